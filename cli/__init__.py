@@ -1,0 +1,1 @@
+"""The `atm` command line tool (also `python -m cli`)."""

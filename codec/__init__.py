@@ -1,0 +1,127 @@
+"""The .atm image codec: images as adaptive triangular meshes with explicit walls.
+
+    import codec
+    data = codec.encode(image, points=4000)   # bytes
+    image2 = codec.decode(data)               # same shape and dtype
+    m = codec.mesh(image)                     # the mesh itself: vertices, triangles, ...
+
+Heavy modules (OpenCV, triangle, OpenGL) load on first use, not at import.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .errors import (
+    ATMError,
+    BackendError,
+    CorruptError,
+    FormatError,
+    LimitError,
+    OptionError,
+    TruncatedError,
+    UnsupportedError,
+)
+from .mesh import Mesh
+
+__version__ = "0.1.0"
+
+
+def encode(image, *, points: int | None = None, mesher: str | None = None, **options) -> bytes:
+    """Encode an H x W (gray) or H x W x 3 (RGB) uint8/uint16 array as .atm bytes.
+
+    points: target vertex count (within 10 %); default 2.8 % of the pixels.
+    mesher: "uniform" (the grid baseline); further options go to the mesher.
+    """
+    from . import encoder
+
+    return encoder.encode(image, points=points, mesher=mesher or encoder.DEFAULT_MESHER, **options)
+
+
+def mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
+    """Build the mesh `encode` would store, without packing it."""
+    from . import encoder
+
+    return encoder.mesh(image, points=points, mesher=mesher or encoder.DEFAULT_MESHER, **options)
+
+
+def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:
+    """Decode .atm bytes to an array of the encoded shape and dtype.
+
+    backend: "cpu" (exact integer scanline decoder).
+    """
+    from . import decoding
+
+    return decoding.render(decode_mesh(data), backend=backend)
+
+
+def decode_mesh(data: bytes) -> Mesh:
+    """Parse .atm bytes into their validated Mesh."""
+    from . import container
+
+    return container.unpack(_as_bytes(data))[1]
+
+
+def info(data: bytes) -> dict:
+    """Header and mesh statistics of .atm bytes: width, height, dtype, channels, vertices,
+    triangles, constraints, bytes."""
+    from . import container
+
+    data = _as_bytes(data)
+    header, m = container.unpack(data)
+    return {
+        "version": header.version,
+        "width": header.width,
+        "height": header.height,
+        "dtype": str(header.dtype),
+        "channels": header.channels,
+        "vertices": int(len(m.vertices)),
+        "triangles": int(len(m.triangles)),
+        "constraints": int(len(m.constraints)),
+        "bytes": len(data),
+    }
+
+
+def read(path: str | os.PathLike, *, backend: str = "cpu") -> np.ndarray:
+    """Read and decode an .atm file."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as exc:
+        raise ATMError(f"cannot read {path}: {exc.strerror}") from None
+    return decode(data, backend=backend)
+
+
+def write(path: str | os.PathLike, image, **options) -> None:
+    """Encode `image` and write it to `path` atomically (options as for `encode`)."""
+    from .files import atomic_write
+
+    atomic_write(path, encode(image, **options))
+
+
+def _as_bytes(data) -> bytes:
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        return bytes(data)
+    raise ATMError(f"expected .atm bytes, got {type(data).__name__}")
+
+
+__all__ = [
+    "ATMError",
+    "BackendError",
+    "CorruptError",
+    "FormatError",
+    "LimitError",
+    "Mesh",
+    "OptionError",
+    "TruncatedError",
+    "UnsupportedError",
+    "decode",
+    "decode_mesh",
+    "encode",
+    "info",
+    "mesh",
+    "read",
+    "write",
+]

@@ -1,0 +1,114 @@
+"""The 2.5-D triangular mesh that an .atm file stores, and its invariants."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import limits
+from .errors import CorruptError, LimitError
+
+
+@dataclass(eq=False)
+class Mesh:
+    """A triangulated image.
+
+    vertices:    N x 2 int64, (x, y) = (column, row) of a pixel centre.
+    values:      N (gray) or N x C (colour) samples, the image's dtype.
+    triangles:   M x 3 int64 vertex indices, each with positive doubled area
+                 (x1-x0)(y2-y0) - (x2-x0)(y1-y0) > 0 (clockwise on screen, y down).
+    constraints: polylines (arrays of vertex indices) the triangulation keeps as edges:
+                 the walls along image discontinuities.
+    """
+
+    vertices: np.ndarray
+    values: np.ndarray
+    triangles: np.ndarray
+    width: int
+    height: int
+    constraints: list[np.ndarray] = field(default_factory=list)
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.values.dtype
+
+    @property
+    def channels(self) -> int:
+        return 1 if self.values.ndim == 1 else self.values.shape[1]
+
+    def __repr__(self) -> str:
+        return (
+            f"Mesh({self.width}x{self.height}, {len(self.vertices)} vertices, "
+            f"{len(self.triangles)} triangles, {len(self.constraints)} constraint polylines, "
+            f"{self.dtype}, {self.channels} channel(s))"
+        )
+
+    def render(self, backend: str = "cpu") -> np.ndarray:
+        """Rasterise the mesh to an image (see codec.decode for the backends)."""
+        from .decoding import render
+
+        return render(self, backend=backend)
+
+
+def doubled_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Signed doubled areas (x1-x0)(y2-y0) - (x2-x0)(y1-y0), exact in int64."""
+    v = vertices.astype(np.int64)
+    p0, p1, p2 = v[triangles[:, 0]], v[triangles[:, 1]], v[triangles[:, 2]]
+    return (p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p2[:, 0] - p0[:, 0]) * (
+        p1[:, 1] - p0[:, 1]
+    )
+
+
+def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Return the triangles reordered so that every doubled area is positive."""
+    triangles = np.array(triangles, dtype=np.int64).reshape(-1, 3)
+    flip = doubled_areas(vertices, triangles) < 0
+    triangles[flip] = triangles[flip][:, [0, 2, 1]]
+    return triangles
+
+
+def validate(mesh: Mesh) -> None:
+    """Raise CorruptError (or LimitError) unless the mesh is one the decoders can render.
+
+    Checked: shapes, index ranges, vertices inside the image and distinct, triangle
+    orientation, total area equal to the image's, and constraint indices.
+    """
+    w, h = mesh.width, mesh.height
+    limits.check_image_size(w, h)
+    v, t = mesh.vertices, mesh.triangles
+    if v.ndim != 2 or v.shape[1] != 2 or len(v) == 0:
+        raise CorruptError(f"vertices must be a non-empty N x 2 array, got shape {v.shape}")
+    if len(v) > limits.max_vertices(w, h):
+        raise LimitError(f"{len(v):,} vertices is too many for a {w}x{h} image")
+    if t.ndim != 2 or t.shape[1] != 3:
+        raise CorruptError(f"triangles must be an M x 3 array, got shape {t.shape}")
+    if len(t) > limits.max_triangles(w, h):
+        raise LimitError(f"{len(t):,} triangles is too many for a {w}x{h} image")
+    vals = mesh.values
+    if vals.shape[0] != len(v) or vals.ndim not in (1, 2):
+        raise CorruptError(f"{len(vals)} values for {len(v)} vertices")
+    x, y = v[:, 0], v[:, 1]
+    if x.min() < 0 or y.min() < 0 or x.max() >= w or y.max() >= h:
+        raise CorruptError(f"a vertex lies outside the {w}x{h} image")
+    if len(np.unique(y.astype(np.int64) * w + x)) != len(v):
+        raise CorruptError("two vertices share a pixel")
+    if len(t):
+        if t.min() < 0 or t.max() >= len(v):
+            raise CorruptError(f"a triangle refers to a vertex beyond the {len(v)} stored")
+        areas = doubled_areas(v, t)
+        if areas.min() <= 0:
+            raise CorruptError("a triangle is degenerate or wrongly oriented")
+        if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
+            raise CorruptError("the triangles do not cover the image exactly once")
+    if (w > 1 and h > 1) != (len(t) > 0):
+        raise CorruptError(
+            "a mesh needs triangles exactly when the image is at least 2 pixels each way"
+        )
+    if len(t) == 0 and (w > 1 or h > 1):
+        along = x if h == 1 else y
+        if along.min() != 0 or along.max() != max(w, h) - 1:
+            raise CorruptError("a one-pixel-wide mesh needs a vertex at each end of the line")
+    for line in mesh.constraints:
+        if len(line) < 2 or line.min() < 0 or line.max() >= len(v):
+            raise CorruptError("a constraint polyline refers to a missing vertex")

@@ -1,0 +1,125 @@
+"""Byte layout of .atm version 1 as `construct` declarations.
+
+Every multi-byte integer is little-endian. ATM.md (beside this file) is the normative
+description; the names here match its field names.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+from construct import (
+    Bytes,
+    Checksum,
+    Const,
+    Construct,
+    Int8ul,
+    Int16ul,
+    Int32ul,
+    SizeofError,
+    Struct,
+    evaluate,
+    stream_read,
+    stream_write,
+    this,
+)
+
+SIGNATURE = b"\x89ATM\r\n\x1a\n"
+VERSION = 1
+
+#: Chunk types of version 1. An upper-case first letter marks a critical chunk.
+HEADER = b"AHDR"
+MESH = b"MESH"
+END = b"AEND"
+
+#: sample_type codes.
+SAMPLE_DTYPES = {0: np.dtype("<u1"), 1: np.dtype("<u2")}
+
+
+class NDArray(Construct):
+    """`count` little-endian numbers of `dtype`, parsed into and built from numpy arrays.
+
+    Both arguments may be context lambdas. Parsing never allocates more than the bytes
+    actually present in the stream.
+    """
+
+    def __init__(self, dtype, count):
+        super().__init__()
+        self.dtype = dtype
+        self.count = count
+
+    def _dtype(self, context) -> np.dtype:
+        return np.dtype(evaluate(self.dtype, context)).newbyteorder("<")
+
+    def _parse(self, stream, context, path):
+        dtype = self._dtype(context)
+        count = int(evaluate(self.count, context))
+        data = stream_read(stream, count * dtype.itemsize, path)
+        return np.frombuffer(data, dtype=dtype)
+
+    def _build(self, obj, stream, context, path):
+        dtype = self._dtype(context)
+        count = int(evaluate(self.count, context))
+        arr = np.ascontiguousarray(obj, dtype=dtype).reshape(-1)
+        if arr.size != count:
+            raise ValueError(f"{path}: expected {count} numbers, got {arr.size}")
+        data = arr.tobytes()
+        stream_write(stream, data, len(data), path)
+        return obj
+
+    def _sizeof(self, context, path):
+        raise SizeofError("NDArray has a data-dependent size", path=path)
+
+
+#: The first 10 bytes of every .atm file.
+FileHeader = Struct(
+    "signature" / Const(SIGNATURE),
+    "version" / Int16ul,
+)
+
+#: The first 8 bytes of every chunk; read first so that `length` can be checked
+#: against limits before the payload is read.
+ChunkHead = Struct(
+    "length" / Int32ul,
+    "type" / Bytes(4),
+)
+
+#: A whole chunk. The CRC-32 (ISO-HDLC, as zlib.crc32) covers type and payload.
+Chunk = Struct(
+    "length" / Int32ul,
+    "type" / Bytes(4),
+    "payload" / Bytes(this.length),
+    "crc"
+    / Checksum(
+        Int32ul,
+        lambda data: zlib.crc32(data) & 0xFFFFFFFF,
+        lambda ctx: ctx.type + ctx.payload,
+    ),
+)
+
+#: AHDR payload (stored, not compressed): 10 bytes.
+Header = Struct(
+    "width" / Int32ul,
+    "height" / Int32ul,
+    "sample_type" / Int8ul,
+    "channels" / Int8ul,
+)
+
+#: MESH payload, after zstd decompression. Build and parse it with the header's
+#: `sample_type` and `channels` as keyword arguments.
+MeshPayload = Struct(
+    "vertex_count" / Int32ul,
+    "triangle_count" / Int32ul,
+    "polyline_count" / Int32ul,
+    "x" / NDArray("<u4", this.vertex_count),
+    "y" / NDArray("<u4", this.vertex_count),
+    "samples"
+    / NDArray(
+        lambda ctx: SAMPLE_DTYPES[ctx._.sample_type],
+        lambda ctx: ctx.vertex_count * ctx._.channels,
+    ),
+    "triangles" / NDArray("<u4", this.triangle_count * 3),
+    "polyline_lengths" / NDArray("<u4", this.polyline_count),
+    "polyline_indices" / NDArray("<u4", lambda ctx: int(ctx.polyline_lengths.sum(dtype=np.uint64))),
+)
