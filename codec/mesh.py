@@ -112,3 +112,18 @@ def validate(mesh: Mesh) -> None:
     for line in mesh.constraints:
         if len(line) < 2 or line.min() < 0 or line.max() >= len(v):
             raise CorruptError("a constraint polyline refers to a missing vertex")
+    if mesh.constraints and len(t):
+        walls = np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in mesh.constraints])
+        if not np.isin(_edge_keys(walls, len(v)), _edge_keys(edges(t), len(v))).all():
+            raise CorruptError("a constraint polyline runs along no triangle edge")
+
+
+def edges(triangles: np.ndarray) -> np.ndarray:
+    """The 3M directed edges (i, j) of the triangles."""
+    t = np.asarray(triangles, dtype=np.int64)
+    return np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+
+
+def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
+    pairs = np.sort(np.asarray(pairs, dtype=np.int64), axis=1)
+    return pairs[:, 0] * n + pairs[:, 1]

@@ -12,16 +12,24 @@ from .triangulate import triangulate
 
 
 def grid_shape(width: int, height: int, points: int) -> tuple[int, int]:
-    """Columns and rows of a grid with about `points` nodes and the image's aspect."""
-    points = max(points, 1)
-    nx = max(1, round(math.sqrt(points * width / height)))
-    nx = min(nx, width)
-    ny = min(height, max(1, round(points / nx)))
-    if width > 1:
-        nx = max(nx, 2)
-    if height > 1:
-        ny = max(ny, 2)
-    return nx, ny
+    """Columns and rows of a grid with about `points` nodes and the image's aspect.
+
+    Among grids whose count is within 10 % of `points`, the one whose spacing is most
+    nearly square wins; if none is that close, the closest count wins. A side longer
+    than one pixel always has its two end pixels in the grid.
+    """
+    lo_x, lo_y = min(width, 2), min(height, 2)
+    best = None
+    for ny in range(lo_y, min(height, max(points // lo_x, lo_y)) + 1):
+        nx = int(min(width, max(lo_x, round(points / ny))))
+        miss = abs(nx * ny - points) / points
+        spacing_x = (width - 1) / max(nx - 1, 1)
+        spacing_y = (height - 1) / max(ny - 1, 1)
+        skew = abs(math.log((spacing_x + 1) / (spacing_y + 1)))
+        score = (miss > 0.1, miss if miss > 0.1 else skew)
+        if best is None or score < best[0]:
+            best = (score, nx, ny)
+    return best[1], best[2]
 
 
 def build(image: np.ndarray, points: int, *, values: str = "sample") -> Mesh:

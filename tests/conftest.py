@@ -1,0 +1,44 @@
+"""Shared test helpers: random meshes and the public corpus."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from codec.mesh import Mesh
+from codec.triangulate import triangulate
+
+
+def random_mesh(seed: int, width: int, height: int, *, dtype=np.uint8, channels: int = 1,
+                extra: int = 10, walls: bool = True) -> Mesh:
+    """A valid mesh of a width x height image: the corners plus `extra` random vertices,
+    Delaunay-triangulated, random values, and some triangle edges kept as polylines."""
+    rng = np.random.default_rng(seed)
+    xs = np.array([0, width - 1, 0, width - 1])
+    ys = np.array([0, 0, height - 1, height - 1])
+    n = min(extra, width * height)
+    pts = np.stack([np.r_[xs, rng.integers(0, width, n)], np.r_[ys, rng.integers(0, height, n)]], 1)
+    vertices = np.unique(pts, axis=0)
+    if width == 1 or height == 1:
+        triangles = np.zeros((0, 3), np.int64)
+    else:
+        triangles = triangulate(vertices)
+    top = np.iinfo(dtype).max
+    shape = (len(vertices),) if channels == 1 else (len(vertices), channels)
+    values = rng.integers(0, top + 1, shape, dtype=np.int64).astype(dtype)
+    constraints = []
+    if walls and len(triangles):
+        for t in triangles[rng.permutation(len(triangles))[: rng.integers(0, 4)]]:
+            constraints.append(np.array([t[0], t[1], t[2]]) if rng.random() < 0.5 else t[:2].copy())
+    return Mesh(vertices, values, triangles, width, height, constraints)
+
+
+@pytest.fixture(scope="session")
+def corpus() -> dict[str, np.ndarray]:
+    """The public test images named in DESIGN.md, as uint8 gray arrays."""
+    from codec.synthetic import range_scene
+    from tests.corpus import load_corpus
+
+    images = load_corpus()
+    images["scene0"] = range_scene(256, 256, seed=0)
+    return images

@@ -1,0 +1,32 @@
+"""The public corpus of DESIGN.md (scikit-image's bundled images, in the test extra)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def disparity() -> np.ndarray:
+    """skimage's motorcycle disparity map as uint8: infinite values (holes) become 0,
+    the finite range is scaled linearly to 0..255."""
+    import skimage
+
+    path = Path(skimage.__file__).parent / "data" / "motorcycle_disp.npz"
+    disp = np.load(path)["arr_0"].astype(np.float64)
+    disp[~np.isfinite(disp)] = 0
+    return np.round(255 * disp / disp.max()).astype(np.uint8)
+
+
+def load_corpus() -> dict[str, np.ndarray]:
+    from skimage import color, data
+
+    images = {
+        "camera": data.camera(),
+        "coins": data.coins(),
+        "moon": data.moon(),
+        "text": data.text(),
+        "astronaut": np.round(255 * color.rgb2gray(data.astronaut())).astype(np.uint8),
+        "motorcycle_disp": disparity(),
+    }
+    return images

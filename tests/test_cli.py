@@ -1,0 +1,130 @@
+"""The `atm` command: round trips through files and pipes, one-line errors, no partial files."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codec.files import read_image, write_image
+from codec.synthetic import range_scene
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def atm(*args, stdin: bytes | None = None, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cli", *map(str, args)], input=stdin, capture_output=True, cwd=cwd
+    )
+
+
+@pytest.fixture(scope="module")
+def png(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("cli") / "scene.png"
+    write_image(path, range_scene(96, 64, seed=2))
+    return path
+
+
+def rms(a, b) -> float:
+    return float(np.sqrt(np.mean((a.astype(float) - b.astype(float)) ** 2)))
+
+
+def test_encode_decode_info(png, tmp_path):
+    out_atm, out_png = tmp_path / "a.atm", tmp_path / "b.png"
+    r = atm("encode", png, out_atm, "--points", 600)
+    assert r.returncode == 0, r.stderr
+    r = atm("decode", out_atm, out_png)
+    assert r.returncode == 0, r.stderr
+    assert rms(read_image(out_png), read_image(png)) < 20
+    r = atm("info", out_atm, "--json")
+    info = json.loads(r.stdout)
+    assert (info["width"], info["height"]) == (96, 64)
+    assert abs(info["vertices"] - 600) <= 60
+    assert info["bytes"] == out_atm.stat().st_size and info["triangles"] > 0
+
+
+def test_pipe_round_trip(png, tmp_path):
+    enc = atm("encode", "-", "-", stdin=png.read_bytes())
+    assert enc.returncode == 0, enc.stderr
+    dec = atm("decode", "-", tmp_path / "out.png", stdin=enc.stdout)
+    assert dec.returncode == 0, dec.stderr
+    assert read_image(tmp_path / "out.png").shape == (64, 96)
+    dec = atm("decode", "-", "-", "--format", "pgm", stdin=enc.stdout)
+    assert dec.stdout.startswith(b"P5")
+
+
+@pytest.mark.parametrize("ext", [".png", ".pgm", ".tif"])
+def test_output_format_follows_the_extension(png, tmp_path, ext):
+    atm("encode", png, tmp_path / "a.atm")
+    assert atm("decode", tmp_path / "a.atm", tmp_path / f"b{ext}").returncode == 0
+    assert read_image(tmp_path / f"b{ext}").shape == (64, 96)
+
+
+def test_sixteen_bit_png_round_trips(tmp_path):
+    src = tmp_path / "deep.png"
+    write_image(src, range_scene(50, 40, seed=1, dtype=np.uint16))
+    assert atm("encode", src, tmp_path / "d.atm").returncode == 0
+    assert atm("decode", tmp_path / "d.atm", tmp_path / "d.png").returncode == 0
+    assert read_image(tmp_path / "d.png").dtype == np.uint16
+
+
+def test_bad_input_is_one_line_exit_1_and_no_output(tmp_path, png):
+    junk = tmp_path / "junk.atm"
+    junk.write_bytes(b"\x89ATM\r\n\x1a\n\x01\x00garbage")
+    out = tmp_path / "out.png"
+    r = atm("decode", junk, out)
+    assert r.returncode == 1
+    lines = r.stderr.decode().strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("atm: error: ")
+    assert "Traceback" not in r.stderr.decode()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.atm"]
+
+
+def test_failed_run_keeps_an_existing_output(tmp_path):
+    out = tmp_path / "keep.png"
+    out.write_bytes(b"precious")
+    r = atm("decode", "-", out, stdin=b"not atm")
+    assert r.returncode == 1
+    assert out.read_bytes() == b"precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.png"]
+
+
+def test_unreadable_image_and_missing_file(tmp_path):
+    r = atm("encode", "-", tmp_path / "a.atm", stdin=b"hello")
+    assert r.returncode == 1 and b"not an image" in r.stderr
+    r = atm("encode", tmp_path / "missing.png", tmp_path / "a.atm")
+    assert r.returncode == 1 and b"cannot read" in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_usage_exits_2():
+    assert atm("encode").returncode == 2
+    assert atm("frobnicate").returncode == 2
+
+
+def test_unwritable_output_format(png, tmp_path):
+    atm("encode", png, tmp_path / "a.atm")
+    r = atm("decode", tmp_path / "a.atm", tmp_path / "b.jpg")
+    assert r.returncode == 1 and b"cannot write .jpg" in r.stderr
+
+
+@pytest.mark.parametrize("command", [[], ["encode"], ["decode"], ["info"]])
+def test_help(command):
+    r = atm(*command, "--help")
+    assert r.returncode == 0 and b"usage: atm" in r.stdout
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    r = atm("--debug", "decode", "-", tmp_path / "x.png", stdin=b"nope")
+    assert r.returncode != 0 and b"Traceback" in r.stderr
+
+
+def test_bundled_example_round_trips(tmp_path):
+    example = ROOT / "examples" / "range_scene.png"
+    assert atm("encode", example, tmp_path / "e.atm").returncode == 0
+    assert atm("decode", tmp_path / "e.atm", tmp_path / "e.png").returncode == 0
+    assert rms(read_image(tmp_path / "e.png"), read_image(example)) < 15

@@ -1,0 +1,50 @@
+"""The conformance files of format_spec/ decode to their expected images exactly."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import codec
+from codec.files import read_image
+
+VECTORS = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
+CASES = sorted(p.stem for p in VECTORS.glob("*.atm"))
+
+
+def test_there_are_conformance_files():
+    assert {"gray8_steps", "gray16_scene", "rgb8_grid", "line_1x9"} <= set(CASES)
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_decodes_exactly(name):
+    data = (VECTORS / f"{name}.atm").read_bytes()
+    expected = read_image(VECTORS / f"{name}.png")
+    out = codec.decode(data)
+    assert out.dtype == expected.dtype
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_walls_survive_in_the_conformance_file():
+    m = codec.decode_mesh((VECTORS / "gray8_steps.atm").read_bytes())
+    assert len(m.constraints) == 2
+    for line in m.constraints:
+        assert set(m.vertices[line, 0]) in ({23}, {24})
+
+
+def test_decoding_rule_by_hand():
+    """Spec §5 on one pixel: the centre of a triangle's edge rounds half up."""
+    from codec.mesh import Mesh
+
+    vertices = np.array([[0, 0], [2, 0], [0, 2], [2, 2]])
+    triangles = np.array([[0, 1, 3], [0, 3, 2]])
+    m = Mesh(vertices, np.array([0, 1, 2, 4], np.uint8), triangles, 3, 3)
+    out = m.render()
+    # (1, 0) halfway between values 0 and 1 -> 0.5 rounds up to 1
+    assert out[0, 1] == 1
+    # (1, 1) on the diagonal, halfway between 0 and 4 -> 2
+    assert out[1, 1] == 2
+    # (2, 1) halfway between 1 and 4 -> 2.5 -> 3
+    assert out[1, 2] == 3

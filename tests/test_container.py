@@ -1,0 +1,203 @@
+"""The .atm container: exact round trips, chunk rules, and errors on damaged bytes."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import codec
+from codec import container
+from codec.errors import ATMError, CorruptError, FormatError, TruncatedError, UnsupportedError
+from format_spec import schema
+from tests.conftest import random_mesh
+
+mesh_args = st.tuples(
+    st.integers(0, 2**32 - 1),
+    st.integers(1, 60),
+    st.integers(1, 60),
+    st.sampled_from([np.uint8, np.uint16]),
+    st.sampled_from([1, 3]),
+    st.integers(0, 200),
+)
+
+
+def assert_same_mesh(a, b) -> None:
+    assert (a.width, a.height, a.dtype, a.channels) == (b.width, b.height, b.dtype, b.channels)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.values, b.values)
+    np.testing.assert_array_equal(a.triangles, b.triangles)
+    assert len(a.constraints) == len(b.constraints)
+    for p, q in zip(a.constraints, b.constraints):
+        np.testing.assert_array_equal(p, q)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mesh_args)
+def test_pack_unpack_is_exact_for_arbitrary_meshes(args):
+    seed, w, h, dtype, channels, extra = args
+    mesh = random_mesh(seed, w, h, dtype=dtype, channels=channels, extra=extra)
+    data = container.pack(mesh)
+    header, back = container.unpack(data)
+    assert (header.width, header.height, header.dtype, header.channels) == (w, h, np.dtype(dtype), channels)
+    assert_same_mesh(mesh, back)
+    assert container.pack(back) == data
+
+
+def chunks(data: bytes) -> list[tuple[int, bytes, bytes]]:
+    """(offset, type, payload) of each chunk of a well-formed file."""
+    out, pos = [], 10
+    while pos < len(data):
+        length, ctype = struct.unpack_from("<I4s", data, pos)
+        out.append((pos, ctype, data[pos + 8 : pos + 8 + length]))
+        pos += 12 + length
+    return out
+
+
+def make_chunk(ctype: bytes, payload: bytes) -> bytes:
+    return struct.pack("<I4s", len(payload), ctype) + payload + struct.pack("<I", zlib.crc32(ctype + payload))
+
+
+@pytest.fixture(scope="module")
+def sample_file() -> bytes:
+    return container.pack(random_mesh(7, 20, 12, extra=30))
+
+
+def test_layout_matches_spec(sample_file):
+    assert sample_file[:8] == b"\x89ATM\r\n\x1a\n"
+    assert struct.unpack_from("<H", sample_file, 8) == (1,)
+    types = [c[1] for c in chunks(sample_file)]
+    assert types == [b"AHDR", b"MESH", b"AEND"]
+    ahdr = chunks(sample_file)[0][2]
+    assert struct.unpack("<IIBB", ahdr) == (20, 12, 0, 1)
+
+
+def test_unknown_ancillary_chunk_is_skipped(sample_file):
+    pos = chunks(sample_file)[1][0]
+    data = sample_file[:pos] + make_chunk(b"tEXt", b"hello") + sample_file[pos:]
+    np.testing.assert_array_equal(codec.decode(data), codec.decode(sample_file))
+
+
+def test_unknown_critical_chunk_is_an_error(sample_file):
+    pos = chunks(sample_file)[1][0]
+    data = sample_file[:pos] + make_chunk(b"QQQQ", b"") + sample_file[pos:]
+    with pytest.raises(UnsupportedError, match="critical chunk QQQQ"):
+        codec.decode(data)
+
+
+def test_bad_crc_names_the_chunk(sample_file):
+    pos, _, payload = chunks(sample_file)[1]
+    data = bytearray(sample_file)
+    data[pos + 8 + len(payload) // 2] ^= 0x40
+    with pytest.raises(CorruptError, match="MESH.*CRC"):
+        codec.decode(bytes(data))
+
+
+def test_every_truncation_is_a_clear_error(sample_file):
+    for n in range(len(sample_file)):
+        with pytest.raises(FormatError):
+            codec.decode(sample_file[:n])
+
+
+def test_truncation_inside_a_chunk_is_truncated_error(sample_file):
+    with pytest.raises(TruncatedError, match="ends inside chunk MESH"):
+        codec.decode(sample_file[:-20])
+
+
+def test_bytes_after_aend_are_ignored(sample_file):
+    np.testing.assert_array_equal(codec.decode(sample_file + b"junk"), codec.decode(sample_file))
+
+
+def test_other_version_is_unsupported(sample_file):
+    data = sample_file[:8] + struct.pack("<H", 2) + sample_file[10:]
+    with pytest.raises(UnsupportedError, match="version 2"):
+        codec.decode(data)
+
+
+def test_not_an_atm_file():
+    with pytest.raises(FormatError, match="not an .atm file"):
+        codec.decode(b"\x89PNG\r\n\x1a\n" + bytes(40))
+
+
+def test_mesh_invariants_are_checked(sample_file):
+    header, mesh = container.unpack(sample_file)
+
+    def repack(**changes) -> bytes:
+        m = dict(
+            vertex_count=len(mesh.vertices), triangle_count=len(mesh.triangles), polyline_count=0,
+            x=mesh.vertices[:, 0], y=mesh.vertices[:, 1], samples=mesh.values,
+            triangles=mesh.triangles, polyline_lengths=np.zeros(0, np.uint32),
+            polyline_indices=np.zeros(0, np.uint32),
+        )
+        m.update(changes)
+        raw = schema.MeshPayload.build(m, sample_type=0, channels=1)
+        import zstandard
+
+        payload = zstandard.ZstdCompressor().compress(raw)
+        parts = chunks(sample_file)
+        return sample_file[: parts[1][0]] + make_chunk(b"MESH", payload) + make_chunk(b"AEND", b"")
+
+    flipped = mesh.triangles.copy()
+    flipped[0] = flipped[0, [0, 2, 1]]
+    bad_index = mesh.triangles.copy()
+    bad_index[0, 0] = len(mesh.vertices)
+    outside = mesh.vertices[:, 0].copy()
+    outside[0] = 20
+    cases = {
+        "wrongly oriented": dict(triangles=flipped),
+        "beyond": dict(triangles=bad_index),
+        "outside": dict(x=outside),
+        "cover": dict(triangle_count=len(mesh.triangles) - 1, triangles=mesh.triangles[:-1]),
+        "constraint": dict(polyline_count=1, polyline_lengths=np.array([2]), polyline_indices=np.array([0, 99])),
+    }
+    assert codec.decode(repack()) is not None
+    for message, change in cases.items():
+        with pytest.raises(CorruptError, match=message):
+            codec.decode(repack(**change))
+
+
+def test_decompression_bomb_is_refused_before_allocation():
+    import zstandard
+
+    header = schema.Header.build(dict(width=100, height=100, sample_type=0, channels=1))
+    bomb = zstandard.ZstdCompressor().compress(bytes(50_000_000))
+    data = (
+        schema.FileHeader.build(dict(version=1))
+        + make_chunk(b"AHDR", header)
+        + make_chunk(b"MESH", bomb)
+        + make_chunk(b"AEND", b"")
+    )
+    with pytest.raises(codec.LimitError, match="decompression bomb"):
+        codec.decode(data)
+
+
+def test_huge_declared_image_is_refused_quickly():
+    header = schema.Header.build(dict(width=100_000, height=100_000, sample_type=0, channels=1))
+    data = schema.FileHeader.build(dict(version=1)) + make_chunk(b"AHDR", header) + make_chunk(b"AEND", b"")
+    with pytest.raises(codec.LimitError, match="pixels"):
+        codec.decode(data)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=300))
+def test_arbitrary_bytes_raise_only_atm_error(data):
+    with pytest.raises(ATMError):
+        codec.decode(data)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_mutated_files_decode_or_raise_atm_error(sample_file, data):
+    buf = bytearray(sample_file)
+    for _ in range(data.draw(st.integers(1, 4))):
+        i = data.draw(st.integers(0, len(buf) - 1))
+        buf[i] = data.draw(st.integers(0, 255))
+    try:
+        image = codec.decode(bytes(buf))
+    except ATMError:
+        return
+    assert image.shape == (12, 20)
