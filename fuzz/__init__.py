@@ -1,0 +1,1 @@
+"""Fuzzing harnesses for the .atm decoder (see fuzz/README.md)."""
