@@ -26,18 +26,42 @@ from .errors import (
 )
 from .mesh import Mesh
 
+
+def __getattr__(name: str):
+    # the streaming classes load their dependencies on first use, not at import
+    if name in ("StreamEncoder", "StreamDecoder"):
+        from . import stream
+
+        return getattr(stream, name)
+    raise AttributeError(f"module 'codec' has no attribute {name!r}")
+
 __version__ = "0.1.0"
 
 
-def encode(image, *, points: int | None = None, mesher: str | None = None, **options) -> bytes:
+def encode(
+    image,
+    *,
+    points: int | None = None,
+    mesher: str | None = None,
+    band_height: int | None = None,
+    **options,
+) -> bytes:
     """Encode an H x W (gray) or H x W x 3 (RGB) uint8/uint16 array as .atm bytes.
 
     points: target vertex count (within 10 %); default 2.8 % of the pixels.
     mesher: "uniform" (the grid baseline); further options go to the mesher.
+    band_height: rows per band (default: about a megapixel per band); images are coded
+    band by band so that StreamEncoder/StreamDecoder can work in bounded memory.
     """
     from . import encoder
 
-    return encoder.encode(image, points=points, mesher=mesher or encoder.DEFAULT_MESHER, **options)
+    return encoder.encode(
+        image,
+        points=points,
+        mesher=mesher or encoder.DEFAULT_MESHER,
+        band_height=band_height,
+        **options,
+    )
 
 
 def mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
@@ -52,16 +76,19 @@ def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:
 
     backend: "cpu" (exact integer scanline decoder).
     """
-    from . import decoding
+    import io
 
-    return decoding.render(decode_mesh(data), backend=backend)
+    from .stream import decode_all
+
+    return decode_all(io.BytesIO(_as_bytes(data)), backend=backend)
 
 
 def decode_mesh(data: bytes) -> Mesh:
-    """Parse .atm bytes into their validated Mesh."""
+    """Parse .atm bytes into one validated Mesh of the whole image (bands merged)."""
     from . import container
+    from .stream import merge_bands
 
-    return container.unpack(_as_bytes(data))[1]
+    return merge_bands(container.unpack(_as_bytes(data))[1])
 
 
 def info(data: bytes) -> dict:
@@ -70,16 +97,17 @@ def info(data: bytes) -> dict:
     from . import container
 
     data = _as_bytes(data)
-    header, m = container.unpack(data)
+    header, bands = container.unpack(data)
     return {
         "version": header.version,
         "width": header.width,
         "height": header.height,
         "dtype": str(header.dtype),
         "channels": header.channels,
-        "vertices": int(len(m.vertices)),
-        "triangles": int(len(m.triangles)),
-        "constraints": int(len(m.constraints)),
+        "bands": len(bands),
+        "vertices": sum(len(m.vertices) for _, m in bands),
+        "triangles": sum(len(m.triangles) for _, m in bands),
+        "constraints": sum(len(m.constraints) for _, m in bands),
         "bytes": len(data),
     }
 
@@ -115,6 +143,8 @@ __all__ = [
     "LimitError",
     "Mesh",
     "OptionError",
+    "StreamDecoder",
+    "StreamEncoder",
     "TruncatedError",
     "UnsupportedError",
     "decode",

@@ -1,4 +1,9 @@
-"""Mesh <-> .atm bytes: signature, version and checksummed chunks (see format_spec/ATM.md)."""
+"""Meshes <-> .atm bytes: signature, version and checksummed chunks (format_spec/ATM.md).
+
+A file holds one image as a sequence of bands of rows, each band's mesh in its own MESH
+chunk; neighbouring bands share their boundary row. `Writer` emits chunks as bands
+arrive and never seeks; `Reader` yields bands as their chunks arrive.
+"""
 
 from __future__ import annotations
 
@@ -32,105 +37,128 @@ class Header:
 
     @property
     def shape(self) -> tuple[int, ...]:
-        return (self.height, self.width) if self.channels == 1 else (self.height, self.width, self.channels)
+        if self.channels == 1:
+            return (self.height, self.width)
+        return (self.height, self.width, self.channels)
+
+    def _fields(self) -> dict:
+        return dict(
+            width=self.width,
+            height=self.height,
+            sample_type=SAMPLE_TYPES[np.dtype(self.dtype)],
+            channels=self.channels,
+        )
+
+
+def band_starts(height: int, band_height: int) -> list[int]:
+    """First rows of the bands: each band has `band_height` new rows and shares its first
+    row with the previous band, so band k covers rows k*band_height .. (k+1)*band_height."""
+    if height == 1:
+        return [0]
+    return list(range(0, height - 1, band_height))
 
 
 def _chunk(ctype: bytes, payload: bytes) -> bytes:
     return schema.Chunk.build(dict(length=len(payload), type=ctype, payload=payload, crc=None))
 
 
-def pack(mesh: Mesh) -> bytes:
-    """Serialise a validated mesh as a complete .atm file."""
-    validate(mesh)
-    header = dict(
-        width=mesh.width,
-        height=mesh.height,
-        sample_type=SAMPLE_TYPES[mesh.dtype],
-        channels=mesh.channels,
-    )
-    lengths = np.array([len(c) for c in mesh.constraints], dtype=np.uint32)
-    indices = (
-        np.concatenate(mesh.constraints).astype(np.uint32)
-        if mesh.constraints
-        else np.zeros(0, np.uint32)
-    )
-    raw = schema.MeshPayload.build(
-        dict(
-            vertex_count=len(mesh.vertices),
-            triangle_count=len(mesh.triangles),
-            polyline_count=len(lengths),
-            x=mesh.vertices[:, 0],
-            y=mesh.vertices[:, 1],
-            samples=mesh.values,
-            triangles=mesh.triangles,
-            polyline_lengths=lengths,
-            polyline_indices=indices,
-        ),
-        **header,
-    )
-    compressed = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True).compress(raw)
-    return b"".join(
-        [
-            schema.FileHeader.build(dict(version=schema.VERSION)),
-            _chunk(schema.HEADER, schema.Header.build(header)),
-            _chunk(schema.MESH, compressed),
-            _chunk(schema.END, b""),
-        ]
-    )
+class Writer:
+    """Write an .atm file band by band: header at creation, one MESH chunk per
+    `write_band`, AEND at `close`. Bands must come in order and cover the image."""
 
+    def __init__(self, stream: BinaryIO, header: Header):
+        limits.check_image_size(header.width, header.height)
+        self._stream = stream
+        self.header = header
+        self._next_y0 = 0
+        self._rows_done = 0
+        self._compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True)
+        stream.write(schema.FileHeader.build(dict(version=schema.VERSION)))
+        stream.write(_chunk(schema.HEADER, schema.Header.build(header._fields())))
 
-def _read_exact(stream: BinaryIO, n: int, what: str) -> bytes:
-    start = stream.tell() if stream.seekable() else None
-    data = stream.read(n)
-    if len(data) != n:
-        where = f" at byte {start}" if start is not None else ""
-        raise TruncatedError(f"the file ends inside {what}{where}: needed {n} bytes, got {len(data)}")
-    return data
+    @property
+    def done(self) -> bool:
+        """Whether the bands written so far reach the image's last row."""
+        return self._rows_done == self.header.height
 
-
-def read_signature(stream: BinaryIO) -> int:
-    """Check the signature and return the format version."""
-    head = stream.read(schema.FileHeader.sizeof())
-    if len(head) < len(schema.SIGNATURE) and schema.SIGNATURE.startswith(head) and head:
-        raise TruncatedError("the file ends inside the .atm signature")
-    if not head.startswith(schema.SIGNATURE):
-        raise FormatError("not an .atm file (the signature does not match)")
-    if len(head) < schema.FileHeader.sizeof():
-        raise TruncatedError("the file ends inside the version field")
-    version = schema.FileHeader.parse(head).version
-    if version != schema.VERSION:
-        raise UnsupportedError(
-            f"this file is .atm version {version}; this codec reads version {schema.VERSION}"
+    def write_band(self, y0: int, mesh: Mesh) -> None:
+        """Write the mesh of rows y0 .. y0 + mesh.height - 1."""
+        h = self.header
+        if y0 != self._next_y0:
+            raise ValueError(f"band starts at row {y0}, expected {self._next_y0}")
+        if mesh.width != h.width or y0 + mesh.height > h.height:
+            raise ValueError("band does not fit the image")
+        validate(mesh)
+        lengths = np.array([len(c) for c in mesh.constraints], dtype=np.uint32)
+        indices = (
+            np.concatenate(mesh.constraints).astype(np.uint32)
+            if mesh.constraints
+            else np.zeros(0, np.uint32)
         )
-    return version
+        raw = schema.MeshPayload.build(
+            dict(
+                y0=y0,
+                rows=mesh.height,
+                vertex_count=len(mesh.vertices),
+                triangle_count=len(mesh.triangles),
+                polyline_count=len(lengths),
+                x=mesh.vertices[:, 0],
+                y=mesh.vertices[:, 1],
+                samples=mesh.values,
+                triangles=mesh.triangles,
+                polyline_lengths=lengths,
+                polyline_indices=indices,
+            ),
+            **h._fields(),
+        )
+        self._stream.write(_chunk(schema.MESH, self._compressor.compress(raw)))
+        self._next_y0 = y0 + mesh.height - 1
+        self._rows_done = y0 + mesh.height
+
+    def close(self) -> None:
+        if not self.done:
+            raise ValueError(f"the bands end before row {self.header.height - 1}")
+        self._stream.write(_chunk(schema.END, b""))
 
 
-def iter_chunks(stream: BinaryIO) -> Iterator[tuple[bytes, bytes]]:
-    """Yield (type, payload) for each chunk after the file header, checksums verified,
-    up to and including the end chunk."""
-    while True:
-        offset = stream.tell() if stream.seekable() else None
-        head = stream.read(schema.ChunkHead.sizeof())
-        if not head:
-            where = f" (at byte {offset})" if offset is not None else ""
-            raise TruncatedError(f"the file ends before its AEND chunk{where}")
-        if len(head) < schema.ChunkHead.sizeof():
-            raise TruncatedError(f"the file ends inside a chunk header at byte {offset}")
-        parsed = schema.ChunkHead.parse(head)
-        length, ctype = parsed.length, parsed.type
-        name = ctype.decode("latin-1")
-        if not all(65 <= c <= 90 or 97 <= c <= 122 for c in ctype):
-            raise CorruptError(f"invalid chunk type {ctype!r} at byte {offset}")
-        if length > limits.MAX_CHUNK_BYTES:
-            raise LimitError(f"chunk {name} declares {length:,} bytes, over the limit")
-        body = _read_exact(stream, length + 4, f"chunk {name}")
-        try:
-            chunk = schema.Chunk.parse(head + body)
-        except ChecksumError:
-            raise CorruptError(f"chunk {name} fails its CRC check (the file is damaged)") from None
-        yield ctype, chunk.payload
-        if ctype == schema.END:
-            return
+def pack(mesh: Mesh) -> bytes:
+    """Serialise one mesh of a whole image as a complete .atm file (a single band)."""
+    out = io.BytesIO()
+    writer = Writer(out, Header(mesh.width, mesh.height, mesh.dtype, mesh.channels))
+    writer.write_band(0, mesh)
+    writer.close()
+    return out.getvalue()
+
+
+class _Counted:
+    """A read-only stream that knows how many bytes have been read, for error messages
+    on pipes that cannot tell()."""
+
+    def __init__(self, stream: BinaryIO):
+        self._stream = stream
+        self.offset = 0
+
+    def read(self, n: int) -> bytes:
+        data = self._stream.read(n)
+        if data is None:  # non-blocking stream with nothing yet: treat as the end
+            data = b""
+        self.offset += len(data)
+        return data
+
+    def read_exact(self, n: int, what: str) -> bytes:
+        start = self.offset
+        parts, left = [], n
+        while left:
+            # read in pieces so a lying length cannot make us allocate it up front
+            part = self.read(min(left, 1 << 20))
+            if not part:
+                raise TruncatedError(
+                    f"the file ends inside {what} at byte {self.offset} "
+                    f"(needed {n} bytes from byte {start}, got {n - left})"
+                )
+            parts.append(part)
+            left -= len(part)
+        return b"".join(parts)
 
 
 def _decompress(payload: bytes, limit: int, name: str) -> bytes:
@@ -146,7 +174,7 @@ def _decompress(payload: bytes, limit: int, name: str) -> bytes:
             "(a decompression bomb?)"
         )
     try:
-        data = zstandard.ZstdDecompressor().decompress(payload, max_output_size=size)
+        data = zstandard.ZstdDecompressor().decompress(payload, max_output_size=max(size, 1))
     except zstandard.ZstdError as exc:
         raise CorruptError(f"chunk {name} does not decompress: {exc}") from None
     if len(data) != size:
@@ -154,87 +182,148 @@ def _decompress(payload: bytes, limit: int, name: str) -> bytes:
     return data
 
 
-def _payload_limit(header: Header) -> int:
-    """The largest MESH payload an image of this size can legitimately need."""
-    nv = limits.max_vertices(header.width, header.height)
-    nt = limits.max_triangles(header.width, header.height)
-    per_vertex = 8 + header.dtype.itemsize * header.channels + 8  # position, values, polylines
-    return 12 + nv * per_vertex + nt * 12 + 4096
+class Reader:
+    """Read an .atm file from a stream: the header at creation, then bands on iteration.
 
+    Iterating yields (y0, Mesh) for each band, validated, as soon as its chunk has been
+    read; a damaged or truncated file raises an ATMError after the intact bands.
+    """
 
-def _parse_header(payload: bytes) -> Header:
-    if len(payload) != schema.Header.sizeof():
-        raise CorruptError(f"AHDR chunk has {len(payload)} bytes, not {schema.Header.sizeof()}")
-    h = schema.Header.parse(payload)
-    if h.sample_type not in DTYPES:
-        raise UnsupportedError(f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16)")
-    if h.channels not in (1, 3):
-        raise UnsupportedError(f"{h.channels} channels; .atm version 1 has 1 or 3")
-    if h.width == 0 or h.height == 0:
-        raise CorruptError(f"the header declares an empty {h.width}x{h.height} image")
-    limits.check_image_size(h.width, h.height)
-    return Header(h.width, h.height, DTYPES[h.sample_type], h.channels)
+    def __init__(self, stream: BinaryIO):
+        self._stream = _Counted(stream)
+        self.version = self._read_signature()
+        ctype, payload, offset = self._next_chunk()
+        if ctype != schema.HEADER:
+            raise CorruptError(f"the first chunk is {ctype.decode('latin-1')}, not AHDR")
+        self.header = self._parse_header(payload)
+        self._iterated = False
+
+    def _read_signature(self) -> int:
+        head = self._stream.read(schema.FileHeader.sizeof())
+        if len(head) < len(schema.SIGNATURE) and head and schema.SIGNATURE.startswith(head):
+            raise TruncatedError("the file ends inside the .atm signature")
+        if not head.startswith(schema.SIGNATURE):
+            raise FormatError("not an .atm file (the signature does not match)")
+        if len(head) < schema.FileHeader.sizeof():
+            raise TruncatedError("the file ends inside the version field")
+        version = schema.FileHeader.parse(head).version
+        if version != schema.VERSION:
+            raise UnsupportedError(
+                f"this file is .atm version {version}; this codec reads version {schema.VERSION}"
+            )
+        return version
+
+    def _next_chunk(self) -> tuple[bytes, bytes, int]:
+        """(type, payload, offset) of the next chunk, its CRC verified."""
+        s = self._stream
+        offset = s.offset
+        head = s.read(schema.ChunkHead.sizeof())
+        if not head:
+            raise TruncatedError(f"the file ends at byte {offset}, before its AEND chunk")
+        if len(head) < schema.ChunkHead.sizeof():
+            raise TruncatedError(f"the file ends inside a chunk header at byte {s.offset}")
+        parsed = schema.ChunkHead.parse(head)
+        length, ctype = parsed.length, parsed.type
+        if not all(65 <= c <= 90 or 97 <= c <= 122 for c in ctype):
+            raise CorruptError(f"invalid chunk type {ctype!r} at byte {offset}")
+        name = ctype.decode("latin-1")
+        if length > limits.MAX_CHUNK_BYTES:
+            raise LimitError(f"chunk {name} at byte {offset} declares {length:,} bytes, over the limit")
+        body = s.read_exact(length + 4, f"chunk {name}")
+        try:
+            chunk = schema.Chunk.parse(head + body)
+        except ChecksumError:
+            raise CorruptError(
+                f"chunk {name} at byte {offset} fails its CRC check (the file is damaged)"
+            ) from None
+        return ctype, chunk.payload, offset
+
+    @staticmethod
+    def _parse_header(payload: bytes) -> Header:
+        if len(payload) != schema.Header.sizeof():
+            raise CorruptError(f"AHDR chunk has {len(payload)} bytes, not {schema.Header.sizeof()}")
+        h = schema.Header.parse(payload)
+        if h.sample_type not in DTYPES:
+            raise UnsupportedError(f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16)")
+        if h.channels not in (1, 3):
+            raise UnsupportedError(f"{h.channels} channels; .atm version 1 has 1 or 3")
+        if h.width == 0 or h.height == 0:
+            raise CorruptError(f"the header declares an empty {h.width}x{h.height} image")
+        limits.check_image_size(h.width, h.height)
+        return Header(h.width, h.height, DTYPES[h.sample_type], h.channels)
+
+    def _payload_limit(self) -> int:
+        """The largest MESH payload the image can legitimately need."""
+        h = self.header
+        nv = limits.max_vertices(h.width, h.height)
+        nt = limits.max_triangles(h.width, h.height)
+        per_vertex = 16 + h.dtype.itemsize * h.channels  # position, samples, polylines
+        return 20 + nv * per_vertex + nt * 12 + 4096
+
+    def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
+        h = self.header
+        raw = _decompress(payload, self._payload_limit(), f"MESH at byte {offset}")
+        stream = io.BytesIO(raw)
+        fields = h._fields()
+        try:
+            m = schema.MeshPayload.parse_stream(stream, **fields)
+        except ConstructError as exc:
+            raise CorruptError(
+                f"MESH chunk at byte {offset} is malformed: {str(exc).splitlines()[0]}"
+            ) from None
+        if stream.tell() != len(raw):
+            raise CorruptError(f"MESH chunk at byte {offset} has {len(raw) - stream.tell()} bytes of trailing data")
+        if m.y0 != y0_expected:
+            raise CorruptError(f"MESH chunk at byte {offset} starts at row {m.y0}, expected {y0_expected}")
+        if m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
+            raise CorruptError(f"MESH chunk at byte {offset} has {m.rows} rows from row {m.y0}")
+        vertices = np.stack([m.x, m.y], axis=1).astype(np.int64)
+        values = m.samples.astype(h.dtype)
+        if h.channels > 1:
+            values = values.reshape(-1, h.channels)
+        triangles = m.triangles.astype(np.int64).reshape(-1, 3)
+        bounds = np.cumsum(m.polyline_lengths.astype(np.int64))[:-1]
+        constraints = np.split(m.polyline_indices.astype(np.int64), bounds) if m.polyline_count else []
+        mesh = Mesh(vertices, values, triangles, h.width, int(m.rows), constraints)
+        validate(mesh)
+        return int(m.y0), mesh
+
+    def __iter__(self) -> Iterator[tuple[int, Mesh]]:
+        if self._iterated:
+            raise RuntimeError("an .atm Reader can be iterated once")
+        self._iterated = True
+        h = self.header
+        next_y0, finished = 0, False
+        while True:
+            ctype, payload, offset = self._next_chunk()
+            name = ctype.decode("latin-1")
+            if ctype == schema.MESH:
+                if finished:
+                    raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
+                y0, mesh = self._parse_band(payload, offset, next_y0)
+                next_y0 = y0 + mesh.height - 1
+                finished = y0 + mesh.height == h.height
+                yield y0, mesh
+            elif ctype == schema.END:
+                if payload:
+                    raise CorruptError("the AEND chunk must be empty")
+                if not finished:
+                    raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
+                return
+            elif ctype == schema.HEADER:
+                raise CorruptError(f"second AHDR chunk at byte {offset}")
+            elif ctype[0] & 0x20 == 0:
+                raise UnsupportedError(f"unknown critical chunk {name}; a newer codec wrote this file")
+            # ancillary chunks this version does not know are skipped, as PNG does
 
 
 def read_header(stream: BinaryIO) -> Header:
     """Read the signature and the AHDR chunk, nothing more."""
-    read_signature(stream)
-    for ctype, payload in iter_chunks(stream):
-        if ctype != schema.HEADER:
-            raise CorruptError(f"the first chunk is {ctype.decode('latin-1')}, not AHDR")
-        return _parse_header(payload)
-    raise CorruptError("the file has no AHDR chunk")  # pragma: no cover - iter_chunks raises first
+    return Reader(stream).header
 
 
-def _parse_mesh(payload: bytes, header: Header) -> Mesh:
-    raw = _decompress(payload, _payload_limit(header), "MESH")
-    stream = io.BytesIO(raw)
-    try:
-        m = schema.MeshPayload.parse_stream(
-            stream, sample_type=SAMPLE_TYPES[header.dtype], channels=header.channels
-        )
-    except ConstructError as exc:
-        raise CorruptError(f"MESH chunk is malformed: {str(exc).splitlines()[0]}") from None
-    if stream.tell() != len(raw):
-        raise CorruptError(f"MESH chunk has {len(raw) - stream.tell()} bytes of trailing data")
-    vertices = np.stack([m.x, m.y], axis=1).astype(np.int64)
-    values = m.samples.astype(header.dtype)
-    if header.channels > 1:
-        values = values.reshape(-1, header.channels)
-    triangles = m.triangles.astype(np.int64).reshape(-1, 3)
-    bounds = np.cumsum(m.polyline_lengths.astype(np.int64))[:-1]
-    constraints = (
-        np.split(m.polyline_indices.astype(np.int64), bounds) if m.polyline_count else []
-    )
-    mesh = Mesh(vertices, values, triangles, header.width, header.height, constraints)
-    validate(mesh)
-    return mesh
-
-
-def unpack(data: bytes | BinaryIO) -> tuple[Header, Mesh]:
-    """Parse a complete .atm file into its header and validated mesh."""
+def unpack(data: bytes | BinaryIO) -> tuple[Header, list[tuple[int, Mesh]]]:
+    """Parse a complete .atm file into its header and validated bands (y0, Mesh)."""
     stream = io.BytesIO(data) if isinstance(data, (bytes, bytearray, memoryview)) else data
-    read_signature(stream)
-    header = None
-    mesh = None
-    for ctype, payload in iter_chunks(stream):
-        name = ctype.decode("latin-1")
-        if header is None and ctype != schema.HEADER:
-            raise CorruptError(f"the first chunk is {name}, not AHDR")
-        if ctype == schema.HEADER:
-            if header is not None:
-                raise CorruptError("the file has two AHDR chunks")
-            header = _parse_header(payload)
-        elif ctype == schema.MESH:
-            if mesh is not None:
-                raise CorruptError("the file has two MESH chunks")
-            mesh = _parse_mesh(payload, header)
-        elif ctype == schema.END:
-            if payload:
-                raise CorruptError("the AEND chunk must be empty")
-        elif ctype[0] & 0x20 == 0:
-            raise UnsupportedError(f"unknown critical chunk {name}; a newer codec wrote this file")
-        # ancillary chunks this version does not know are skipped, as PNG does
-    if mesh is None:
-        raise CorruptError("the file has no MESH chunk")
-    return header, mesh
+    reader = Reader(stream)
+    return reader.header, list(reader)

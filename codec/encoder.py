@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import io
 import inspect
 import numbers
 
@@ -29,19 +30,27 @@ def _mesher(name: str):
     return importlib.import_module(MESHERS[name])
 
 
-def _check_options(build, mesher: str, options: dict) -> None:
+def mesher_build(name: str, options: dict):
+    """The named mesher's `build(image, points, **options)`, once `options` are checked."""
+    build = _mesher(name).build
     params = inspect.signature(build).parameters
     accepted = [p for p, spec in params.items() if spec.kind == spec.KEYWORD_ONLY]
     unknown = sorted(set(options) - set(accepted))
     if unknown:
         raise OptionError(
-            f"mesher {mesher!r} has no option {', '.join(unknown)}; "
+            f"mesher {name!r} has no option {', '.join(unknown)}; "
             f"its options are: {', '.join(accepted) or 'none'}"
         )
+    return build
+
+
+def _check_points(points) -> None:
+    if isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 1:
+        raise OptionError(f"points must be a positive whole number, not {points!r}")
 
 
 def mesh(image, *, points: int | None = None, mesher: str = DEFAULT_MESHER, **options) -> Mesh:
-    """Mesh an image (H x W gray or H x W x 3 RGB, uint8 or uint16).
+    """Mesh a whole image (H x W gray or H x W x 3 RGB, uint8 or uint16) in one piece.
 
     points: target vertex count (the result lands within 10 % where the image has that
     many pixels); default 2.8 % of the pixels. Other options go to the mesher.
@@ -50,21 +59,42 @@ def mesh(image, *, points: int | None = None, mesher: str = DEFAULT_MESHER, **op
     height, width = img.shape[:2]
     if points is None:
         points = default_points(width, height)
-    elif isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 1:
-        raise OptionError(f"points must be a positive whole number, not {points!r}")
-    module = _mesher(mesher)
-    _check_options(module.build, mesher, options)
-    return module.build(img, min(int(points), width * height), **options)
+    _check_points(points)
+    build = mesher_build(mesher, options)
+    return build(img, min(int(points), width * height), **options)
 
 
-def encode(image, *, points: int | None = None, mesher: str = DEFAULT_MESHER, **options) -> bytes:
-    """Encode an image as .atm bytes. Same image and options give the same bytes."""
-    return container.pack(mesh(image, points=points, mesher=mesher, **options))
+def encode(
+    image,
+    *,
+    points: int | None = None,
+    mesher: str = DEFAULT_MESHER,
+    band_height: int | None = None,
+    **options,
+) -> bytes:
+    """Encode an image as .atm bytes, band by band (see codec.StreamEncoder).
+    Same image and options give the same bytes."""
+    from .stream import StreamEncoder
+
+    img = as_image(image)
+    height, width = img.shape[:2]
+    out = io.BytesIO()
+    enc = StreamEncoder(
+        out,
+        width,
+        height,
+        dtype=img.dtype,
+        channels=1 if img.ndim == 2 else img.shape[2],
+        band_height=band_height,
+        points=points,
+        mesher=mesher,
+        **options,
+    )
+    enc.write(img)
+    enc.close()
+    return out.getvalue()
 
 
 def pack(m: Mesh) -> bytes:
     """Encode an existing mesh (validated first) as .atm bytes."""
     return container.pack(m)
-
-
-__all__ = ["encode", "mesh", "pack", "MESHERS", "DEFAULT_MESHER"]

@@ -106,9 +106,11 @@ Header = Struct(
     "channels" / Int8ul,
 )
 
-#: MESH payload, after zstd decompression. Build and parse it with the header's
-#: `sample_type` and `channels` as keyword arguments.
+#: MESH payload, after zstd decompression: the mesh of one band of rows. Build and
+#: parse it with the header's `sample_type` and `channels` as keyword arguments.
 MeshPayload = Struct(
+    "y0" / Int32ul,
+    "rows" / Int32ul,
     "vertex_count" / Int32ul,
     "triangle_count" / Int32ul,
     "polyline_count" / Int32ul,

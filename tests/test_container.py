@@ -42,7 +42,9 @@ def test_pack_unpack_is_exact_for_arbitrary_meshes(args):
     seed, w, h, dtype, channels, extra = args
     mesh = random_mesh(seed, w, h, dtype=dtype, channels=channels, extra=extra)
     data = container.pack(mesh)
-    header, back = container.unpack(data)
+    header, bands = container.unpack(data)
+    [(y0, back)] = bands
+    assert y0 == 0
     assert (header.width, header.height, header.dtype, header.channels) == (w, h, np.dtype(dtype), channels)
     assert_same_mesh(mesh, back)
     assert container.pack(back) == data
@@ -74,6 +76,10 @@ def test_layout_matches_spec(sample_file):
     assert types == [b"AHDR", b"MESH", b"AEND"]
     ahdr = chunks(sample_file)[0][2]
     assert struct.unpack("<IIBB", ahdr) == (20, 12, 0, 1)
+    import zstandard
+
+    mesh = zstandard.ZstdDecompressor().decompress(chunks(sample_file)[1][2])
+    assert struct.unpack_from("<II", mesh) == (0, 12)  # y0, rows
 
 
 def test_unknown_ancillary_chunk_is_skipped(sample_file):
@@ -124,11 +130,11 @@ def test_not_an_atm_file():
 
 
 def test_mesh_invariants_are_checked(sample_file):
-    header, mesh = container.unpack(sample_file)
+    header, [(_, mesh)] = container.unpack(sample_file)
 
     def repack(**changes) -> bytes:
         m = dict(
-            vertex_count=len(mesh.vertices), triangle_count=len(mesh.triangles), polyline_count=0,
+            y0=0, rows=12, vertex_count=len(mesh.vertices), triangle_count=len(mesh.triangles), polyline_count=0,
             x=mesh.vertices[:, 0], y=mesh.vertices[:, 1], samples=mesh.values,
             triangles=mesh.triangles, polyline_lengths=np.zeros(0, np.uint32),
             polyline_indices=np.zeros(0, np.uint32),

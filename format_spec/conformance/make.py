@@ -50,6 +50,9 @@ def main() -> None:
             points=40,
             mesher="uniform",
         ),
+        "bands_gray8": codec.encode(
+            synthetic.range_scene(40, 30, seed=6), points=200, mesher="uniform", band_height=8
+        ),
         "line_1x9": codec.encode(
             np.array([[0, 30, 60, 90, 255, 200, 100, 50, 7]], np.uint8), points=4, mesher="uniform"
         ),

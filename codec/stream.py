@@ -1,0 +1,191 @@
+"""Streaming: encode and decode band by band, with memory bounded by the band.
+
+Modelled on python-zstandard's stream objects: `StreamEncoder` takes rows as they come
+and writes each band's chunk as soon as the band is complete; `StreamDecoder` yields
+decoded rows as each band's chunk arrives.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import BinaryIO, Iterator
+
+import numpy as np
+
+from . import banding, container, encoder
+from .errors import ATMError, OptionError, UnsupportedError
+from .image import SAMPLE_TYPES
+from .mesh import Mesh
+
+
+class StreamEncoder:
+    """Encode an image arriving in rows to a writable binary file object.
+
+        with codec.StreamEncoder(f, width, height) as enc:
+            for rows in source:          # any number of rows at a time
+                enc.write(rows)
+
+    The bytes equal `codec.encode(image, band_height=..., **options)` for the same image.
+    The writer never seeks; at most one band (band_height + 1 rows) is held in memory.
+    """
+
+    def __init__(
+        self,
+        fileobj: BinaryIO,
+        width: int,
+        height: int,
+        *,
+        dtype=np.uint8,
+        channels: int = 1,
+        band_height: int | None = None,
+        points: int | None = None,
+        mesher: str | None = None,
+        **options,
+    ):
+        for name, value in (("width", width), ("height", height)):
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+                raise OptionError(f"{name} must be a positive whole number, not {value!r}")
+        dtype = np.dtype(dtype)
+        if dtype not in SAMPLE_TYPES:
+            raise UnsupportedError(f"unsupported pixel type {dtype}; .atm stores uint8 or uint16 samples")
+        if channels not in (1, 3):
+            raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
+        if band_height is None:
+            band_height = banding.default_band_height(width, height)
+        elif isinstance(band_height, bool) or not isinstance(band_height, numbers.Integral) or band_height < 1:
+            raise OptionError(f"band_height must be a positive whole number, not {band_height!r}")
+        self.width, self.height, self.dtype, self.channels = int(width), int(height), dtype, channels
+        self.band_height = int(min(band_height, max(height - 1, 1)))
+        self._mesher_name = mesher or encoder.DEFAULT_MESHER
+        self._build = encoder.mesher_build(self._mesher_name, options)
+        self._options = options
+        if points is None:
+            points = encoder.default_points(width, height)
+        elif isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 1:
+            raise OptionError(f"points must be a positive whole number, not {points!r}")
+        self._points = int(points)
+        self._writer = container.Writer(fileobj, container.Header(width, height, dtype, channels))
+        shape = (self.band_height + 1, width) + ((channels,) if channels > 1 else ())
+        self._buf = np.empty(shape, dtype)
+        self._filled = 0  # rows of the current band in _buf
+        self._y0 = 0  # image row of _buf[0]
+        self._received = 0
+        self._top: tuple[np.ndarray, np.ndarray] | None = None
+        self._closed = False
+
+    def write(self, rows) -> None:
+        """Add rows (an n x W, or n x W x 3, array; a single row may be 1-D)."""
+        if self._closed:
+            raise ATMError("write() on a closed StreamEncoder")
+        rows = np.asarray(rows)
+        row_ndim = 1 if self.channels == 1 else 2
+        if rows.ndim == row_ndim:
+            rows = rows[None]
+        if rows.ndim != row_ndim + 1 or rows.shape[1:] != self._buf.shape[1:]:
+            raise ATMError(
+                f"rows must have shape (n, {', '.join(map(str, self._buf.shape[1:]))}); got {rows.shape}"
+            )
+        if rows.dtype != self.dtype:
+            raise ATMError(f"rows are {rows.dtype}; this stream encodes {self.dtype}")
+        if self._received + len(rows) > self.height:
+            raise ATMError(f"more than the {self.height} rows declared")
+        i = 0
+        while i < len(rows):
+            n = min(len(rows) - i, len(self._buf) - self._filled)
+            self._buf[self._filled : self._filled + n] = rows[i : i + n]
+            self._filled += n
+            self._received += n
+            i += n
+            if self._filled == len(self._buf) or self._received == self.height:
+                self._flush()
+
+    def _flush(self) -> None:
+        if self._filled < 2 and self.height > 1:
+            return  # only the shared row of a band already written
+        band = self._buf[: self._filled]
+        share = self._points * (self._filled - (self._y0 > 0)) / self.height
+        mesh = self._build(band, max(4, round(share)), **self._options)
+        if self._top is not None:
+            mesh = banding.pin_top_row(mesh, *self._top)
+        self._writer.write_band(self._y0, mesh)
+        self._top = banding.bottom_row(mesh)
+        self._buf[0] = self._buf[self._filled - 1]
+        self._y0 += self._filled - 1
+        self._filled = 1
+
+    def close(self) -> None:
+        """Finish the file. Raises ATMError if fewer rows came than were declared."""
+        if self._closed:
+            return
+        if self._received != self.height:
+            raise ATMError(f"the stream got {self._received} of the {self.height} rows declared")
+        self._writer.close()
+        self._closed = True
+
+    def __enter__(self) -> "StreamEncoder":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+
+
+class StreamDecoder:
+    """Decode an .atm file from a readable binary file object, band by band.
+
+    `width`, `height`, `dtype`, `channels` and `shape` are known once the header has
+    been read (at creation). Iterating yields `(y0, rows)`: the image rows y0, y0+1, ...
+    in order, each row once, as soon as each band's chunk has arrived. A damaged or
+    truncated stream yields every intact band and then raises an ATMError.
+    """
+
+    def __init__(self, fileobj: BinaryIO, *, backend: str = "cpu"):
+        from . import decoding
+
+        if backend not in decoding.BACKENDS:
+            raise OptionError(
+                f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
+            )
+        self._reader = container.Reader(fileobj)
+        self._backend = backend
+        h = self._reader.header
+        self.width, self.height, self.dtype, self.channels = h.width, h.height, h.dtype, h.channels
+        self.shape = h.shape
+
+    def bands(self) -> Iterator[tuple[int, Mesh]]:
+        """The (y0, Mesh) of each band, undecoded."""
+        return iter(self._reader)
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
+        from . import decoding
+
+        for y0, mesh in self._reader:
+            rows = decoding.render(mesh, backend=self._backend)
+            last = y0 + mesh.height == self.height
+            # the band's last row is the next band's first: emit it once, from there
+            yield y0, rows if last else rows[:-1]
+
+
+def decode_all(fileobj: BinaryIO, backend: str = "cpu") -> np.ndarray:
+    """Decode a whole file into one array."""
+    dec = StreamDecoder(fileobj, backend=backend)
+    out = np.empty(dec.shape, dec.dtype)
+    for y0, rows in dec:
+        out[y0 : y0 + len(rows)] = rows
+    return out
+
+
+def merge_bands(bands: list[tuple[int, Mesh]]) -> Mesh:
+    """One Mesh of the whole image from its bands (shared-row vertices merged)."""
+    if len(bands) == 1:
+        return bands[0][1]
+    width = bands[0][1].width
+    height = bands[-1][0] + bands[-1][1].height
+    pos = np.concatenate([m.vertices + [0, y0] for y0, m in bands])
+    vals = np.concatenate([m.values for _, m in bands])
+    keys = pos[:, 1] * width + pos[:, 0]
+    unique, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    offsets = np.cumsum([0] + [len(m.vertices) for _, m in bands[:-1]])
+    triangles = np.concatenate([inverse[m.triangles + o] for (_, m), o in zip(bands, offsets)])
+    constraints = [inverse[c + o] for (_, m), o in zip(bands, offsets) for c in m.constraints]
+    return Mesh(pos[first], vals[first], triangles, width, height, constraints)

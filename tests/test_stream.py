@@ -1,0 +1,165 @@
+"""Streaming: band-by-band encoding equals one-shot encoding, decoding yields bands as
+they arrive, and damaged streams give their intact bands and then a clear error."""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import codec
+from codec.errors import ATMError, CorruptError, TruncatedError
+from codec.synthetic import range_scene
+
+
+def stream_encode(image, band_height, step, **options) -> bytes:
+    out = io.BytesIO()
+    h, w = image.shape[:2]
+    with codec.StreamEncoder(out, w, h, dtype=image.dtype, band_height=band_height, **options) as enc:
+        for y in range(0, h, step):
+            enc.write(image[y : y + step])
+    return out.getvalue()
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(1, 40), st.integers(1, 50), st.integers(1, 12), st.integers(1, 9), st.integers(0, 99))
+def test_stream_equals_one_shot(height, width, band_height, step, seed):
+    image = range_scene(width, height, seed=seed)
+    one_shot = codec.encode(image, band_height=band_height, mesher="uniform", points=max(4, width * height // 20))
+    streamed = stream_encode(image, band_height, step, mesher="uniform", points=max(4, width * height // 20))
+    assert streamed == one_shot
+    out = codec.decode(one_shot)
+    assert out.shape == image.shape
+
+
+@pytest.mark.parametrize("band_height", [1, 2, 3, 7, 16, 64])
+def test_bands_decode_without_seams(band_height):
+    image = range_scene(64, 50, seed=3)
+    data = codec.encode(image, band_height=band_height, points=600)
+    dec = codec.StreamDecoder(io.BytesIO(data))
+    bands = [(y0, m.render()) for y0, m in dec.bands()]
+    assert len(bands) == -(-49 // band_height)
+    for (y0, a), (y1, b) in zip(bands, bands[1:]):
+        assert y1 == y0 + len(a) - 1
+        np.testing.assert_array_equal(a[-1], b[0])  # the shared row, decoded from each side
+    rows = list(codec.StreamDecoder(io.BytesIO(data)))
+    assert [y for y, _ in rows] == [y for y, _ in bands]
+    whole = np.concatenate([r for _, r in rows])
+    np.testing.assert_array_equal(whole, codec.decode(data))
+    assert whole.shape == image.shape
+
+
+def test_banded_quality_is_close_to_one_band():
+    image = range_scene(128, 128, seed=5)
+    rms = {}
+    for bh in (16, 128):
+        out = codec.decode(codec.encode(image, band_height=bh, points=800))
+        rms[bh] = np.sqrt(np.mean((out.astype(float) - image) ** 2))
+    assert rms[16] < 1.5 * rms[128] + 1
+
+
+def test_decoder_knows_the_header_before_any_band():
+    image = range_scene(30, 20, seed=1, dtype=np.uint16)
+    dec = codec.StreamDecoder(io.BytesIO(codec.encode(image)))
+    assert (dec.width, dec.height, dec.dtype, dec.channels, dec.shape) == (30, 20, np.uint16, 1, (20, 30))
+
+
+def chunk_bounds(data: bytes) -> list[int]:
+    """Byte offsets where each chunk starts, and the end of the file."""
+    pos, out = 10, []
+    while pos < len(data):
+        out.append(pos)
+        (length,) = struct.unpack_from("<I", data, pos)
+        pos += 12 + length
+    return out + [pos]
+
+
+def test_truncation_at_every_chunk_boundary_yields_intact_bands():
+    image = range_scene(40, 33, seed=2)
+    data = codec.encode(image, band_height=8, mesher="uniform", points=300)
+    full = codec.decode(data)
+    bounds = chunk_bounds(data)
+    for cut in bounds[1:-1] + [b + 5 for b in bounds[1:-2]]:
+        dec = codec.StreamDecoder(io.BytesIO(data[:cut]))
+        got = []
+        with pytest.raises(TruncatedError, match=r"byte \d+"):
+            for y0, rows in dec:
+                got.append((y0, rows))
+        complete_bands = sum(1 for b in bounds[2:-1] if b <= cut)  # MESH chunks that end by the cut
+        assert len(got) == complete_bands
+        for y0, rows in got:
+            np.testing.assert_array_equal(rows, full[y0 : y0 + len(rows)])
+
+
+def test_bad_checksum_names_the_chunk():
+    data = bytearray(codec.encode(range_scene(40, 33, seed=2), band_height=8, mesher="uniform"))
+    bounds = chunk_bounds(bytes(data))
+    data[bounds[2] + 20] ^= 0xFF  # inside the second MESH chunk
+    dec = codec.StreamDecoder(io.BytesIO(bytes(data)))
+    it = iter(dec)
+    next(it)
+    with pytest.raises(CorruptError, match=f"MESH at byte {bounds[2]} fails its CRC"):
+        next(it)
+
+
+def test_decoding_from_a_pipe_yields_a_band_before_the_rest_arrives():
+    image = range_scene(64, 64, seed=4)
+    data = codec.encode(image, band_height=16, mesher="uniform")
+    bounds = chunk_bounds(data)
+    r, w = os.pipe()
+    first_band_sent, release = threading.Event(), threading.Event()
+
+    def writer():
+        with os.fdopen(w, "wb") as f:
+            f.write(data[: bounds[2]])  # signature, AHDR and the first MESH only
+            f.flush()
+            first_band_sent.set()
+            release.wait(10)
+            f.write(data[bounds[2] :])
+
+    t = threading.Thread(target=writer)
+    t.start()
+    with os.fdopen(r, "rb") as f:
+        it = iter(codec.StreamDecoder(f))
+        y0, rows = next(it)  # must not wait for the rest of the file
+        assert y0 == 0 and len(rows) == 16 and not release.is_set()
+        release.set()
+        rest = list(it)
+    t.join()
+    assert sum(len(r) for _, r in rest) == 48
+
+
+def test_encoder_errors():
+    out = io.BytesIO()
+    enc = codec.StreamEncoder(out, 10, 5)
+    with pytest.raises(ATMError, match="shape"):
+        enc.write(np.zeros((2, 11), np.uint8))
+    with pytest.raises(ATMError, match="uint16"):
+        enc.write(np.zeros((2, 10), np.uint16))
+    enc.write(np.zeros((3, 10), np.uint8))
+    with pytest.raises(ATMError, match="3 of the 5 rows"):
+        enc.close()
+    with pytest.raises(ATMError, match="more than the 5 rows"):
+        enc.write(np.zeros((3, 10), np.uint8))
+    with pytest.raises(ATMError, match="band_height"):
+        codec.StreamEncoder(io.BytesIO(), 10, 5, band_height=0)
+    with pytest.raises(ATMError, match="no option"):
+        codec.StreamEncoder(io.BytesIO(), 10, 5, bogus=1)
+
+
+def test_rgb_and_single_row_streams():
+    rgb = np.random.default_rng(0).integers(0, 256, (21, 13, 3), dtype=np.uint8)
+    out = io.BytesIO()
+    with codec.StreamEncoder(out, 13, 21, channels=3, band_height=4, mesher="uniform") as enc:
+        for row in rgb:
+            enc.write(row)
+    assert out.getvalue() == codec.encode(rgb, band_height=4, mesher="uniform")
+    assert codec.decode(out.getvalue()).shape == (21, 13, 3)
+    line = np.arange(17, dtype=np.uint8)[None]
+    assert codec.decode(stream_encode(line, 3, 1)).shape == (1, 17)
