@@ -7,7 +7,9 @@ import numpy as np
 from .errors import OptionError
 from .mesh import Mesh
 
-BACKENDS = ("cpu",)
+#: "cpu": exact integer scanline decoder (codec.decoder_cpu), the default.
+#: "gl": OpenGL z-buffer decoder (codec.decoder_gl), identical output, needs EGL.
+BACKENDS = ("cpu", "gl")
 
 
 def render(mesh: Mesh, backend: str = "cpu") -> np.ndarray:
@@ -16,4 +18,8 @@ def render(mesh: Mesh, backend: str = "cpu") -> np.ndarray:
         from . import decoder_cpu
 
         return decoder_cpu.render(mesh)
+    if backend == "gl":
+        from . import decoder_gl
+
+        return decoder_gl.render(mesh)
     raise OptionError(f"unknown decoder backend {backend!r}; choose one of {', '.join(BACKENDS)}")
