@@ -7,6 +7,7 @@ arrive and never seeks; `Reader` yields bands as their chunks arrive.
 
 from __future__ import annotations
 
+import gc
 import io
 from dataclasses import dataclass
 from typing import BinaryIO, Iterator
@@ -56,6 +57,19 @@ def band_starts(height: int, band_height: int) -> list[int]:
     if height == 1:
         return [0]
     return list(range(0, height - 1, band_height))
+
+
+#: Payload size above which a band's construct contexts are collected at once (below).
+_COLLECT_BYTES = 1 << 18
+
+
+def _release_cycles(size: int) -> None:
+    """construct keeps each build/parse context in a reference cycle (the root context
+    points to itself), so a band's arrays would live until Python's cyclic collector
+    happens to run, and a long stream's memory would grow with its height. Collect
+    them now when they are big enough to matter (a collection costs a few ms)."""
+    if size >= _COLLECT_BYTES:
+        gc.collect()
 
 
 def _chunk(ctype: bytes, payload: bytes) -> bytes:
@@ -112,6 +126,7 @@ class Writer:
             **h._fields(),
         )
         self._stream.write(_chunk(schema.MESH, self._compressor.compress(raw)))
+        _release_cycles(len(raw))
         self._next_y0 = y0 + mesh.height - 1
         self._rows_done = y0 + mesh.height
 
@@ -271,6 +286,7 @@ class Reader:
             raise CorruptError(
                 f"MESH chunk at byte {offset} is malformed: {str(exc).splitlines()[0]}"
             ) from None
+        _release_cycles(len(raw))
         if stream.tell() != len(raw):
             raise CorruptError(f"MESH chunk at byte {offset} has {len(raw) - stream.tell()} bytes of trailing data")
         if m.y0 != y0_expected:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
+from typing import BinaryIO, Iterator
 
 import numpy as np
 
@@ -14,8 +16,10 @@ from .errors import ATMError, UnsupportedError
 WRITABLE = (".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff")
 
 
-def atomic_write(path: str | os.PathLike, data: bytes) -> None:
-    """Write `data` to `path` so that `path` is either untouched or complete."""
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
+    """A binary file to write `path` with: it replaces `path` only when the block
+    finishes without error; otherwise it is deleted and `path` is left as it was."""
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
@@ -29,7 +33,7 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> None:
             mode = 0o666 & ~umask
         os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            yield f
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -39,6 +43,12 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> None:
         except FileNotFoundError:
             pass
         raise
+
+
+def atomic_write(path: str | os.PathLike, data: bytes) -> None:
+    """Write `data` to `path` so that `path` is either untouched or complete."""
+    with atomic_open(path) as f:
+        f.write(data)
 
 
 def decode_image(data: bytes, name: str = "input") -> np.ndarray:

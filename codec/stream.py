@@ -72,6 +72,8 @@ class StreamEncoder:
         self._received = 0
         self._top: tuple[np.ndarray, np.ndarray] | None = None
         self._closed = False
+        #: Totals over the bands written so far (shared-row vertices count in both bands).
+        self.bands = self.vertices = self.triangles = 0
 
     def write(self, rows) -> None:
         """Add rows (an n x W, or n x W x 3, array; a single row may be 1-D)."""
@@ -108,6 +110,9 @@ class StreamEncoder:
         if self._top is not None:
             mesh = banding.pin_top_row(mesh, *self._top)
         self._writer.write_band(self._y0, mesh)
+        self.bands += 1
+        self.vertices += len(mesh.vertices)
+        self.triangles += len(mesh.triangles)
         self._top = banding.bottom_row(mesh)
         self._buf[0] = self._buf[self._filled - 1]
         self._y0 += self._filled - 1

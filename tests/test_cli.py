@@ -128,3 +128,43 @@ def test_bundled_example_round_trips(tmp_path):
     assert atm("encode", example, tmp_path / "e.atm").returncode == 0
     assert atm("decode", tmp_path / "e.atm", tmp_path / "e.png").returncode == 0
     assert rms(read_image(tmp_path / "e.png"), read_image(example)) < 15
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_pgm_and_npy_stream_through_pipes(tmp_path, dtype):
+    image = range_scene(70, 45, seed=9, dtype=dtype)
+    pgm = tmp_path / "in.pgm"
+    write_image(pgm, image)
+    enc = atm("encode", "-", "-", "--band-height", "8", stdin=pgm.read_bytes())
+    assert enc.returncode == 0, enc.stderr
+    import codec
+
+    assert codec.info(enc.stdout)["bands"] == 6
+    dec = atm("decode", "-", "-", "--format", "pgm", stdin=enc.stdout)
+    assert dec.returncode == 0, dec.stderr
+    (tmp_path / "out.pgm").write_bytes(dec.stdout)
+    out = read_image(tmp_path / "out.pgm")
+    np.testing.assert_array_equal(out, codec.decode(enc.stdout))
+    assert out.dtype == dtype
+    # the same image as .npy, from a file (memory-mapped) and from a pipe
+    npy = tmp_path / "in.npy"
+    np.save(npy, image)
+    from_file = atm("encode", npy, "-", "--band-height", "8")
+    from_pipe = atm("encode", "-", "-", "--band-height", "8", stdin=npy.read_bytes())
+    assert from_file.stdout == from_pipe.stdout == enc.stdout
+    assert atm("decode", "-", tmp_path / "o.npy", stdin=enc.stdout).returncode == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "o.npy"), out)
+
+
+def test_truncated_stream_is_an_error_and_leaves_no_file(tmp_path, png):
+    data = atm("encode", png, "-", "--band-height", "8").stdout
+    r = atm("decode", "-", tmp_path / "o.pgm", stdin=data[: len(data) - 30])
+    assert r.returncode == 1 and b"ends" in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_npy_of_floats_is_refused(tmp_path):
+    np.save(tmp_path / "f.npy", np.zeros((4, 4), np.float64))
+    r = atm("encode", tmp_path / "f.npy", tmp_path / "f.atm")
+    assert r.returncode == 1 and b"float64" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.npy"]

@@ -1,0 +1,166 @@
+"""Images as streams of rows for the CLI: binary PGM/PPM and .npy are read and written
+row by row; other formats (PNG, TIFF, ...) go through OpenCV whole, in memory."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from dataclasses import dataclass
+from typing import BinaryIO, Iterator
+
+import numpy as np
+
+from codec.errors import ATMError, UnsupportedError
+from codec.files import decode_image
+
+#: Rows handed to the encoder at a time when reading a stream.
+BLOCK_ROWS = 64
+
+
+@dataclass
+class RowSource:
+    """An image's size and type, and its rows in blocks, top to bottom."""
+
+    width: int
+    height: int
+    dtype: np.dtype
+    channels: int
+    blocks: Iterator[np.ndarray]
+
+
+def _read_exact(f: BinaryIO, n: int, name: str) -> bytes:
+    data = f.read(n)
+    if len(data) != n:
+        raise ATMError(f"{name}: the image data ends early")
+    return data
+
+
+def _pnm_token(f: BinaryIO, head: bytearray) -> bytes:
+    """The next whitespace-separated header token, skipping # comments."""
+    token = b""
+    while True:
+        c = f.read(1)
+        head += c
+        if not c:
+            return token
+        if c == b"#":
+            while c not in (b"\n", b"\r", b""):
+                c = f.read(1)
+                head += c
+            continue
+        if c.isspace():
+            if token:
+                return token
+            continue
+        token += c
+
+
+def _pnm_source(f: BinaryIO, magic: bytes, name: str) -> RowSource:
+    head = bytearray(magic)
+    try:
+        width, height, maxval = (int(_pnm_token(f, head)) for _ in range(3))
+    except ValueError:
+        raise ATMError(f"{name}: malformed PGM/PPM header") from None
+    if width < 1 or height < 1 or not 0 < maxval < 65536:
+        raise ATMError(f"{name}: PGM/PPM header declares {width}x{height}, maxval {maxval}")
+    channels = 1 if magic == b"P5" else 3
+    wire = np.dtype(">u2") if maxval > 255 else np.dtype("u1")
+    dtype = np.dtype(np.uint16) if maxval > 255 else np.dtype(np.uint8)
+    row_shape = (width,) if channels == 1 else (width, 3)
+    row_bytes = width * channels * wire.itemsize
+
+    def blocks() -> Iterator[np.ndarray]:
+        for y in range(0, height, BLOCK_ROWS):
+            n = min(BLOCK_ROWS, height - y)
+            data = _read_exact(f, n * row_bytes, name)
+            yield np.frombuffer(data, wire).reshape((n,) + row_shape).astype(dtype)
+
+    return RowSource(width, height, dtype, channels, blocks())
+
+
+def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
+    if path is not None:
+        array = np.load(path, mmap_mode="r", allow_pickle=False)  # pages in as rows are read
+        shape, dtype = array.shape, array.dtype
+    else:
+        try:
+            version = np.lib.format.read_magic(f)
+            header = (
+                np.lib.format.read_array_header_1_0(f)
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0(f)
+            )
+        except (ValueError, SyntaxError) as exc:
+            raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
+        shape, fortran, dtype = header
+        if fortran:
+            raise UnsupportedError(f"{name}: Fortran-ordered .npy cannot be streamed")
+        array = None
+    if len(shape) not in (2, 3) or 0 in shape:
+        raise ATMError(f"{name}: array of shape {shape} is not an image")
+    height, width = shape[:2]
+    channels = 1 if len(shape) == 2 else shape[2]
+    row_items = int(np.prod(shape[1:]))
+
+    def blocks() -> Iterator[np.ndarray]:
+        for y in range(0, height, BLOCK_ROWS):
+            n = min(BLOCK_ROWS, height - y)
+            if array is not None:
+                yield np.ascontiguousarray(array[y : y + n])
+            else:
+                data = _read_exact(f, n * row_items * dtype.itemsize, name)
+                yield np.frombuffer(data, dtype).reshape((n,) + tuple(shape[1:])).astype(dtype.newbyteorder("="))
+
+    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks())
+
+
+def open_rows(name: str) -> RowSource:
+    """Open an image file (or - for standard input) as rows."""
+    if name == "-":
+        f, path = sys.stdin.buffer, None
+    else:
+        try:
+            f, path = open(name, "rb"), name
+        except OSError as exc:
+            raise ATMError(f"cannot read {name}: {exc.strerror}") from None
+    magic = f.read(2)
+    if magic in (b"P5", b"P6"):
+        return _pnm_source(f, magic, name)
+    if magic == b"\x93N":
+        if path is not None:
+            f.close()
+        else:
+            f = _Prefixed(magic, f)
+        return _npy_source(f, name, path)
+    image = decode_image(magic + f.read(), name)  # formats OpenCV reads whole
+    if path is not None:
+        f.close()
+    if image.ndim not in (2, 3):
+        raise ATMError(f"{name}: not a 2-D image")
+    h, w = image.shape[:2]
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    return RowSource(w, h, image.dtype, channels, iter([image]))
+
+
+class _Prefixed:
+    """A stream with bytes already read put back in front."""
+
+    def __init__(self, prefix: bytes, stream: BinaryIO):
+        self._prefix = prefix
+        self._stream = stream
+
+    def read(self, n: int = -1) -> bytes:
+        head, self._prefix = (self._prefix, b"") if n < 0 or n >= len(self._prefix) else (self._prefix[:n], self._prefix[n:])
+        if n < 0:
+            return head + self._stream.read()
+        return head + (self._stream.read(n - len(head)) if n > len(head) else b"")
+
+
+def pnm_header(width: int, height: int, dtype: np.dtype, channels: int) -> bytes:
+    maxval = 255 if dtype == np.uint8 else 65535
+    return f"{'P5' if channels == 1 else 'P6'}\n{width} {height}\n{maxval}\n".encode()
+
+
+def pnm_rows(rows: np.ndarray) -> bytes:
+    """Rows as PNM sample bytes (16-bit samples are big-endian in PNM)."""
+    return rows.astype(rows.dtype.newbyteorder(">")).tobytes() if rows.dtype.itemsize > 1 else rows.tobytes()
