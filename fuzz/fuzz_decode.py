@@ -23,6 +23,7 @@ with atheris.instrument_imports():
     import codec.container
     import codec.decoder_cpu
     import codec.mesh
+    import codec.stream
     from fuzz.mutate import mutate
     from fuzz.targets import run_one
 

@@ -2,22 +2,38 @@
 
 from __future__ import annotations
 
+import io
+
+import numpy as np
+
 import codec
 
 
 def run_one(data: bytes) -> bool:
-    """Decode `data` every way a user can; only codec.ATMError may escape.
-    Returns whether it decoded."""
+    """Read `data` as `codec.info`, `codec.StreamDecoder` and `codec.decode` do; only
+    codec.ATMError may escape, and what decodes must agree with the header. Returns
+    whether the whole file decoded."""
     try:
         codec.info(data)
     except codec.ATMError:
-        return False
+        pass
+    rows_seen = 0
+    try:
+        dec = codec.StreamDecoder(io.BytesIO(data))
+        for y0, rows in dec:
+            if y0 != rows_seen or rows.shape[1:] != dec.shape[1:] or rows.dtype != dec.dtype:
+                raise AssertionError(f"band at row {y0} of shape {rows.shape} after {rows_seen} rows")
+            rows_seen += len(rows)
+    except codec.ATMError:
+        pass
     try:
         image = codec.decode(data)
     except codec.ATMError:
         return False
     info = codec.info(data)
     expected = (info["height"], info["width"]) + ((info["channels"],) if info["channels"] > 1 else ())
-    if image.shape != expected:
+    if image.shape != expected or rows_seen != info["height"]:
         raise AssertionError(f"decoded shape {image.shape}, header says {expected}")
+    if not isinstance(image, np.ndarray):
+        raise AssertionError("decode did not return an array")
     return True
