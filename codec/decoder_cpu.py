@@ -36,13 +36,16 @@ vectorised; no Python loop runs per triangle or per pixel.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from .errors import CorruptError, UnsupportedError
 from .mesh import Mesh
 
-#: Pixels per band of rows; bounds the decoder's temporary memory (about 40 bytes each).
-BATCH_PIXELS = 1 << 20
+#: Pixels per band of rows; bounds the decoder's temporary memory (about 60 bytes each,
+#: 40 of them kept per thread as reusable scratch).
+BATCH_PIXELS = 1 << 16
 
 # float64 holds every integer below 2**53 exactly; the fast path evaluates the exact
 # integer numerators in float64 when they provably stay below this bound, and the
@@ -86,72 +89,74 @@ def render_line(mesh: Mesh) -> np.ndarray:
 
 
 class _Trapezoids:
-    """Each triangle cut at its middle vertex's row into two trapezoids (one may be
-    empty), each bounded by one left and one right edge, as float64 arrays.
+    """Each triangle cut at its middle vertex's row into two trapezoids (empty ones
+    dropped), each bounded by one left and one right edge, plus the plane of the
+    triangle it comes from.
 
-    Every number here is an integer far below 2**53, so float64 holds it exactly and
-    the float arithmetic below is exact integer arithmetic (bounds in the comments).
+    Everything is float64 holding integers: for images of at most 2**32 pixels every
+    number here and in _render_band stays below 2**53 (bounds in the comments), so the
+    float arithmetic is exact integer arithmetic.
     """
 
     def __init__(self, mesh: Mesh) -> None:
-        w, h, c = mesh.width, mesh.height, mesh.channels
-        v = mesh.vertices.astype(np.int64)
-        t = np.asarray(mesh.triangles, dtype=np.int64)
+        h, c = mesh.height, mesh.channels
+        t0, t1, t2 = np.asarray(mesh.triangles, dtype=np.int64).T
+        vx = mesh.vertices[:, 0].astype(np.float64)
+        vy = mesh.vertices[:, 1].astype(np.float64)
+        y0, y1, y2 = vy[t0], vy[t1], vy[t2]
         # rotate each corner triple so the top corner A comes first; the orientation
         # (clockwise on screen) then puts P1 on the right chain and P2 on the left
-        top = np.argmin(v[t, 1], axis=1)
-        t = np.take_along_axis(t, (top[:, None] + np.arange(3)) % 3, axis=1)
-        x, y = v[t, 0], v[t, 1]
-        ax, ay, p1x, p1y, p2x, p2y = x[:, 0], y[:, 0], x[:, 1], y[:, 1], x[:, 2], y[:, 2]
+        # (1-D arrays throughout: numpy is slow along short axes)
+        top0 = (y0 <= y1) & (y0 <= y2)
+        top1 = ~top0 & (y1 <= y2)
+        a = np.where(top0, t0, np.where(top1, t1, t2))
+        p1 = np.where(top0, t1, np.where(top1, t2, t0))
+        p2 = np.where(top0, t2, np.where(top1, t0, t1))
+        ax, ay, p1x, p1y, p2x, p2y = vx[a], vy[a], vx[p1], vy[p1], vx[p2], vy[p2]
         ymid = np.minimum(p1y, p2y)
         ybot = np.maximum(p1y, p2y)
         # owned rows: ay <= y < ybot, plus ybot itself on the image's last row
         yend = ybot + (ybot == h - 1)
         flat_bottom = ymid == ybot
-        upper_end = np.where(flat_bottom, yend, ymid)
-        p1_mid = p1y < p2y
-        # edges (P -> Q with Qy >= Py) of the upper and lower trapezoids
-        up_l = (ax, ay, p2x, p2y)
-        up_r = (ax, ay, p1x, p1y)
-        lo_l = tuple(np.where(p1_mid, a, b) for a, b in zip((ax, ay, p2x, p2y), (p2x, p2y, p1x, p1y)))
-        lo_r = tuple(np.where(p1_mid, a, b) for a, b in zip((p1x, p1y, p2x, p2y), (ax, ay, p1x, p1y)))
-        lo_start = ymid
-        lo_end = np.where(flat_bottom, ymid, yend)
-        tri = np.arange(len(t))
-        first = np.concatenate([ay, lo_start])
-        count = np.concatenate([upper_end - ay, lo_end - lo_start])
-        keep = count > 0
-        self.first = first[keep].astype(np.float64)
+        m = len(a)
+        # trapezoid rows: upper [ay, ymid) (to yend if the bottom is flat), lower [ymid, yend)
+        first = np.concatenate([ay, ymid])
+        count = np.concatenate([np.where(flat_bottom, yend, ymid) - ay,
+                                np.where(flat_bottom, 0, yend - ymid)])
+        keep = np.flatnonzero(count > 0)
+        tri = np.concatenate([np.arange(m), np.arange(m)])[keep]
+        self.first = first[keep]
         self.count = count[keep].astype(np.int64)
-        self.tri = np.concatenate([tri, tri])[keep]
+        # bounding edges P -> Q: upper A->P2 | A->P1; lower A->P2 | P1->P2 when P1 is
+        # the middle corner, else P2->P1 | A->P1
+        p1_mid = p1y < p2y
 
-        def edge(left: tuple, right: tuple) -> tuple:
-            px, py, qx, qy = (np.concatenate([a, b])[keep] for a, b in zip(left, right))
-            den = np.maximum(qy - py, 1)  # a flat edge never bounds a non-empty row range
+        def pick(upper: np.ndarray, if_p1_mid: np.ndarray, otherwise: np.ndarray) -> np.ndarray:
+            return np.concatenate([upper, np.where(p1_mid, if_p1_mid, otherwise)])[keep]
+
+        def edge(px, py, qx, qy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            den = np.maximum(qy - py, 1.0)  # a flat edge never bounds a non-empty row range
             dx = qx - px
             # x on row y is (px*den + dx*(y - py)) / den: |numerator| <= W*H
-            num0 = px * den + dx * (self.first.astype(np.int64) - py)
-            return num0.astype(np.float64), dx.astype(np.float64), den.astype(np.float64)
+            return px * den + dx * (self.first - py), dx, den
 
-        self.lnum, self.ldx, self.lden = edge(up_l, lo_l)
-        self.rnum, self.rdx, self.rden = edge(up_r, lo_r)
-        # the plane of 2*sum(w_i v_i) + D per channel, as T(x, y) = ta + ga*(x - ax) +
-        # gb*(y - ay); at corner A the weights are (D, 0, 0), so ta = (2 vA + 1) D
-        vals = mesh.values.astype(np.int64).reshape(len(v), c)
+        self.lnum, self.ldx, self.lden = edge(
+            pick(ax, ax, p2x), pick(ay, ay, p2y), pick(p2x, p2x, p1x), pick(p2y, p2y, p1y)
+        )
+        self.rnum, self.rdx, self.rden = edge(
+            pick(ax, p1x, ax), pick(ay, p1y, ay), pick(p1x, p2x, p1x), pick(p1y, p2y, p1y)
+        )
+        # the plane 2*sum(w_i v_i) + D = ga*x + gb*y + gc per channel; at corner A the
+        # weights are (D, 0, 0), which gives gc. |ga|, |gb| < 2**18 max(W, H) and
+        # |ga*x|, |gb*y|, |gc| < 2**52 (channel-major so each channel is contiguous)
+        vals = mesh.values.astype(np.float64).reshape(len(vx), c).T  # C x N
+        va, v1, v2 = vals[:, a], vals[:, p1], vals[:, p2]
+        ga = 2 * ((p1y - p2y) * va + (p2y - ay) * v1 + (ay - p1y) * v2)
+        gb = 2 * ((p2x - p1x) * va + (ax - p2x) * v1 + (p1x - ax) * v2)
         d = (p1x - ax) * (p2y - ay) - (p2x - ax) * (p1y - ay)
-        ga = np.zeros((len(t), c), np.int64)
-        gb = np.zeros((len(t), c), np.int64)
-        for i in range(3):  # the three corners, not a per-triangle loop
-            j, k = (i + 1) % 3, (i + 2) % 3
-            vi = vals[t[:, i]]
-            ga -= (y[:, k] - y[:, j])[:, None] * vi
-            gb += (x[:, k] - x[:, j])[:, None] * vi
-        # |ga|, |gb| <= 4 * 65535 * max(W, H); |ta| <= 2**17 * 2 W H
-        ta = (2 * vals[t[:, 0]] + 1) * d[:, None]
-        #: per triangle: ax, ay, 2D, ga (C), gb (C), ta (C), gathered in one go per span
-        self.plane = np.concatenate(
-            [ax[:, None], ay[:, None], 2 * d[:, None], 2 * ga, 2 * gb, ta], axis=1
-        ).astype(np.float64)
+        gc = (2 * va + 1) * d - ga * ax - gb * ay
+        self.ga, self.gb, self.gc = ga[:, tri], gb[:, tri], gc[:, tri]
+        self.d2 = 2 * d[tri]
 
 
 def _render_band(tz: _Trapezoids, sel: np.ndarray | None, r0: int, r1: int, width: int,
@@ -160,22 +165,23 @@ def _render_band(tz: _Trapezoids, sel: np.ndarray | None, r0: int, r1: int, widt
     when the band is the whole image)."""
     npix = (r1 - r0) * width
     if sel is None:
-        live, n, skip = np.arange(len(tz.count)), tz.count, 0.0
-        base = np.cumsum(n) - n
+        n = tz.count
+        seg = np.repeat(np.arange(len(n)), n)  # trapezoid of each (trapezoid, row) pair
+        g = seg
+        base = (np.cumsum(n) - n).astype(np.float64)
     else:
         # clip the trapezoids' row ranges to the band
         first = tz.first[sel]
         start = np.maximum(first, r0)
         n = (np.minimum(first + tz.count[sel], r1) - start).astype(np.int64)
         keep = n > 0
-        live, n, skip = sel[keep], n[keep], (start - first)[keep]
-        base = np.cumsum(n) - n - skip
-    rows_total = int(n.sum())
-    # one (trapezoid, row) pair per owned row; k is the row's offset in its trapezoid
-    seg = np.repeat(np.arange(len(n)), n)
-    k = np.arange(rows_total, dtype=np.float64)
-    k -= np.take(base.astype(np.float64), seg)
-    g = np.take(live, seg)
+        live, n = sel[keep], n[keep]
+        base = np.cumsum(n) - n - (start - first)[keep]
+        seg = np.repeat(np.arange(len(n)), n)
+        g = np.take(live, seg)
+    # k: the pair's row offset in its trapezoid
+    k = np.arange(len(seg), dtype=np.float64)
+    k -= np.take(base, seg)
     # exact span ends: ceil of (integer numerator <= W*H) / (denominator <= H)
     lnum = np.take(tz.ldx, g)
     lnum *= k
@@ -183,78 +189,96 @@ def _render_band(tz: _Trapezoids, sel: np.ndarray | None, r0: int, r1: int, widt
     rnum = np.take(tz.rdx, g)
     rnum *= k
     rnum += np.take(tz.rnum, g)
-    rden = np.take(tz.rden, g)
     xs = lnum / np.take(tz.lden, g)
     np.ceil(xs, out=xs)
+    rden = np.take(tz.rden, g)
     xe = rnum / rden
     np.ceil(xe, out=xe)
     # the last column belongs to a span that reaches it with positive length
     cand = np.flatnonzero(xe == width - 1)
     if len(cand):
-        rc = cand[rnum[cand] == (width - 1) * rden[cand]]
-        rc = rc[lnum[rc] < (width - 1) * np.take(tz.lden, np.take(g, rc))]
-        xe[rc] = width
-    length = xe - xs
-    keep = np.flatnonzero(length > 0)
-    # first band pixel of each non-empty span
-    key = np.take(tz.first, g)
-    key += k
-    key -= r0
-    key *= width
-    key += xs
-    key = np.take(key, keep).astype(np.int64)
-    length = np.take(length, keep)
+        cand = cand[rnum[cand] == (width - 1) * rden[cand]]
+        cand = cand[lnum[cand] < (width - 1) * np.take(tz.lden, np.take(g, cand))]
+        xe[cand] = width
+    xe -= xs  # span lengths
+    keep = np.flatnonzero(xe > 0)
+    # the band row of each pair, and the band pixel where each non-empty span starts
+    y = np.take(tz.first, g)
+    y += k
     g = np.take(g, keep)
+    y = np.take(y, keep)
+    xs = np.take(xs, keep)
+    length = np.take(xe, keep)
+    key = (y - r0) * width
+    key += xs
+    key = key.astype(np.int64)
     spans = len(key)
     # counting sort of the spans into raster order; a repeated start means an overlap
-    marker = np.zeros(npix, dtype=bool)
+    marker = _scratch("marker", npix, bool)
+    marker.fill(False)
     marker[key] = True
-    slot = np.empty(npix, dtype=np.int64)
+    slot = _scratch("slot", npix, np.int64)
     slot[key] = np.arange(spans)
     where = np.flatnonzero(marker)
     if len(where) != spans:
         _fail(int(np.flatnonzero(np.bincount(key) > 1)[0]), r0, width, "covers it twice")
     order = np.take(slot, where)
-    length = np.take(length, order)
+    length = np.take(length, order).astype(np.int64)
     ends = np.cumsum(length)
     # tiling check: each span starts where the previous one ended, the last ends the band
-    bad = np.flatnonzero(where[1:] != ends[:-1])
-    if len(bad) or spans == 0 or where[0] != 0 or ends[-1] != npix:
+    if spans == 0 or where[0] != 0 or ends[-1] != npix or (where[1:] != ends[:-1]).any():
         _tiling_error(where, ends, npix, r0, width)
-    # per span, in raster order: its triangle and the numerator at its first pixel
-    tri = np.take(tz.tri, np.take(g, order))
-    keyf = where.astype(np.float64)
-    y, xs = np.divmod(keyf, width)
-    y += r0
-    pl = np.take(tz.plane, tri, axis=0)  # ax, ay, 2D, then ga, gb, ta per channel
-    c = out.shape[1]
-    ga, gb, ta = pl[:, 3:3 + c], pl[:, 3 + c:3 + 2 * c], pl[:, 3 + 2 * c:]
-    t0 = ga * (xs - pl[:, 0])[:, None]
-    t0 += gb * (y - pl[:, 1])[:, None]
-    t0 += ta
-    # numerator at band pixel p: t0 + ga*(p - key) = (t0 - ga*key) + ga*p; the folded
-    # form saves a pass but needs |ga|*npix and |t0 - ga*key| below 2**52 to be exact
-    g0 = t0 - ga * keyf[:, None]
-    fold = float(np.abs(ga).max(initial=0)) * npix + float(np.abs(g0).max(initial=0)) < _FLOAT_EXACT
-    # the span of each band pixel
-    pseg = np.repeat(np.arange(spans), length.astype(np.int64))
-    p = np.arange(npix, dtype=np.float64)
-    if not fold:
-        p -= np.take(keyf, pseg)
-        g0 = t0
-    dr = np.take(pl[:, 2], pseg)
+    # per span in raster order: its trapezoid, row and the plane's row constant
+    g = np.take(g, order)
+    y = np.take(y, order)
+    d2 = np.take(tz.d2, g)
+    # per band pixel: its span (the number of span starts up to it, minus one) and its
+    # column; the per-pixel arrays are reused scratch, since fresh pages cost more
+    # than the arithmetic on them
+    pseg = np.cumsum(marker, dtype=np.int64, out=_scratch("pseg", npix, np.int64))
+    pseg -= 1
+    col = _columns(width, r1 - r0)
+    dr = np.take(d2, pseg, out=_scratch("dr", npix, np.float64), mode="clip")
+    num = _scratch("num", npix, np.float64)
+    tmp = _scratch("tmp", npix, np.float64)
     band = out[r0 * width:r1 * width]
-    for ch in range(c):  # a loop over channels
-        num = np.take(np.ascontiguousarray(ga[:, ch]), pseg)
-        num *= p
-        num += np.take(np.ascontiguousarray(g0[:, ch]), pseg)
+    for ch in range(out.shape[1]):  # a loop over channels
+        # numerator ga*x + (gb*y + gc): every term and partial sum below 2**52
+        row_const = np.take(tz.gb[ch], g)
+        row_const *= y
+        row_const += np.take(tz.gc[ch], g)
+        np.take(np.take(tz.ga[ch], g), pseg, out=num, mode="clip")  # indices are valid
+        num *= col
+        num += np.take(row_const, pseg, out=tmp, mode="clip")
         # num and dr are integers below 2**53 and dr < 2**36: the correctly rounded
         # quotient is exact when integral, and otherwise more than its rounding error
         # (< 2**-36 for quotients below 2**17) away from the next integer, so floor()
-        # of it is the exact floor((2 sum w_i v_i + D) / 2D)
+        # of it is the exact floor((2 sum w_i v_i + D) / 2D); values are >= 0, so the
+        # truncating cast below is that floor
         num /= dr
-        np.floor(num, out=num)
         np.copyto(band[:, ch], num, casting="unsafe")
+
+
+_local = threading.local()
+
+
+def _scratch(name: str, n: int, dtype) -> np.ndarray:
+    """A reusable per-thread array of n items (contents undefined), at most a band."""
+    bufs = _local.__dict__.setdefault("bufs", {})
+    buf = bufs.get(name)
+    if buf is None or len(buf) < n:
+        buf = bufs[name] = np.empty(n, dtype)
+    return buf[:n]
+
+
+def _columns(width: int, rows: int) -> np.ndarray:
+    """The column number of every pixel of a band `rows` x `width`, as float64 (a
+    prefix of a cached ramp, so the last, shorter band reuses it)."""
+    cols = _local.__dict__.get("cols")
+    if cols is None or cols[0] != width or len(cols[1]) < rows * width:
+        cols = (width, np.tile(np.arange(width, dtype=np.float64), rows))
+        _local.cols = cols
+    return cols[1][:rows * width]
 
 
 def _tiling_error(where: np.ndarray, ends: np.ndarray, npix: int, r0: int, width: int) -> None:
@@ -290,7 +314,7 @@ def render(mesh: Mesh) -> np.ndarray:
     if len(mesh.triangles) == 0:
         return render_line(mesh)
     w, h, c = mesh.width, mesh.height, mesh.channels
-    if w * h >= 1 << 34:
+    if w * h > 1 << 32:
         # keeps every intermediate below the float64-exact bounds stated above
         raise UnsupportedError(f"a {w}x{h} image is too large for the CPU decoder")
     tz = _Trapezoids(mesh)
@@ -300,8 +324,9 @@ def render(mesh: Mesh) -> np.ndarray:
         _render_band(tz, None, 0, h, w, out)
     else:
         # bucket trapezoids by band: each joins every band its rows touch
-        b0 = tz.first.astype(np.int64) // band_rows
-        b1 = (tz.first.astype(np.int64) + tz.count - 1) // band_rows
+        first = tz.first.astype(np.int64)
+        b0 = first // band_rows
+        b1 = (first + tz.count - 1) // band_rows
         per = b1 - b0 + 1
         trap = np.repeat(np.arange(len(b0)), per)
         band = b0[trap] + np.arange(len(trap)) - np.repeat(np.cumsum(per) - per, per)
