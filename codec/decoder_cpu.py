@@ -26,12 +26,14 @@ For a mesh that tiles the image (what mesh.validate checks, plus no overlaps) ev
 pixel is thus written exactly once. The decoder checks that the spans tile each band of
 rows exactly and raises CorruptError otherwise (a pixel uncovered, or covered twice).
 
-Implementation: the image is processed in bands of rows whose pixel count bounds the
-temporary memory. In a band, every (triangle, row) pair gets its span [xs, xe) from
-exact ceil divisions; the spans are put into raster order with a counting sort, which
-also proves that they tile the band; then every pixel's 2*sum(w_i v_i) + D is evaluated
-from the plane of its span as G + a * p (p the pixel's index in the band), all
-vectorised; no Python loop runs per triangle or per pixel.
+Implementation: each triangle is cut at its middle corner's row into two trapezoids;
+the image is processed in bands of rows whose pixel count bounds the temporary memory.
+In a band, every (trapezoid, row) pair gets its span [xs, xe) from exact ceil
+divisions; the spans are put into raster order with a counting sort, which also proves
+that they tile the band; then every pixel's 2*sum(w_i v_i) + D is evaluated from its
+span's plane as ga*x + (gb*y + gc) and divided by 2D, all vectorised; no Python loop
+runs per triangle or per pixel. The integers are held in float64, which is exact for
+them (see _Trapezoids) and much faster than numpy's int64 division.
 """
 
 from __future__ import annotations
