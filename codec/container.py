@@ -18,12 +18,12 @@ from construct import ChecksumError, ConstructError
 
 from format_spec import schema
 
-from . import limits
+from . import coding, limits, meshcode
 from .errors import CorruptError, FormatError, LimitError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 
-ZSTD_LEVEL = 12
+ZSTD_LEVEL = 19
 
 
 @dataclass(frozen=True)
@@ -103,28 +103,7 @@ class Writer:
         if mesh.width != h.width or y0 + mesh.height > h.height:
             raise ValueError("band does not fit the image")
         validate(mesh)
-        lengths = np.array([len(c) for c in mesh.constraints], dtype=np.uint32)
-        indices = (
-            np.concatenate(mesh.constraints).astype(np.uint32)
-            if mesh.constraints
-            else np.zeros(0, np.uint32)
-        )
-        raw = schema.MeshPayload.build(
-            dict(
-                y0=y0,
-                rows=mesh.height,
-                vertex_count=len(mesh.vertices),
-                triangle_count=len(mesh.triangles),
-                polyline_count=len(lengths),
-                x=mesh.vertices[:, 0],
-                y=mesh.vertices[:, 1],
-                samples=mesh.values,
-                triangles=mesh.triangles,
-                polyline_lengths=lengths,
-                polyline_indices=indices,
-            ),
-            **h._fields(),
-        )
+        raw = schema.MeshPayload.build(meshcode.encode_band(y0, mesh), **h._fields())
         self._stream.write(_chunk(schema.MESH, self._compressor.compress(raw)))
         _release_cycles(len(raw))
         self._next_y0 = y0 + mesh.height - 1
@@ -268,12 +247,14 @@ class Reader:
         return Header(h.width, h.height, DTYPES[h.sample_type], h.channels)
 
     def _payload_limit(self) -> int:
-        """The largest MESH payload the image can legitimately need."""
+        """The largest MESH payload the image can legitimately need: every count at its
+        limit and every varint at its longest."""
         h = self.header
         nv = limits.max_vertices(h.width, h.height)
         nt = limits.max_triangles(h.width, h.height)
-        per_vertex = 16 + h.dtype.itemsize * h.channels  # position, samples, polylines
-        return 20 + nv * per_vertex + nt * 12 + 4096
+        v = coding.MAX_VARINT_BYTES
+        per_vertex = v + h.dtype.itemsize * h.channels + 3 * v  # position, samples, polylines
+        return 64 + nv * per_vertex + nt * 3 * v
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
         h = self.header
@@ -293,14 +274,7 @@ class Reader:
             raise CorruptError(f"MESH chunk at byte {offset} starts at row {m.y0}, expected {y0_expected}")
         if m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
             raise CorruptError(f"MESH chunk at byte {offset} has {m.rows} rows from row {m.y0}")
-        vertices = np.stack([m.x, m.y], axis=1).astype(np.int64)
-        values = m.samples.astype(h.dtype)
-        if h.channels > 1:
-            values = values.reshape(-1, h.channels)
-        triangles = m.triangles.astype(np.int64).reshape(-1, 3)
-        bounds = np.cumsum(m.polyline_lengths.astype(np.int64))[:-1]
-        constraints = np.split(m.polyline_indices.astype(np.int64), bounds) if m.polyline_count else []
-        mesh = Mesh(vertices, values, triangles, h.width, int(m.rows), constraints)
+        mesh = meshcode.decode_band(m, h.width, h.dtype, h.channels, f"MESH chunk at byte {offset}")
         validate(mesh)
         return int(m.y0), mesh
 

@@ -1,4 +1,4 @@
-"""Byte layout of .atm version 1 as `construct` declarations.
+"""Byte layout of .atm version 2 as `construct` declarations.
 
 Every multi-byte integer is little-endian. ATM.md (beside this file) is the normative
 description; the names here match its field names.
@@ -14,9 +14,11 @@ from construct import (
     Checksum,
     Const,
     Construct,
+    GreedyBytes,
     Int8ul,
     Int16ul,
     Int32ul,
+    Prefixed,
     SizeofError,
     Struct,
     evaluate,
@@ -26,9 +28,9 @@ from construct import (
 )
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-VERSION = 1
+VERSION = 2
 
-#: Chunk types of version 1. An upper-case first letter marks a critical chunk.
+#: Chunk types. An upper-case first letter marks a critical chunk.
 HEADER = b"AHDR"
 MESH = b"MESH"
 END = b"AEND"
@@ -106,6 +108,13 @@ Header = Struct(
     "channels" / Int8ul,
 )
 
+#: Byte sections whose length comes first (varint streams, decoded by the codec).
+Section = Prefixed(Int32ul, GreedyBytes)
+
+#: connectivity codes
+LISTED = 0
+DELAUNAY = 1
+
 #: MESH payload, after zstd decompression: the mesh of one band of rows. Build and
 #: parse it with the header's `sample_type` and `channels` as keyword arguments.
 MeshPayload = Struct(
@@ -114,14 +123,16 @@ MeshPayload = Struct(
     "vertex_count" / Int32ul,
     "triangle_count" / Int32ul,
     "polyline_count" / Int32ul,
-    "x" / NDArray("<u4", this.vertex_count),
-    "y" / NDArray("<u4", this.vertex_count),
+    "polyline_index_count" / Int32ul,
+    "connectivity" / Int8ul,
+    "triangle_crc" / Int32ul,
+    "positions" / Section,
     "samples"
     / NDArray(
-        lambda ctx: SAMPLE_DTYPES[ctx._.sample_type],
-        lambda ctx: ctx.vertex_count * ctx._.channels,
+        "u1",
+        lambda ctx: ctx.vertex_count * ctx._.channels * SAMPLE_DTYPES[ctx._.sample_type].itemsize,
     ),
-    "triangles" / NDArray("<u4", this.triangle_count * 3),
-    "polyline_lengths" / NDArray("<u4", this.polyline_count),
-    "polyline_indices" / NDArray("<u4", lambda ctx: int(ctx.polyline_lengths.sum(dtype=np.uint64))),
+    "polyline_lengths" / Section,
+    "polyline_indices" / Section,
+    "triangles" / Section,
 )

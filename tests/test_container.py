@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 import codec
 from codec import container
+from codec.coding import canonical_triangles
 from codec.errors import ATMError, CorruptError, FormatError, TruncatedError, UnsupportedError
 from format_spec import schema
 from tests.conftest import random_mesh
@@ -26,13 +27,23 @@ mesh_args = st.tuples(
 )
 
 
+def canonical(m):
+    """The mesh with vertices in raster order and triangles in canonical order: the
+    form the container stores, whatever order the mesh was made in."""
+    order = np.argsort(m.vertices[:, 1] * m.width + m.vertices[:, 0])
+    inverse = np.empty(len(order), np.int64)
+    inverse[order] = np.arange(len(order))
+    tris = canonical_triangles(inverse[m.triangles])
+    return m.vertices[order], m.values[order], tris, [inverse[c] for c in m.constraints]
+
+
 def assert_same_mesh(a, b) -> None:
     assert (a.width, a.height, a.dtype, a.channels) == (b.width, b.height, b.dtype, b.channels)
-    np.testing.assert_array_equal(a.vertices, b.vertices)
-    np.testing.assert_array_equal(a.values, b.values)
-    np.testing.assert_array_equal(a.triangles, b.triangles)
-    assert len(a.constraints) == len(b.constraints)
-    for p, q in zip(a.constraints, b.constraints):
+    for p, q in zip(canonical(a)[:3], canonical(b)[:3]):
+        np.testing.assert_array_equal(p, q)
+    ca, cb = canonical(a)[3], canonical(b)[3]
+    assert len(ca) == len(cb)
+    for p, q in zip(ca, cb):
         np.testing.assert_array_equal(p, q)
 
 
@@ -71,7 +82,7 @@ def sample_file() -> bytes:
 
 def test_layout_matches_spec(sample_file):
     assert sample_file[:8] == b"\x89ATM\r\n\x1a\n"
-    assert struct.unpack_from("<H", sample_file, 8) == (1,)
+    assert struct.unpack_from("<H", sample_file, 8) == (2,)
     types = [c[1] for c in chunks(sample_file)]
     assert types == [b"AHDR", b"MESH", b"AEND"]
     ahdr = chunks(sample_file)[0][2]
@@ -118,9 +129,10 @@ def test_bytes_after_aend_are_ignored(sample_file):
     np.testing.assert_array_equal(codec.decode(sample_file + b"junk"), codec.decode(sample_file))
 
 
-def test_other_version_is_unsupported(sample_file):
-    data = sample_file[:8] + struct.pack("<H", 2) + sample_file[10:]
-    with pytest.raises(UnsupportedError, match="version 2"):
+@pytest.mark.parametrize("version", [1, 3])
+def test_other_versions_are_unsupported(sample_file, version):
+    data = sample_file[:8] + struct.pack("<H", version) + sample_file[10:]
+    with pytest.raises(UnsupportedError, match=f"version {version}; this codec reads version 2"):
         codec.decode(data)
 
 
@@ -130,40 +142,57 @@ def test_not_an_atm_file():
 
 
 def test_mesh_invariants_are_checked(sample_file):
+    import zstandard
+
+    from codec import meshcode
+    from codec.coding import triangle_crc, varints, zigzag
+
     header, [(_, mesh)] = container.unpack(sample_file)
+    good = meshcode.encode_band(0, mesh)  # mesh came from a file: raster order, canonical
+
+    def listed(triangles) -> dict:
+        t = np.asarray(triangles)
+        a = t[:, 0]
+        fields = np.stack([np.diff(a, prepend=0), t[:, 1] - a - 1, t[:, 2] - a - 1], 1).ravel()
+        return dict(connectivity=1 - 1, triangle_count=len(t), triangles=varints(fields),
+                    triangle_crc=triangle_crc(t))
 
     def repack(**changes) -> bytes:
-        m = dict(
-            y0=0, rows=12, vertex_count=len(mesh.vertices), triangle_count=len(mesh.triangles), polyline_count=0,
-            x=mesh.vertices[:, 0], y=mesh.vertices[:, 1], samples=mesh.values,
-            triangles=mesh.triangles, polyline_lengths=np.zeros(0, np.uint32),
-            polyline_indices=np.zeros(0, np.uint32),
-        )
-        m.update(changes)
-        raw = schema.MeshPayload.build(m, sample_type=0, channels=1)
-        import zstandard
-
+        fields = dict(good, **changes)
+        raw = schema.MeshPayload.build(fields, sample_type=0, channels=1)
         payload = zstandard.ZstdCompressor().compress(raw)
         parts = chunks(sample_file)
         return sample_file[: parts[1][0]] + make_chunk(b"MESH", payload) + make_chunk(b"AEND", b"")
 
     flipped = mesh.triangles.copy()
     flipped[0] = flipped[0, [0, 2, 1]]
-    bad_index = mesh.triangles.copy()
-    bad_index[0, 0] = len(mesh.vertices)
-    outside = mesh.vertices[:, 0].copy()
-    outside[0] = 20
+    beyond = mesh.triangles.copy()
+    beyond[-1, 2] = len(mesh.vertices)
+    gaps = np.diff(mesh.vertices[:, 1] * 20 + mesh.vertices[:, 0], prepend=-1) - 1
+    gaps[-1] += 5
     cases = {
-        "wrongly oriented": dict(triangles=flipped),
-        "beyond": dict(triangles=bad_index),
-        "outside": dict(x=outside),
-        "cover": dict(triangle_count=len(mesh.triangles) - 1, triangles=mesh.triangles[:-1]),
-        "constraint": dict(polyline_count=1, polyline_lengths=np.array([2]), polyline_indices=np.array([0, 99])),
+        "wrongly oriented": listed(flipped),
+        "beyond": listed(beyond),
+        "outside": dict(positions=varints(gaps)),
+        "cover": listed(mesh.triangles[:-1]),
+        "missing vertex": dict(polyline_count=1, polyline_index_count=2,
+                               polyline_lengths=varints([2]), polyline_indices=varints(zigzag([0, 99]))),
+        "CRC mismatch": dict(triangle_crc=good["triangle_crc"] ^ 1),
+        "hold": dict(positions=good["positions"] + b"\x01"),
     }
-    assert codec.decode(repack()) is not None
+    np.testing.assert_array_equal(codec.decode(repack()), codec.decode(sample_file))
+    np.testing.assert_array_equal(codec.decode(repack(**listed(mesh.triangles))), codec.decode(sample_file))
     for message, change in cases.items():
         with pytest.raises(CorruptError, match=message):
             codec.decode(repack(**change))
+
+
+def test_delaunay_connectivity_is_not_stored(sample_file):
+    import zstandard
+
+    raw = zstandard.ZstdDecompressor().decompress(chunks(sample_file)[1][2])
+    parsed = schema.MeshPayload.parse(raw, sample_type=0, channels=1)
+    assert parsed.connectivity == schema.DELAUNAY and parsed.triangles == b""
 
 
 def test_decompression_bomb_is_refused_before_allocation():
@@ -172,7 +201,7 @@ def test_decompression_bomb_is_refused_before_allocation():
     header = schema.Header.build(dict(width=100, height=100, sample_type=0, channels=1))
     bomb = zstandard.ZstdCompressor().compress(bytes(50_000_000))
     data = (
-        schema.FileHeader.build(dict(version=1))
+        schema.FileHeader.build(dict(version=2))
         + make_chunk(b"AHDR", header)
         + make_chunk(b"MESH", bomb)
         + make_chunk(b"AEND", b"")
@@ -183,7 +212,7 @@ def test_decompression_bomb_is_refused_before_allocation():
 
 def test_huge_declared_image_is_refused_quickly():
     header = schema.Header.build(dict(width=100_000, height=100_000, sample_type=0, channels=1))
-    data = schema.FileHeader.build(dict(version=1)) + make_chunk(b"AHDR", header) + make_chunk(b"AEND", b"")
+    data = schema.FileHeader.build(dict(version=2)) + make_chunk(b"AHDR", header) + make_chunk(b"AEND", b"")
     with pytest.raises(codec.LimitError, match="pixels"):
         codec.decode(data)
 
