@@ -92,6 +92,9 @@ def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
     shift = np.argmin(t, axis=1)
     idx = (shift[:, None] + np.arange(3)[None, :]) % 3
     t = np.take_along_axis(t, idx, axis=1)
+    n = int(t.max()) + 1
+    if n < 1 << 21:  # the three indices fit one int64 sort key
+        return t[np.argsort((t[:, 0] * n + t[:, 1]) * n + t[:, 2], kind="stable")]
     return t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
 
 

@@ -16,6 +16,11 @@ MAX_DIMENSION: int = 1 << 20
 MAX_VERTICES_PER_PIXEL: float = 1.0
 #: Largest number of triangles in a mesh, relative to the pixel count (plus a small floor).
 MAX_TRIANGLES_PER_PIXEL: float = 2.0
+#: Largest total row extent of a mesh's triangles (the sum over triangles of the rows
+#: each one crosses), relative to the pixel count, plus a floor. It bounds the decoders'
+#: work: a hostile file of tall slivers could otherwise cost time far beyond its size.
+MAX_TRIANGLE_ROWS_PER_PIXEL: float = 4.0
+MIN_TRIANGLE_ROWS: int = 1 << 20
 #: Largest decompressed size of one chunk payload, in bytes.
 MAX_PAYLOAD_BYTES: int = 1 << 31
 #: Largest stored (compressed) chunk length, in bytes.
@@ -42,3 +47,7 @@ def max_vertices(width: int, height: int) -> int:
 
 def max_triangles(width: int, height: int) -> int:
     return int(width * height * MAX_TRIANGLES_PER_PIXEL) + 16
+
+
+def max_triangle_rows(width: int, height: int) -> int:
+    return int(width * height * MAX_TRIANGLE_ROWS_PER_PIXEL) + MIN_TRIANGLE_ROWS

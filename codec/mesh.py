@@ -91,7 +91,9 @@ def validate(mesh: Mesh) -> None:
     x, y = v[:, 0], v[:, 1]
     if x.min() < 0 or y.min() < 0 or x.max() >= w or y.max() >= h:
         raise CorruptError(f"a vertex lies outside the {w}x{h} image")
-    if len(np.unique(y.astype(np.int64) * w + x)) != len(v):
+    keys = y.astype(np.int64) * w + x
+    # decoded meshes come in raster order, where distinctness is a linear-time check
+    if not (np.diff(keys) > 0).all() and len(np.unique(keys)) != len(v):
         raise CorruptError("two vertices share a pixel")
     if len(t):
         if t.min() < 0 or t.max() >= len(v):
@@ -101,6 +103,13 @@ def validate(mesh: Mesh) -> None:
             raise CorruptError("a triangle is degenerate or wrongly oriented")
         if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
             raise CorruptError("the triangles do not cover the image exactly once")
+        ys = v[:, 1][t]
+        extent = int((ys.max(axis=1) - ys.min(axis=1) + 1).sum())
+        if extent > limits.max_triangle_rows(w, h):
+            raise LimitError(
+                f"the triangles cross {extent:,} rows in all, too many to render a {w}x{h} "
+                "image in bounded time (raise codec.limits.MAX_TRIANGLE_ROWS_PER_PIXEL to accept it)"
+            )
     if (w > 1 and h > 1) != (len(t) > 0):
         raise CorruptError(
             "a mesh needs triangles exactly when the image is at least 2 pixels each way"

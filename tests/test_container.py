@@ -236,3 +236,22 @@ def test_mutated_files_decode_or_raise_atm_error(sample_file, data):
     except ATMError:
         return
     assert image.shape == (12, 20)
+
+
+def test_tall_sliver_fans_are_refused_before_rendering(monkeypatch):
+    """A mesh of tall slivers has legal areas but would cost time out of proportion to
+    its size; the limit on the triangles' total row extent refuses it."""
+    from codec import limits
+    from codec.mesh import Mesh, validate
+    from codec.triangulate import triangulate
+
+    h = 200
+    # a fan from the top-left corner to every pixel of the right column
+    vertices = np.array([[0, 0], [0, h - 1]] + [[3, y] for y in range(h)])
+    mesh = Mesh(vertices, np.zeros(len(vertices), np.uint8), triangulate(vertices), 4, h)
+    data = container.pack(mesh)  # within the default limits
+    monkeypatch.setattr(limits, "MIN_TRIANGLE_ROWS", 0)
+    with pytest.raises(codec.LimitError, match="rows in all"):
+        validate(mesh)
+    with pytest.raises(codec.LimitError, match="rows in all"):
+        codec.decode(data)
