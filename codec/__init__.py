@@ -49,6 +49,9 @@ def encode(
     """Encode an H x W (gray) or H x W x 3 (RGB) uint8/uint16 array as .atm bytes.
 
     points: target vertex count (within 10 %); default 2.8 % of the pixels.
+    quality: 1..100, like JPEG's (an RMS bound; 100 is lossless); or
+    max_rms / max_error: a bound on the decoded image's RMS / largest error, per
+    channel, in sample units, guaranteed by refinement.
     mesher: "uniform" (the grid baseline); further options go to the mesher.
     band_height: rows per band (default: about a megapixel per band); images are coded
     band by band so that StreamEncoder/StreamDecoder can work in bounded memory.

@@ -20,8 +20,25 @@ DEFAULT_MESHER = "uniform"
 DEFAULT_DENSITY = 0.028
 
 
+#: Vertex density of the starting mesh when refinement to a bound decides the size.
+START_DENSITY = 0.002
+
+
 def default_points(width: int, height: int) -> int:
     return max(4, round(DEFAULT_DENSITY * width * height))
+
+
+def start_points(width: int, height: int) -> int:
+    return max(4, round(START_DENSITY * width * height))
+
+
+def values_method(build, options: dict) -> str:
+    """How the mesher picks vertex values (its `values` option), so that refinement
+    picks new ones the same way."""
+    if "values" in options:
+        return options["values"]
+    param = inspect.signature(build).parameters.get("values")
+    return param.default if param is not None else "sample"
 
 
 def _mesher(name: str):
@@ -72,8 +89,8 @@ def encode(
     band_height: int | None = None,
     **options,
 ) -> bytes:
-    """Encode an image as .atm bytes, band by band (see codec.StreamEncoder).
-    Same image and options give the same bytes."""
+    """Encode an image as .atm bytes, band by band (see codec.StreamEncoder for the
+    size knobs). Same image and options give the same bytes."""
     from .stream import StreamEncoder
 
     img = as_image(image)

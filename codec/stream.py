@@ -12,7 +12,7 @@ from typing import BinaryIO, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder
+from . import banding, container, encoder, refine
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh
@@ -27,6 +27,10 @@ class StreamEncoder:
 
     The bytes equal `codec.encode(image, band_height=..., **options)` for the same image.
     The writer never seeks; at most one band (band_height + 1 rows) is held in memory.
+
+    Size knobs: `points` (target vertex count), or a bound that refinement guarantees on
+    the decoded image, per channel: `max_rms`, `max_error` (in sample units), or
+    `quality` 1..100 (JPEG-like; an RMS bound, 100 = lossless).
     """
 
     def __init__(
@@ -40,6 +44,9 @@ class StreamEncoder:
         band_height: int | None = None,
         points: int | None = None,
         mesher: str | None = None,
+        quality: int | None = None,
+        max_rms: float | None = None,
+        max_error: float | None = None,
         **options,
     ):
         for name, value in (("width", width), ("height", height)):
@@ -57,10 +64,20 @@ class StreamEncoder:
         self.width, self.height, self.dtype, self.channels = int(width), int(height), dtype, channels
         self.band_height = int(min(band_height, max(height - 1, 1)))
         self._mesher_name = mesher or encoder.DEFAULT_MESHER
+        if quality is not None:
+            if max_rms is not None:
+                raise OptionError("give quality or max_rms, not both")
+            max_rms = refine.quality_rms(quality, dtype)
+        self._bound = refine.Bound(max_rms=max_rms, max_error=max_error)
         self._build = encoder.mesher_build(self._mesher_name, options)
+        self._values = encoder.values_method(self._build, options)
         self._options = options
         if points is None:
-            points = encoder.default_points(width, height)
+            points = (
+                encoder.start_points(width, height)
+                if self._bound.active
+                else encoder.default_points(width, height)
+            )
         elif isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 1:
             raise OptionError(f"points must be a positive whole number, not {points!r}")
         self._points = int(points)
@@ -109,6 +126,14 @@ class StreamEncoder:
         mesh = self._build(band, max(4, round(share)), **self._options)
         if self._top is not None:
             mesh = banding.pin_top_row(mesh, *self._top)
+        mesh = refine.refine(
+            mesh,
+            band,
+            self._bound,
+            values=self._values,
+            pinned_rows=1 if self._top is not None else 0,
+            last_band=self._received == self.height,
+        )
         self._writer.write_band(self._y0, mesh)
         self.bands += 1
         self.vertices += len(mesh.vertices)

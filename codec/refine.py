@@ -1,0 +1,163 @@
+"""Error-bounded refinement (the seed's §3.3.1, coarse to fine): insert vertices where
+the decoded error is largest until a bound holds.
+
+The error is measured on the image the decoder will produce (the exact CPU rule), so
+a bound reached here holds for every decode. Refinement always ends: at worst every
+pixel becomes a vertex holding its own value, which decodes exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import decoder_cpu
+from . import values as vertex_values
+from .errors import OptionError
+from .mesh import Mesh
+from .triangulate import triangulate
+
+
+@dataclass(frozen=True)
+class Bound:
+    """What refinement must reach: per channel, RMS <= max_rms and/or every
+    |error| <= max_error, over the pixels the band is responsible for."""
+
+    max_rms: float | None = None
+    max_error: float | None = None
+
+    def __post_init__(self):
+        for name in ("max_rms", "max_error"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0):
+                raise OptionError(f"{name} must be a number >= 0, not {v!r}")
+
+    @property
+    def active(self) -> bool:
+        return self.max_rms is not None or self.max_error is not None
+
+
+#: quality 1..100 -> RMS bound for 8-bit samples (scaled by the sample range for 16-bit):
+#: 38 at quality 1, 23 at 10, 2.5 at 50, 0.6 at 75, 0 (lossless) at 100.
+def quality_rms(quality: int, dtype: np.dtype) -> float:
+    """The RMS bound that `quality` (1..100, like JPEG's) stands for."""
+    if isinstance(quality, bool) or not isinstance(quality, (int, np.integer)) or not 1 <= quality <= 100:
+        raise OptionError(f"quality must be a whole number from 1 to 100, not {quality!r}")
+    scale = np.iinfo(dtype).max / 255.0
+    return scale * 40.0 * (math.exp(-quality / 18.0) - math.exp(-100 / 18.0))
+
+
+def _segments_mask(mesh: Mesh) -> np.ndarray:
+    """Pixels on or next to a constraint segment: new vertices there would split a wall."""
+    import cv2
+
+    mask = np.zeros((mesh.height, mesh.width), np.uint8)
+    if mesh.constraints:
+        lines = [mesh.vertices[c].astype(np.int32).reshape(-1, 1, 2) for c in mesh.constraints]
+        cv2.polylines(mask, lines, False, 1)
+    return mask.astype(bool)
+
+
+def _squared_errors(mesh: Mesh, image: np.ndarray) -> np.ndarray:
+    """H x W x C squared errors of the decoded mesh."""
+    decoded = decoder_cpu.render(mesh).astype(np.float64)
+    diff = decoded - image.astype(np.float64)
+    return (diff * diff).reshape(mesh.height, mesh.width, -1)
+
+
+def refine(
+    mesh: Mesh,
+    image: np.ndarray,
+    bound: Bound,
+    *,
+    values: str = "sample",
+    pinned_rows: int = 0,
+    last_band: bool = True,
+) -> Mesh:
+    """Insert vertices into `mesh` (of `image`) until `bound` holds.
+
+    pinned_rows: the first rows are fixed (shared with the band above): no vertex is
+        added there and their vertices keep their values.
+    last_band: if False, the band's last row is shared with the band below, which
+        counts it: the RMS bound is then met by the rows above it and, separately, by
+        the last row alone, so that the bound holds over the whole image.
+    values: how new vertex values are chosen ("sample" or "lsq", as the mesher did).
+    """
+    if not bound.active:
+        return mesh
+    h, w = mesh.height, mesh.width
+    sq_limit = None if bound.max_error is None else bound.max_error**2
+    rms_sq = None if bound.max_rms is None else bound.max_rms**2
+    counted = np.ones(h, bool)
+    if not last_band and h > 1:
+        counted[-1] = False
+    fixed = mesh.vertices[:, 1] < pinned_rows
+    fixed_values = mesh.values[fixed]
+    walls = _segments_mask(mesh)
+    segments = (
+        np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in mesh.constraints])
+        if mesh.constraints
+        else None
+    )
+    sampled = np.zeros(len(mesh.vertices), bool)
+    while True:
+        sq = _squared_errors(mesh, image)
+        worst = sq.max(axis=2)
+        bad = np.zeros((h, w), bool)
+        if sq_limit is not None:
+            bad |= worst > sq_limit + 1e-9
+        if rms_sq is not None:
+            for rows in ([counted], [~counted]) if not last_band else ([counted],):
+                sel = rows[0]
+                if sel.any() and (sq[sel].mean(axis=(0, 1)) > rms_sq + 1e-9).any():
+                    bad[sel] |= worst[sel] > rms_sq
+        bad[:pinned_rows] = False
+        if not bad.any():
+            return mesh
+        # a bad pixel that is already a vertex (fitted, not sampled) gets its own value
+        vx, vy = mesh.vertices[:, 0], mesh.vertices[:, 1]
+        at_vertex = bad[vy, vx] & ~fixed
+        is_vertex = np.zeros((h, w), bool)
+        is_vertex[vy, vx] = True
+        candidates = bad & ~is_vertex & ~walls
+        new = _spread(np.where(candidates, worst, 0.0), max(8, len(mesh.vertices) // 4))
+        if len(new) == 0 and not at_vertex.any():
+            # only wall pixels are left: take them, splitting walls is better than failing
+            new = _spread(np.where(bad & ~is_vertex, worst, 0.0), max(8, len(mesh.vertices) // 4))
+            segments = None
+            mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [])
+        vertices = np.concatenate([mesh.vertices, new]) if len(new) else mesh.vertices
+        triangles = triangulate(vertices, segments) if len(new) else mesh.triangles
+        sampled = np.concatenate([sampled | at_vertex, np.ones(len(new), bool)])
+        if values == "sample":
+            vals = np.concatenate([mesh.values, image[new[:, 1], new[:, 0]]]) if len(new) else mesh.values.copy()
+            vals[sampled] = image[vertices[sampled, 1], vertices[sampled, 0]]
+        else:
+            vals = vertex_values.fit(image, vertices, triangles, values)
+            # vertices whose own pixel was off keep their pixel value from now on
+            old = np.zeros(len(vertices), bool)
+            old[: len(at_vertex)] = sampled[: len(at_vertex)]
+            vals[old] = image[vertices[old, 1], vertices[old, 0]]
+        fixed = np.concatenate([fixed, np.zeros(len(new), bool)])
+        vals[fixed] = fixed_values
+        mesh = Mesh(vertices, vals, triangles, w, h, mesh.constraints)
+
+
+def _spread(score: np.ndarray, count: int) -> np.ndarray:
+    """About `count` pixels with the highest positive scores, at most one per cell of a
+    grid whose cells are sized so there are about `count` of them: new vertices spread
+    over the image instead of crowding one spot. Returns K x 2 (x, y)."""
+    h, w = score.shape
+    cell = max(1, int(math.sqrt(h * w / max(count, 1))))
+    ph, pw = -(-h // cell) * cell, -(-w // cell) * cell
+    padded = np.zeros((ph, pw))
+    padded[:h, :w] = score
+    blocks = padded.reshape(ph // cell, cell, pw // cell, cell).transpose(0, 2, 1, 3).reshape(-1, cell * cell)
+    best = blocks.argmax(axis=1)
+    keep = blocks[np.arange(len(blocks)), best] > 0
+    cells = np.flatnonzero(keep)
+    by, bx = np.divmod(cells, pw // cell)
+    oy, ox = np.divmod(best[keep], cell)
+    return np.stack([bx * cell + ox, by * cell + oy], 1).astype(np.int64)
