@@ -97,7 +97,9 @@ def mutate(data: bytes, rng: random.Random) -> bytes:
         ctype, payload = chunks[target]
         if ctype == b"MESH" and rng.random() < 0.9:
             try:
-                raw = zstandard.ZstdDecompressor().decompress(payload)
+                # the mutator must not be the one to fall for a bomb
+                size = zstandard.frame_content_size(payload)
+                raw = zstandard.ZstdDecompressor().decompress(payload) if 0 <= size <= 1 << 20 else None
             except zstandard.ZstdError:
                 raw = None
             if raw is not None:
