@@ -22,19 +22,22 @@ from . import coding, limits, meshcode
 from .errors import CorruptError, FormatError, LimitError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
+from .quantise import STORAGE, Quantiser
 
 ZSTD_LEVEL = 19
 
 
 @dataclass(frozen=True)
 class Header:
-    """What the AHDR chunk says about the image."""
+    """What the AHDR (and QUNT) chunks say about the image. `dtype` is what decoding
+    returns: float32 for quantised float data, whose samples are stored as uint16."""
 
     width: int
     height: int
     dtype: np.dtype
     channels: int
     version: int = schema.VERSION
+    quant: Quantiser | None = None
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -42,13 +45,14 @@ class Header:
             return (self.height, self.width)
         return (self.height, self.width, self.channels)
 
+    @property
+    def storage(self) -> np.dtype:
+        """The integer type the samples are coded in."""
+        return STORAGE if self.quant is not None else np.dtype(self.dtype)
+
     def _fields(self) -> dict:
-        return dict(
-            width=self.width,
-            height=self.height,
-            sample_type=SAMPLE_TYPES[np.dtype(self.dtype)],
-            channels=self.channels,
-        )
+        code = schema.FLOAT16Q if self.quant is not None else SAMPLE_TYPES[np.dtype(self.dtype)]
+        return dict(width=self.width, height=self.height, sample_type=code, channels=self.channels)
 
 
 def band_starts(height: int, band_height: int) -> list[int]:
@@ -89,6 +93,9 @@ class Writer:
         self._compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True)
         stream.write(schema.FileHeader.build(dict(version=schema.VERSION)))
         stream.write(_chunk(schema.HEADER, schema.Header.build(header._fields())))
+        if header.quant is not None:
+            q = header.quant
+            stream.write(_chunk(schema.QUANT, schema.Quantisation.build(dict(offset=q.offset, scale=q.scale))))
 
     @property
     def done(self) -> bool:
@@ -176,6 +183,12 @@ def _decompress(payload: bytes, limit: int, name: str) -> bytes:
     return data
 
 
+@dataclass(frozen=True)
+class _RawHeader:
+    sample_type: int
+    header: Header
+
+
 class Reader:
     """Read an .atm file from a stream: the header at creation, then bands on iteration.
 
@@ -190,6 +203,12 @@ class Reader:
         if ctype != schema.HEADER:
             raise CorruptError(f"the first chunk is {ctype.decode('latin-1')}, not AHDR")
         self.header = self._parse_header(payload)
+        if self.header.sample_type == schema.FLOAT16Q:
+            ctype, payload, offset = self._next_chunk()
+            if ctype != schema.QUANT:
+                raise CorruptError(f"float data needs a QUNT chunk after AHDR; found {ctype.decode('latin-1')}")
+            self.header = self._parse_quant(self.header, payload)
+        self.header = self.header.header
         self._iterated = False
 
     def _read_signature(self) -> int:
@@ -233,18 +252,33 @@ class Reader:
         return ctype, chunk.payload, offset
 
     @staticmethod
-    def _parse_header(payload: bytes) -> Header:
+    def _parse_header(payload: bytes) -> "_RawHeader":
         if len(payload) != schema.Header.sizeof():
             raise CorruptError(f"AHDR chunk has {len(payload)} bytes, not {schema.Header.sizeof()}")
         h = schema.Header.parse(payload)
-        if h.sample_type not in DTYPES:
-            raise UnsupportedError(f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16)")
+        if h.sample_type not in schema.SAMPLE_DTYPES:
+            raise UnsupportedError(
+                f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16, 2 = quantised float)"
+            )
         if h.channels not in (1, 3):
-            raise UnsupportedError(f"{h.channels} channels; .atm version 1 has 1 or 3")
+            raise UnsupportedError(f"{h.channels} channels; .atm has 1 or 3")
         if h.width == 0 or h.height == 0:
             raise CorruptError(f"the header declares an empty {h.width}x{h.height} image")
+        if h.sample_type == schema.FLOAT16Q and h.channels != 1:
+            raise UnsupportedError("quantised float data has one channel")
         limits.check_image_size(h.width, h.height)
-        return Header(h.width, h.height, DTYPES[h.sample_type], h.channels)
+        dtype = np.dtype(np.float32) if h.sample_type == schema.FLOAT16Q else DTYPES[h.sample_type]
+        return _RawHeader(h.sample_type, Header(h.width, h.height, dtype, h.channels))
+
+    @staticmethod
+    def _parse_quant(raw: "_RawHeader", payload: bytes) -> "_RawHeader":
+        if len(payload) != schema.Quantisation.sizeof():
+            raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {schema.Quantisation.sizeof()}")
+        q = schema.Quantisation.parse(payload)
+        if not (np.isfinite(q.offset) and np.isfinite(q.scale) and q.scale > 0):
+            raise CorruptError(f"QUNT chunk has scale {q.scale!r} and offset {q.offset!r}")
+        h = raw.header
+        return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
 
     def _payload_limit(self) -> int:
         """The largest MESH payload the image can legitimately need: every count at its
@@ -253,7 +287,7 @@ class Reader:
         nv = limits.max_vertices(h.width, h.height)
         nt = limits.max_triangles(h.width, h.height)
         v = coding.MAX_VARINT_BYTES
-        per_vertex = v + h.dtype.itemsize * h.channels + 3 * v  # position, samples, polylines
+        per_vertex = v + h.storage.itemsize * h.channels + 3 * v  # position, samples, polylines
         return 64 + nv * per_vertex + nt * 3 * v
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
@@ -274,7 +308,7 @@ class Reader:
             raise CorruptError(f"MESH chunk at byte {offset} starts at row {m.y0}, expected {y0_expected}")
         if m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
             raise CorruptError(f"MESH chunk at byte {offset} has {m.rows} rows from row {m.y0}")
-        mesh = meshcode.decode_band(m, h.width, h.dtype, h.channels, f"MESH chunk at byte {offset}")
+        mesh = meshcode.decode_band(m, h.width, h.storage, h.channels, f"MESH chunk at byte {offset}")
         validate(mesh)
         return int(m.y0), mesh
 
@@ -300,8 +334,8 @@ class Reader:
                 if not finished:
                     raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
                 return
-            elif ctype == schema.HEADER:
-                raise CorruptError(f"second AHDR chunk at byte {offset}")
+            elif ctype in (schema.HEADER, schema.QUANT):
+                raise CorruptError(f"misplaced {name} chunk at byte {offset}")
             elif ctype[0] & 0x20 == 0:
                 raise UnsupportedError(f"unknown critical chunk {name}; a newer codec wrote this file")
             # ancillary chunks this version does not know are skipped, as PNG does

@@ -95,6 +95,8 @@ def encode(
 
     img = as_image(image)
     height, width = img.shape[:2]
+    if img.dtype.kind == "f" and "value_range" not in options:
+        options["value_range"] = (float(img.min()), float(img.max()))
     out = io.BytesIO()
     enc = StreamEncoder(
         out,

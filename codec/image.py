@@ -24,14 +24,16 @@ def as_image(image) -> np.ndarray:
             raise ATMError(f"cannot read the image as an array: {exc}") from None
     if image.dtype.kind == "b":
         image = image.astype(np.uint8) * 255
-    if image.dtype not in SAMPLE_TYPES:
-        if image.dtype.kind == "f":
-            raise UnsupportedError(
-                f"float images ({image.dtype}) are not supported yet; "
-                "scale them to uint8 or uint16 first"
-            )
+    if image.dtype.kind == "f":
+        if image.dtype.itemsize < 4:
+            image = image.astype(np.float32)
+        if not np.isfinite(image).all():
+            raise UnsupportedError("the image holds NaN or infinite values, which .atm cannot store yet")
+        if image.ndim == 3:
+            raise UnsupportedError("float images must have one channel (e.g. elevations, depths)")
+    elif image.dtype not in SAMPLE_TYPES:
         raise UnsupportedError(
-            f"unsupported pixel type {image.dtype}; .atm stores uint8 or uint16 samples"
+            f"unsupported pixel type {image.dtype}; .atm stores uint8, uint16 or float samples"
         )
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]

@@ -12,7 +12,7 @@ from typing import BinaryIO, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder, refine
+from . import banding, container, encoder, quantise, refine
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh
@@ -31,6 +31,11 @@ class StreamEncoder:
     Size knobs: `points` (target vertex count), or a bound that refinement guarantees on
     the decoded image, per channel: `max_rms`, `max_error` (in sample units), or
     `quality` 1..100 (JPEG-like; an RMS bound, 100 = lossless).
+
+    Float images (dtype float32/float64, one channel) are stored as 16-bit integers with
+    a scale and offset: give `value_range=(lowest, highest)` and optionally `precision`
+    (the quantisation step). `max_rms`/`max_error` are then in data units and include
+    the quantisation error; decoding returns float32.
     """
 
     def __init__(
@@ -47,14 +52,33 @@ class StreamEncoder:
         quality: int | None = None,
         max_rms: float | None = None,
         max_error: float | None = None,
+        value_range: tuple[float, float] | None = None,
+        precision: float | None = None,
         **options,
     ):
         for name, value in (("width", width), ("height", height)):
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
                 raise OptionError(f"{name} must be a positive whole number, not {value!r}")
         dtype = np.dtype(dtype)
-        if dtype not in SAMPLE_TYPES:
-            raise UnsupportedError(f"unsupported pixel type {dtype}; .atm stores uint8 or uint16 samples")
+        self._quant = None
+        if dtype.kind == "f":
+            if channels != 1:
+                raise UnsupportedError("float images must have one channel")
+            if value_range is None:
+                raise OptionError(
+                    "a float stream needs value_range=(lowest, highest) so that the header can "
+                    "carry the quantisation before the data arrives"
+                )
+            self._quant = quantise.plan(*value_range, precision=precision)
+            if quality is None:
+                max_rms, max_error = self._quant.integer_bounds(max_rms, max_error, self._quant.scale / 2)
+        elif value_range is not None or precision is not None:
+            raise OptionError("value_range and precision apply to float images only")
+        elif dtype not in SAMPLE_TYPES:
+            raise UnsupportedError(
+                f"unsupported pixel type {dtype}; .atm stores uint8, uint16 or float samples"
+            )
+        storage = quantise.STORAGE if self._quant is not None else dtype
         if channels not in (1, 3):
             raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
         if band_height is None:
@@ -67,7 +91,7 @@ class StreamEncoder:
         if quality is not None:
             if max_rms is not None:
                 raise OptionError("give quality or max_rms, not both")
-            max_rms = refine.quality_rms(quality, dtype)
+            max_rms = refine.quality_rms(quality, storage)
         self._bound = refine.Bound(max_rms=max_rms, max_error=max_error)
         self._build = encoder.mesher_build(self._mesher_name, options)
         self._values = encoder.values_method(self._build, options)
@@ -81,9 +105,12 @@ class StreamEncoder:
         elif isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 1:
             raise OptionError(f"points must be a positive whole number, not {points!r}")
         self._points = int(points)
-        self._writer = container.Writer(fileobj, container.Header(width, height, dtype, channels))
+        header = container.Header(
+            width, height, np.dtype(np.float32) if self._quant else dtype, channels, quant=self._quant
+        )
+        self._writer = container.Writer(fileobj, header)
         shape = (self.band_height + 1, width) + ((channels,) if channels > 1 else ())
-        self._buf = np.empty(shape, dtype)
+        self._buf = np.empty(shape, storage)
         self._filled = 0  # rows of the current band in _buf
         self._y0 = 0  # image row of _buf[0]
         self._received = 0
@@ -106,6 +133,10 @@ class StreamEncoder:
             )
         if rows.dtype != self.dtype:
             raise ATMError(f"rows are {rows.dtype}; this stream encodes {self.dtype}")
+        if self._quant is not None:
+            if not np.isfinite(rows).all():
+                raise ATMError("the rows hold NaN or infinite values, which .atm cannot store yet")
+            rows = self._quant.quantise(rows)
         if self._received + len(rows) > self.height:
             raise ATMError(f"more than the {self.height} rows declared")
         i = 0
@@ -189,8 +220,11 @@ class StreamDecoder:
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         from . import decoding
 
+        quant = self._reader.header.quant
         for y0, mesh in self._reader:
             rows = decoding.render(mesh, backend=self._backend)
+            if quant is not None:
+                rows = quant.dequantise(rows)
             last = y0 + mesh.height == self.height
             # the band's last row is the next band's first: emit it once, from there
             yield y0, rows if last else rows[:-1]

@@ -14,6 +14,7 @@ from construct import (
     Checksum,
     Const,
     Construct,
+    Float64l,
     GreedyBytes,
     Int8ul,
     Int16ul,
@@ -34,9 +35,12 @@ VERSION = 2
 HEADER = b"AHDR"
 MESH = b"MESH"
 END = b"AEND"
+QUANT = b"QUNT"
 
-#: sample_type codes.
-SAMPLE_DTYPES = {0: np.dtype("<u1"), 1: np.dtype("<u2")}
+#: sample_type codes -> how samples are stored. Code 2 is float data stored as 16-bit
+#: integers with the QUNT chunk's scale and offset.
+SAMPLE_DTYPES = {0: np.dtype("<u1"), 1: np.dtype("<u2"), 2: np.dtype("<u2")}
+FLOAT16Q = 2
 
 
 class NDArray(Construct):
@@ -114,6 +118,12 @@ Section = Prefixed(Int32ul, GreedyBytes)
 #: connectivity codes
 LISTED = 0
 DELAUNAY = 1
+
+#: QUNT payload (stored, not compressed): 16 bytes; required when sample_type is 2.
+Quantisation = Struct(
+    "offset" / Float64l,
+    "scale" / Float64l,
+)
 
 #: MESH payload, after zstd decompression: the mesh of one band of rows. Build and
 #: parse it with the header's `sample_type` and `channels` as keyword arguments.

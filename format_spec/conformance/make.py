@@ -57,9 +57,15 @@ def main() -> None:
             np.array([[0, 30, 60, 90, 255, 200, 100, 50, 7]], np.uint8), points=4, mesher="uniform"
         ),
     }
+    elevation = synthetic.range_scene(36, 24, seed=8).astype(np.float64) * 0.75 + 312.5
+    cases["float_elevation"] = codec.encode(elevation, mesher="uniform", points=90, precision=0.01)
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
-        write_image(HERE / f"{name}.png", codec.decode(data))
+        image = codec.decode(data)
+        if image.dtype.kind == "f":
+            np.save(HERE / f"{name}.npy", image)
+        else:
+            write_image(HERE / f"{name}.png", image)
         print(name, codec.info(data))
 
 
