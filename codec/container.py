@@ -275,8 +275,12 @@ class Reader:
         if len(payload) != schema.Quantisation.sizeof():
             raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {schema.Quantisation.sizeof()}")
         q = schema.Quantisation.parse(payload)
-        if not (np.isfinite(q.offset) and np.isfinite(q.scale) and q.scale > 0):
-            raise CorruptError(f"QUNT chunk has scale {q.scale!r} and offset {q.offset!r}")
+        top = abs(q.offset) + q.scale * 65535 if np.isfinite(q.offset) and np.isfinite(q.scale) else np.inf
+        if not (q.scale > 0 and top <= np.finfo(np.float32).max):
+            raise CorruptError(
+                f"QUNT chunk has scale {q.scale!r} and offset {q.offset!r}: values must be finite "
+                "and within float32's range"
+            )
         h = raw.header
         return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
 
