@@ -10,6 +10,7 @@ Heavy modules (OpenCV, triangle, OpenGL) load on first use, not at import.
 
 from __future__ import annotations
 
+import io
 import os
 
 import numpy as np
@@ -75,7 +76,8 @@ def mesh(image, *, points: int | None = None, mesher: str | None = None, **optio
 
 
 def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:
-    """Decode .atm bytes to an array of the encoded shape and dtype.
+    """Decode .atm bytes to an array of the encoded shape and dtype (float32 for float
+    data; hole pixels hold the file's nodata value, NaN for float data).
 
     backend: "cpu" (exact integer scanline decoder).
     """
@@ -83,7 +85,7 @@ def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:
 
     from .stream import decode_all
 
-    return decode_all(io.BytesIO(_as_bytes(data)), backend=backend)
+    return decode_all(io.BytesIO(_as_bytes(data)), backend=backend)[0]
 
 
 def decode_mesh(data: bytes) -> Mesh:
@@ -95,12 +97,14 @@ def decode_mesh(data: bytes) -> Mesh:
 
 
 def info(data: bytes) -> dict:
-    """Header and mesh statistics of .atm bytes: width, height, dtype, channels, vertices,
-    triangles, constraints, bytes."""
+    """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
+    vertices, triangles, constraints, bytes, nodata, metadata."""
     from . import container
 
     data = _as_bytes(data)
-    header, bands = container.unpack(data)
+    reader = container.Reader(io.BytesIO(data))
+    bands = list(reader)
+    header = reader.header
     return {
         "version": header.version,
         "width": header.width,
@@ -112,17 +116,22 @@ def info(data: bytes) -> dict:
         "triangles": sum(len(m.triangles) for _, m in bands),
         "constraints": sum(len(m.constraints) for _, m in bands),
         "bytes": len(data),
+        "nodata": header.nodata,
+        "metadata": header.metadata or {},
     }
 
 
-def read(path: str | os.PathLike, *, backend: str = "cpu") -> np.ndarray:
-    """Read and decode an .atm file."""
+def read(path: str | os.PathLike, *, backend: str = "cpu", metadata: bool = False):
+    """Read and decode an .atm file; with metadata=True, return (image, metadata dict)."""
+    from .stream import decode_all
+
     try:
-        with open(path, "rb") as f:
-            data = f.read()
+        f = open(path, "rb")
     except OSError as exc:
         raise ATMError(f"cannot read {path}: {exc.strerror}") from None
-    return decode(data, backend=backend)
+    with f:
+        image, meta = decode_all(f, backend=backend)
+    return (image, meta) if metadata else image
 
 
 def write(path: str | os.PathLike, image, **options) -> None:

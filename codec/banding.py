@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh
+from .mesh import Mesh, without_vertices
 from .triangulate import triangulate
 
 #: Default band size in pixels: bands of about a megapixel keep the encoder's working
@@ -34,25 +34,16 @@ def pin_top_row(mesh: Mesh, xs: np.ndarray, values: np.ndarray) -> Mesh:
     Vertices below the first row keep their positions and values; constraint polylines
     lose their first-row vertices; only the triangles touching the first row change.
     """
-    v = mesh.vertices
-    keep = v[:, 1] > 0
+    keep = mesh.vertices[:, 1] > 0
     if mesh.height == 1:
         raise ValueError("a one-row band has no row below its first")
-    remap = np.full(len(v), -1, dtype=np.int64)
-    remap[keep] = np.arange(int(keep.sum())) + len(xs)
-    constraints = []
-    for line in mesh.constraints:
-        mapped = remap[line]
-        # split where a first-row vertex was dropped
-        pieces = np.split(mapped, np.flatnonzero(mapped < 0))
-        for piece in pieces:
-            piece = piece[piece >= 0]
-            if len(piece) >= 2:
-                constraints.append(piece)
-    vertices = np.concatenate([np.stack([xs, np.zeros_like(xs)], 1), v[keep]]).astype(np.int64)
-    vals = np.concatenate([values, mesh.values[keep]]).astype(mesh.dtype)
+    base = without_vertices(mesh, keep)
+    top = np.stack([xs, np.zeros_like(xs)], 1).astype(np.int64)
+    vertices = np.concatenate([top, base.vertices])
+    vals = np.concatenate([values, base.values]).astype(mesh.dtype)
+    constraints = [c + len(xs) for c in base.constraints]
     segments = (
         np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in constraints]) if constraints else None
     )
     triangles = triangulate(vertices, segments)
-    return Mesh(vertices, vals, triangles, mesh.width, mesh.height, constraints)
+    return Mesh(vertices, vals, triangles, mesh.width, mesh.height, constraints, mesh.holes)

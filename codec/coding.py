@@ -101,3 +101,23 @@ def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
 def triangle_crc(canonical: np.ndarray) -> int:
     """CRC-32 of a canonical triangle list as little-endian u32 triples."""
     return zlib.crc32(np.ascontiguousarray(canonical, dtype="<u4").tobytes()) & 0xFFFFFFFF
+
+
+def runs(mask: np.ndarray) -> np.ndarray:
+    """Lengths of the alternating runs of False and True in `mask` (raster order),
+    starting with a False run (empty if the first pixel is True)."""
+    flat = np.asarray(mask, bool).ravel()
+    change = np.flatnonzero(flat[1:] != flat[:-1]) + 1
+    bounds = np.concatenate([[0], change, [flat.size]])
+    lengths = np.diff(bounds)
+    return np.concatenate([[0], lengths]) if flat.size and flat[0] else lengths
+
+
+def unruns(lengths: np.ndarray, rows: int, width: int, what: str) -> np.ndarray:
+    """The rows x width mask of run `lengths` (False first); CorruptError unless they
+    add up to the pixel count and only the first run is empty."""
+    lengths = np.asarray(lengths, dtype=np.int64)
+    if lengths.sum() != rows * width or (len(lengths) > 1 and lengths[1:].min() == 0):
+        raise CorruptError(f"{what}: the runs do not describe {rows} x {width} pixels")
+    values = (np.arange(len(lengths)) % 2).astype(bool)
+    return np.repeat(values, lengths).reshape(rows, width)

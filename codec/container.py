@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import gc
 import io
+import json
 from dataclasses import dataclass
 from typing import BinaryIO, Iterator
 
@@ -19,7 +20,7 @@ from construct import ChecksumError, ConstructError
 from format_spec import schema
 
 from . import coding, limits, meshcode
-from .errors import CorruptError, FormatError, LimitError, TruncatedError, UnsupportedError
+from .errors import CorruptError, FormatError, LimitError, OptionError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser
@@ -38,6 +39,10 @@ class Header:
     channels: int
     version: int = schema.VERSION
     quant: Quantiser | None = None
+    #: the value hole pixels decode to; None when the image has no holes
+    nodata: float | None = None
+    #: JSON key-values (units, georeferencing, ...) from the meta chunk
+    metadata: dict | None = None
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -53,6 +58,23 @@ class Header:
     def _fields(self) -> dict:
         code = schema.FLOAT16Q if self.quant is not None else SAMPLE_TYPES[np.dtype(self.dtype)]
         return dict(width=self.width, height=self.height, sample_type=code, channels=self.channels)
+
+
+#: Largest meta chunk, once decompressed.
+MAX_METADATA_BYTES = 1 << 20
+
+
+def encode_metadata(metadata: dict) -> bytes:
+    """The meta chunk's JSON: an object, keys sorted (the same input gives the same bytes)."""
+    if not isinstance(metadata, dict) or not all(isinstance(k, str) for k in metadata):
+        raise OptionError("metadata must be a dict with string keys")
+    try:
+        data = json.dumps(metadata, sort_keys=True, ensure_ascii=False, allow_nan=False).encode("utf-8")
+    except (TypeError, ValueError) as exc:
+        raise OptionError(f"metadata must be JSON-serialisable: {exc}") from None
+    if len(data) > MAX_METADATA_BYTES:
+        raise OptionError(f"metadata is {len(data):,} bytes of JSON; at most {MAX_METADATA_BYTES:,}")
+    return data
 
 
 def band_starts(height: int, band_height: int) -> list[int]:
@@ -96,6 +118,10 @@ class Writer:
         if header.quant is not None:
             q = header.quant
             stream.write(_chunk(schema.QUANT, schema.Quantisation.build(dict(offset=q.offset, scale=q.scale))))
+        if header.nodata is not None:
+            stream.write(_chunk(schema.NODATA, schema.NoData.build(dict(value=header.nodata))))
+        if header.metadata is not None:
+            stream.write(_chunk(schema.META, self._compressor.compress(encode_metadata(header.metadata))))
 
     @property
     def done(self) -> bool:
@@ -110,6 +136,15 @@ class Writer:
         if mesh.width != h.width or y0 + mesh.height > h.height:
             raise ValueError("band does not fit the image")
         validate(mesh)
+        if h.nodata is not None:
+            holes = mesh.holes if mesh.holes is not None else np.zeros((mesh.height, mesh.width), bool)
+            runs = coding.runs(holes)
+            mask = schema.MaskPayload.build(
+                dict(y0=y0, rows=mesh.height, run_count=len(runs), runs=coding.varints(runs))
+            )
+            self._stream.write(_chunk(schema.MASK, self._compressor.compress(mask)))
+        elif mesh.holes is not None and mesh.holes.any():
+            raise ValueError("a band with holes needs a header with a nodata value")
         raw = schema.MeshPayload.build(meshcode.encode_band(y0, mesh), **h._fields())
         self._stream.write(_chunk(schema.MESH, self._compressor.compress(raw)))
         _release_cycles(len(raw))
@@ -209,6 +244,23 @@ class Reader:
                 raise CorruptError(f"float data needs a QUNT chunk after AHDR; found {ctype.decode('latin-1')}")
             self.header = self._parse_quant(self.header, payload)
         self.header = self.header.header
+        self._pending = None
+        self._pending_error = None
+        # the chunks before the first band: NDAT, meta and ancillary ones
+        while True:
+            try:
+                chunk = self._next_chunk()
+            except TruncatedError as exc:
+                # the header is intact: report the truncation when the bands are read
+                self._pending_error = exc
+                break
+            if chunk[0] == schema.NODATA and self.header.nodata is None:
+                self.header = self._parse_nodata(self.header, chunk[1])
+            elif chunk[0] == schema.META:
+                self._read_metadata(chunk[1], chunk[2])
+            elif chunk[0][0] & 0x20 == 0 or chunk[0] == schema.NODATA:
+                self._pending = chunk  # the first band's chunk: __iter__ takes it
+                break
         self._iterated = False
 
     def _read_signature(self) -> int:
@@ -228,6 +280,11 @@ class Reader:
 
     def _next_chunk(self) -> tuple[bytes, bytes, int]:
         """(type, payload, offset) of the next chunk, its CRC verified."""
+        if getattr(self, "_pending", None) is not None:
+            chunk, self._pending = self._pending, None
+            return chunk
+        if getattr(self, "_pending_error", None) is not None:
+            raise self._pending_error
         s = self._stream
         offset = s.offset
         head = s.read(schema.ChunkHead.sizeof())
@@ -284,6 +341,49 @@ class Reader:
         h = raw.header
         return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
 
+    def _read_metadata(self, payload: bytes, offset: int) -> None:
+        raw = _decompress(payload, MAX_METADATA_BYTES, f"meta at byte {offset}")
+        try:
+            meta = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError):
+            raise CorruptError(f"meta chunk at byte {offset} is not UTF-8 JSON") from None
+        if not isinstance(meta, dict):
+            raise CorruptError(f"meta chunk at byte {offset} is not a JSON object")
+        h = self.header
+        merged = dict(h.metadata or {}, **meta)
+        self.header = Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, h.nodata, merged)
+
+    @staticmethod
+    def _parse_nodata(h: Header, payload: bytes) -> Header:
+        if len(payload) != schema.NoData.sizeof():
+            raise CorruptError(f"NDAT chunk has {len(payload)} bytes, not {schema.NoData.sizeof()}")
+        value = schema.NoData.parse(payload).value
+        if h.quant is None:
+            info = np.iinfo(h.dtype)
+            if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):
+                raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")
+        elif np.isinf(value) or (np.isfinite(value) and abs(value) > np.finfo(np.float32).max):
+            raise CorruptError(f"NDAT value {value!r} is not a finite float32 or NaN")
+        return Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, float(value), h.metadata)
+
+    def _parse_mask(self, payload: bytes, offset: int, y0: int) -> np.ndarray:
+        h = self.header
+        where = f"MASK chunk at byte {offset}"
+        raw = _decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where)
+        stream = io.BytesIO(raw)
+        try:
+            m = schema.MaskPayload.parse_stream(stream)
+        except ConstructError as exc:
+            raise CorruptError(f"{where} is malformed: {str(exc).splitlines()[0]}") from None
+        if stream.tell() != len(raw):
+            raise CorruptError(f"{where} has trailing data")
+        if m.y0 != y0 or m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
+            raise CorruptError(f"{where} covers rows {m.y0}..{m.y0 + m.rows - 1}, not a band from row {y0}")
+        if m.run_count > h.width * m.rows + 1:
+            raise CorruptError(f"{where} has more runs than pixels")
+        runs = coding.unvarints(m.runs, m.run_count, where)
+        return coding.unruns(runs, m.rows, h.width, where)
+
     def _payload_limit(self) -> int:
         """The largest MESH payload the image can legitimately need: every count at its
         limit and every varint at its longest."""
@@ -321,14 +421,26 @@ class Reader:
             raise RuntimeError("an .atm Reader can be iterated once")
         self._iterated = True
         h = self.header
-        next_y0, finished = 0, False
+        next_y0, finished, holes = 0, False, None
         while True:
             ctype, payload, offset = self._next_chunk()
             name = ctype.decode("latin-1")
-            if ctype == schema.MESH:
+            if ctype == schema.MASK:
+                if h.nodata is None:
+                    raise CorruptError(f"MASK chunk at byte {offset} in a file without NDAT")
+                if holes is not None:
+                    raise CorruptError(f"two MASK chunks before a MESH at byte {offset}")
+                holes = self._parse_mask(payload, offset, next_y0)
+            elif ctype == schema.MESH:
                 if finished:
                     raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
+                if h.nodata is not None and holes is None:
+                    raise CorruptError(f"MESH chunk at byte {offset} has no MASK chunk before it")
                 y0, mesh = self._parse_band(payload, offset, next_y0)
+                if holes is not None:
+                    if holes.shape != (mesh.height, mesh.width):
+                        raise CorruptError(f"MASK and MESH chunks before byte {offset} cover different rows")
+                    mesh.holes, holes = holes, None
                 next_y0 = y0 + mesh.height - 1
                 finished = y0 + mesh.height == h.height
                 yield y0, mesh
@@ -338,7 +450,9 @@ class Reader:
                 if not finished:
                     raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
                 return
-            elif ctype in (schema.HEADER, schema.QUANT):
+            elif ctype == schema.META:
+                self._read_metadata(payload, offset)
+            elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA):
                 raise CorruptError(f"misplaced {name} chunk at byte {offset}")
             elif ctype[0] & 0x20 == 0:
                 raise UnsupportedError(f"unknown critical chunk {name}; a newer codec wrote this file")

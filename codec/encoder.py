@@ -7,6 +7,8 @@ import io
 import inspect
 import numbers
 
+import numpy as np
+
 
 from . import container
 from .errors import OptionError
@@ -87,16 +89,30 @@ def encode(
     points: int | None = None,
     mesher: str = DEFAULT_MESHER,
     band_height: int | None = None,
+    mask=None,
     **options,
 ) -> bytes:
     """Encode an image as .atm bytes, band by band (see codec.StreamEncoder for the
     size knobs). Same image and options give the same bytes."""
     from .stream import StreamEncoder
 
-    img = as_image(image)
+    img = as_image(image, allow_nan=True)
     height, width = img.shape[:2]
+    holes = None
+    if mask is not None:
+        holes = np.asarray(mask, dtype=bool)
+        if holes.shape != (height, width):
+            raise OptionError(f"mask must have shape {(height, width)}, not {holes.shape}")
+        if img.dtype.kind != "f" and options.get("nodata") is None:
+            options["nodata"] = 0
     if img.dtype.kind == "f" and "value_range" not in options:
-        options["value_range"] = (float(img.min()), float(img.max()))
+        valid = np.isfinite(img) if holes is None else np.isfinite(img) & ~holes
+        nodata = options.get("nodata")
+        if nodata is not None:
+            valid &= img != nodata
+        options["value_range"] = (
+            (float(img[valid].min()), float(img[valid].max())) if valid.any() else (0.0, 0.0)
+        )
     out = io.BytesIO()
     enc = StreamEncoder(
         out,
@@ -109,7 +125,7 @@ def encode(
         mesher=mesher,
         **options,
     )
-    enc.write(img)
+    enc.write(img, holes=holes)
     enc.close()
     return out.getvalue()
 

@@ -12,7 +12,7 @@ SAMPLE_TYPES: dict[np.dtype, int] = {np.dtype(np.uint8): 0, np.dtype(np.uint16):
 DTYPES: dict[int, np.dtype] = {code: dtype for dtype, code in SAMPLE_TYPES.items()}
 
 
-def as_image(image) -> np.ndarray:
+def as_image(image, *, allow_nan: bool = False) -> np.ndarray:
     """Return `image` as a C-contiguous H x W or H x W x 3 array of a supported dtype.
 
     Raises the codec's own errors with a message saying what is wrong.
@@ -27,8 +27,8 @@ def as_image(image) -> np.ndarray:
     if image.dtype.kind == "f":
         if image.dtype.itemsize < 4:
             image = image.astype(np.float32)
-        if not np.isfinite(image).all():
-            raise UnsupportedError("the image holds NaN or infinite values, which .atm cannot store yet")
+        if not allow_nan and not np.isfinite(image).all():
+            raise UnsupportedError("the image holds NaN or infinite values; encode it to keep them as holes")
         if image.ndim == 3:
             raise UnsupportedError("float images must have one channel (e.g. elevations, depths)")
     elif image.dtype not in SAMPLE_TYPES:

@@ -15,6 +15,7 @@ class Mesh:
     """A triangulated image.
 
     vertices:    N x 2 int64, (x, y) = (column, row) of a pixel centre.
+    holes:       optional H x W mask of pixels without data.
     values:      N (gray) or N x C (colour) samples, the image's dtype.
     triangles:   M x 3 int64 vertex indices, each with positive doubled area
                  (x1-x0)(y2-y0) - (x2-x0)(y1-y0) > 0 (clockwise on screen, y down).
@@ -28,6 +29,9 @@ class Mesh:
     width: int
     height: int
     constraints: list[np.ndarray] = field(default_factory=list)
+    #: height x width booleans, True where the image has no data (None: no holes).
+    #: Decoders give hole pixels the file's nodata value; no vertex value comes from them.
+    holes: np.ndarray | None = None
 
     @property
     def dtype(self) -> np.dtype:
@@ -136,3 +140,22 @@ def edges(triangles: np.ndarray) -> np.ndarray:
 def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
     pairs = np.sort(np.asarray(pairs, dtype=np.int64), axis=1)
     return pairs[:, 0] * n + pairs[:, 1]
+
+
+def without_vertices(mesh: Mesh, keep: np.ndarray) -> Mesh:
+    """The mesh's kept vertices, their values, and its walls split where a vertex went
+    (pieces shorter than two vertices vanish). Triangles are left empty: the caller
+    triangulates again."""
+    remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
+    remap[keep] = np.arange(int(np.count_nonzero(keep)))
+    constraints = []
+    for line in mesh.constraints:
+        mapped = remap[line]
+        for piece in np.split(mapped, np.flatnonzero(mapped < 0)):
+            piece = piece[piece >= 0]
+            if len(piece) >= 2:
+                constraints.append(piece)
+    return Mesh(
+        mesh.vertices[keep], mesh.values[keep], np.zeros((0, 3), np.int64),
+        mesh.width, mesh.height, constraints, mesh.holes,
+    )

@@ -75,6 +75,7 @@ def refine(
     values: str = "sample",
     pinned_rows: int = 0,
     last_band: bool = True,
+    valid: np.ndarray | None = None,
 ) -> Mesh:
     """Insert vertices into `mesh` (of `image`) until `bound` holds.
 
@@ -84,6 +85,7 @@ def refine(
         counts it: the RMS bound is then met by the rows above it and, separately, by
         the last row alone, so that the bound holds over the whole image.
     values: how new vertex values are chosen ("sample" or "lsq", as the mesher did).
+    valid: pixels that count (holes do not); `image` then holds filled values in holes.
     """
     if not bound.active:
         return mesh
@@ -104,6 +106,8 @@ def refine(
     sampled = np.zeros(len(mesh.vertices), bool)
     while True:
         sq = _squared_errors(mesh, image)
+        if valid is not None:
+            sq[~valid] = 0.0
         worst = sq.max(axis=2)
         bad = np.zeros((h, w), bool)
         if sq_limit is not None:
@@ -111,7 +115,8 @@ def refine(
         if rms_sq is not None:
             for rows in ([counted], [~counted]) if not last_band else ([counted],):
                 sel = rows[0]
-                if sel.any() and (sq[sel].mean(axis=(0, 1)) > rms_sq + 1e-9).any():
+                count = sel.sum() * w if valid is None else valid[sel].sum()
+                if count and (sq[sel].sum(axis=(0, 1)) / count > rms_sq + 1e-9).any():
                     bad[sel] |= worst[sel] > rms_sq
         bad[:pinned_rows] = False
         if not bad.any():
@@ -127,7 +132,7 @@ def refine(
             # only wall pixels are left: take them, splitting walls is better than failing
             new = _spread(np.where(bad & ~is_vertex, worst, 0.0), max(8, len(mesh.vertices) // 4))
             segments = None
-            mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [])
+            mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [], mesh.holes)
         vertices = np.concatenate([mesh.vertices, new]) if len(new) else mesh.vertices
         triangles = triangulate(vertices, segments) if len(new) else mesh.triangles
         sampled = np.concatenate([sampled | at_vertex, np.ones(len(new), bool)])
@@ -142,7 +147,7 @@ def refine(
             vals[old] = image[vertices[old, 1], vertices[old, 0]]
         fixed = np.concatenate([fixed, np.zeros(len(new), bool)])
         vals[fixed] = fixed_values
-        mesh = Mesh(vertices, vals, triangles, w, h, mesh.constraints)
+        mesh = Mesh(vertices, vals, triangles, w, h, mesh.constraints, mesh.holes)
 
 
 def _spread(score: np.ndarray, count: int) -> np.ndarray:

@@ -12,7 +12,8 @@ from typing import BinaryIO, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder, quantise, refine
+from . import banding, container, encoder, holes, quantise, refine
+from . import values as vertex_values
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh
@@ -54,6 +55,8 @@ class StreamEncoder:
         max_error: float | None = None,
         value_range: tuple[float, float] | None = None,
         precision: float | None = None,
+        nodata: float | None = None,
+        metadata: dict | None = None,
         **options,
     ):
         for name, value in (("width", width), ("height", height)):
@@ -79,6 +82,13 @@ class StreamEncoder:
                 f"unsupported pixel type {dtype}; .atm stores uint8, uint16 or float samples"
             )
         storage = quantise.STORAGE if self._quant is not None else dtype
+        if nodata is not None and self._quant is None:
+            info = np.iinfo(dtype)
+            if not (isinstance(nodata, numbers.Real) and float(nodata).is_integer() and info.min <= nodata <= info.max):
+                raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
+        # float data always has a nodata value (NaN unless given), as NaN can turn up in
+        # any row; integer data has one when the user names it
+        self._nodata = (float("nan") if nodata is None else float(nodata)) if self._quant else nodata
         if channels not in (1, 3):
             raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
         if band_height is None:
@@ -106,11 +116,20 @@ class StreamEncoder:
             raise OptionError(f"points must be a positive whole number, not {points!r}")
         self._points = int(points)
         header = container.Header(
-            width, height, np.dtype(np.float32) if self._quant else dtype, channels, quant=self._quant
+            width,
+            height,
+            np.dtype(np.float32) if self._quant else dtype,
+            channels,
+            quant=self._quant,
+            nodata=None if self._nodata is None else float(self._nodata),
+            metadata=metadata,
         )
+        if metadata is not None:
+            container.encode_metadata(metadata)  # checked before anything is written
         self._writer = container.Writer(fileobj, header)
         shape = (self.band_height + 1, width) + ((channels,) if channels > 1 else ())
         self._buf = np.empty(shape, storage)
+        self._holes = np.zeros(shape[:2], bool)
         self._filled = 0  # rows of the current band in _buf
         self._y0 = 0  # image row of _buf[0]
         self._received = 0
@@ -119,8 +138,11 @@ class StreamEncoder:
         #: Totals over the bands written so far (shared-row vertices count in both bands).
         self.bands = self.vertices = self.triangles = 0
 
-    def write(self, rows) -> None:
-        """Add rows (an n x W, or n x W x 3, array; a single row may be 1-D)."""
+    def write(self, rows, holes=None) -> None:
+        """Add rows (an n x W, or n x W x 3, array; a single row may be 1-D).
+
+        Pixels without data are those equal to `nodata`, NaN or infinite ones in float
+        data, and those True in `holes` (an n x W boolean array, if given)."""
         if self._closed:
             raise ATMError("write() on a closed StreamEncoder")
         rows = np.asarray(rows)
@@ -133,16 +155,27 @@ class StreamEncoder:
             )
         if rows.dtype != self.dtype:
             raise ATMError(f"rows are {rows.dtype}; this stream encodes {self.dtype}")
+        missing = np.zeros(rows.shape[:2], bool)
+        if holes is not None:
+            holes = np.asarray(holes, dtype=bool)
+            if holes.shape != rows.shape[:2]:
+                raise ATMError(f"holes must have shape {rows.shape[:2]}, not {holes.shape}")
+            missing |= holes
+        if self._nodata is not None and not np.isnan(self._nodata):
+            equal = rows == self._nodata
+            missing |= equal if equal.ndim == 2 else equal.all(axis=2)
         if self._quant is not None:
-            if not np.isfinite(rows).all():
-                raise ATMError("the rows hold NaN or infinite values, which .atm cannot store yet")
-            rows = self._quant.quantise(rows)
+            missing |= ~np.isfinite(rows)
+            rows = self._quant.quantise(np.where(missing, self._quant.offset, rows))
+        if missing.any() and self._nodata is None:
+            raise ATMError("the image has holes: give nodata= (the value hole pixels decode to)")
         if self._received + len(rows) > self.height:
             raise ATMError(f"more than the {self.height} rows declared")
         i = 0
         while i < len(rows):
             n = min(len(rows) - i, len(self._buf) - self._filled)
             self._buf[self._filled : self._filled + n] = rows[i : i + n]
+            self._holes[self._filled : self._filled + n] = missing[i : i + n]
             self._filled += n
             self._received += n
             i += n
@@ -153,10 +186,23 @@ class StreamEncoder:
         if self._filled < 2 and self.height > 1:
             return  # only the shared row of a band already written
         band = self._buf[: self._filled]
-        share = self._points * (self._filled - (self._y0 > 0)) / self.height
+        band_holes = self._holes[: self._filled]
+        has_holes = bool(band_holes.any())
+        valid_share = 1.0 - band_holes.mean() if has_holes else 1.0
+        share = self._points * valid_share * (self._filled - (self._y0 > 0)) / self.height
+        if has_holes:
+            band = holes.fill(band, band_holes)
         mesh = self._build(band, max(4, round(share)), **self._options)
+        if has_holes:
+            mesh = holes.cut(mesh, band_holes.copy())
         if self._top is not None:
             mesh = banding.pin_top_row(mesh, *self._top)
+        if has_holes:
+            fitted = vertex_values.fit(band, mesh.vertices, mesh.triangles, self._values)
+            if self._top is not None:
+                top = mesh.vertices[:, 1] == 0
+                fitted[top] = mesh.values[top]
+            mesh.values = fitted
         mesh = refine.refine(
             mesh,
             band,
@@ -164,6 +210,7 @@ class StreamEncoder:
             values=self._values,
             pinned_rows=1 if self._top is not None else 0,
             last_band=self._received == self.height,
+            valid=~band_holes if has_holes else None,
         )
         self._writer.write_band(self._y0, mesh)
         self.bands += 1
@@ -171,6 +218,7 @@ class StreamEncoder:
         self.triangles += len(mesh.triangles)
         self._top = banding.bottom_row(mesh)
         self._buf[0] = self._buf[self._filled - 1]
+        self._holes[0] = self._holes[self._filled - 1]
         self._y0 += self._filled - 1
         self._filled = 1
 
@@ -212,6 +260,9 @@ class StreamDecoder:
         h = self._reader.header
         self.width, self.height, self.dtype, self.channels = h.width, h.height, h.dtype, h.channels
         self.shape = h.shape
+        #: JSON key-values stored with the image (empty if none); meta chunks after
+        #: the first band are added as they are read
+        self.metadata = dict(h.metadata or {})
 
     def bands(self) -> Iterator[tuple[int, Mesh]]:
         """The (y0, Mesh) of each band, undecoded."""
@@ -220,23 +271,26 @@ class StreamDecoder:
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         from . import decoding
 
-        quant = self._reader.header.quant
+        quant, nodata = self._reader.header.quant, self._reader.header.nodata
         for y0, mesh in self._reader:
+            self.metadata.update(self._reader.header.metadata or {})
             rows = decoding.render(mesh, backend=self._backend)
             if quant is not None:
                 rows = quant.dequantise(rows)
+            if mesh.holes is not None:
+                rows[mesh.holes] = nodata
             last = y0 + mesh.height == self.height
             # the band's last row is the next band's first: emit it once, from there
             yield y0, rows if last else rows[:-1]
 
 
-def decode_all(fileobj: BinaryIO, backend: str = "cpu") -> np.ndarray:
-    """Decode a whole file into one array."""
+def decode_all(fileobj: BinaryIO, backend: str = "cpu") -> tuple[np.ndarray, dict]:
+    """Decode a whole file into one array; also return its metadata."""
     dec = StreamDecoder(fileobj, backend=backend)
     out = np.empty(dec.shape, dec.dtype)
     for y0, rows in dec:
         out[y0 : y0 + len(rows)] = rows
-    return out
+    return out, dec.metadata
 
 
 def merge_bands(bands: list[tuple[int, Mesh]]) -> Mesh:

@@ -32,3 +32,34 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.
             "off the pixel grid"
         )
     return orient(vertices, result["triangles"])
+
+
+def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[np.ndarray]:
+    """The polylines with every vertex that lies exactly on one of their segments put
+    in its place along the segment. A constrained triangulation splits a segment at
+    such vertices, so these are the polylines whose steps are its edges."""
+    if not polylines:
+        return polylines
+    v = np.asarray(vertices, dtype=np.int64)
+    width = int(v[:, 0].max()) + 1
+    keys = v[:, 1] * width + v[:, 0]
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    out = []
+    for line in polylines:
+        a, b = v[line[:-1]], v[line[1:]]
+        d = b - a
+        g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
+        steps = np.maximum(g, 1)
+        # lattice points a + k (b - a) / g, k = 0 .. g-1, of every segment, then the end
+        seg = np.repeat(np.arange(len(a)), steps)
+        k = np.arange(len(seg)) - np.repeat(np.cumsum(steps) - steps, steps)
+        pts = a[seg] + (d[seg] // steps[seg, None]) * k[:, None]
+        pts = np.concatenate([pts, v[line[-1:]]])
+        pk = pts[:, 1] * width + pts[:, 0]
+        at = np.clip(np.searchsorted(sorted_keys, pk), 0, len(keys) - 1)
+        hit = sorted_keys[at] == pk
+        idx = order[at[hit]]
+        # a zero-length step is no edge
+        out.append(idx[np.r_[True, idx[1:] != idx[:-1]]])
+    return out

@@ -36,6 +36,9 @@ HEADER = b"AHDR"
 MESH = b"MESH"
 END = b"AEND"
 QUANT = b"QUNT"
+NODATA = b"NDAT"
+MASK = b"MASK"
+META = b"meta"
 
 #: sample_type codes -> how samples are stored. Code 2 is float data stored as 16-bit
 #: integers with the QUNT chunk's scale and offset.
@@ -112,17 +115,31 @@ Header = Struct(
     "channels" / Int8ul,
 )
 
-#: Byte sections whose length comes first (varint streams, decoded by the codec).
-Section = Prefixed(Int32ul, GreedyBytes)
-
 #: connectivity codes
 LISTED = 0
 DELAUNAY = 1
+
+#: Byte sections whose length comes first (varint streams, decoded by the codec).
+Section = Prefixed(Int32ul, GreedyBytes)
 
 #: QUNT payload (stored, not compressed): 16 bytes; required when sample_type is 2.
 Quantisation = Struct(
     "offset" / Float64l,
     "scale" / Float64l,
+)
+
+#: NDAT payload (stored, not compressed): 8 bytes; the value hole pixels decode to.
+NoData = Struct(
+    "value" / Float64l,
+)
+
+#: MASK payload, after zstd decompression: the hole pixels of one band, as the lengths
+#: of alternating runs (valid first) in raster order.
+MaskPayload = Struct(
+    "y0" / Int32ul,
+    "rows" / Int32ul,
+    "run_count" / Int32ul,
+    "runs" / Section,
 )
 
 #: MESH payload, after zstd decompression: the mesh of one band of rows. Build and

@@ -74,11 +74,14 @@ def test_float_streams_need_a_range_and_match_one_shot():
         enc2.write(z[:2])
 
 
-def test_nan_is_refused_with_a_clear_message():
+def test_nan_and_infinity_are_holes_and_all_holes_works():
     z = np.zeros((5, 5), np.float32)
-    z[2, 2] = np.nan
+    z[2, 2], z[0, 4] = np.nan, -np.inf
+    out = codec.decode(codec.encode(z))
+    assert np.isnan(out[2, 2]) and np.isnan(out[0, 4]) and np.count_nonzero(np.isnan(out)) == 2
+    assert np.isnan(codec.decode(codec.encode(np.full((3, 4), np.nan)))).all()
     with pytest.raises(ATMError, match="NaN or infinite"):
-        codec.encode(z)
+        codec.mesh(z)  # a bare mesh has no place for holes
 
 
 def test_constant_float_image():

@@ -59,6 +59,12 @@ def main() -> None:
     }
     elevation = synthetic.range_scene(36, 24, seed=8).astype(np.float64) * 0.75 + 312.5
     cases["float_elevation"] = codec.encode(elevation, mesher="uniform", points=90, precision=0.01)
+    depth = synthetic.range_scene(40, 30, seed=9).astype(np.float64) * 0.02 + 1.5
+    depth[4:11, 6:19] = np.nan
+    depth[20:, 33:] = np.nan
+    cases["holes_float"] = codec.encode(
+        depth, mesher="uniform", points=120, band_height=12, metadata={"units": "m"}
+    )
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
