@@ -95,6 +95,61 @@ def atm_at(image: np.ndarray, budget: int) -> tuple[int, float] | None:
     return largest_fitting(lambda n: atm(image, n), lo, min(pixels, lo * 2), budget)
 
 
+def holes_table(bpps: list[float]) -> None:
+    """The disparity map with its holes kept as nodata: RMS over valid pixels against
+    bytes; the peers get the image with holes filled from the nearest valid pixel, their
+    best case (they cannot store a hole)."""
+    from codec.holes import fill
+    from tests.corpus import disparity, disparity_holes
+
+    image, holes = disparity(), disparity_holes()
+    filled = fill(image, holes)
+    valid = ~holes
+    h, w = image.shape
+
+    def atm_masked(n: int) -> tuple[int, float]:
+        data = codec.encode(image, points=n, mask=holes, nodata=0)
+        out = codec.decode(data)
+        return len(data), rms(out[valid], image[valid])
+
+    def peer_filled(name: str, q: int) -> tuple[int, float]:
+        import cv2
+
+        ext, flag, _, _ = PEERS[name]
+        ok, buf = cv2.imencode(ext, filled, [getattr(cv2, flag), int(q)])
+        return len(buf), rms(cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)[valid], image[valid])
+
+    print(f"\nmotorcycle_disp with {holes.mean():.1%} holes kept as nodata (RMS over valid pixels)\n")
+    print("| budget | .atm (holes exact) | WebP (filled) | JPEG 2000 (filled) |")
+    print("|---|---:|---:|---:|")
+    for bpp in bpps:
+        budget = int(bpp * h * w / 8)
+        lo = 4
+        while atm_masked(lo * 2)[0] <= budget and lo * 2 <= h * w:
+            lo *= 2
+        cells = [largest_fitting(atm_masked, lo, lo * 2, budget)]
+        for name in ("webp", "jpeg2000"):
+            _, _, qlo, qhi = PEERS[name]
+            cells.append(largest_fitting(lambda q: peer_filled(name, q), qlo, qhi, budget))
+        print(f"| {bpp:g} bpp | " + " | ".join(fmt(c) for c in cells) + " |", flush=True)
+
+
+def elevation_table() -> None:
+    """A float elevation model (metres) under max_error bounds."""
+    z = range_scene(512, 512, seed=11, dtype=np.uint16).astype(np.float64) * 0.0015 + 412.0
+    print(f"\nfloat elevation 512x512 ({z.min():.0f} .. {z.max():.0f} m): max_error in metres\n")
+    print("| max_error | bytes | bits/pixel | measured max error | RMS |")
+    print("|---:|---:|---:|---:|---:|")
+    for bound in (0.01, 0.1, 0.5, 1.0, 2.0):
+        data = codec.encode(z, max_error=bound)
+        e = codec.decode(data).astype(np.float64) - z
+        print(
+            f"| {bound:g} m | {len(data):,} | {8 * len(data) / z.size:.3f} | "
+            f"{np.abs(e).max():.4f} m | {np.sqrt(np.mean(e ** 2)):.4f} m |",
+            flush=True,
+        )
+
+
 def at_budget(image: np.ndarray, budget: int) -> dict[str, tuple[int, float] | None]:
     row = {"atm": atm_at(image, budget)}
     for name, (_, _, lo, hi) in PEERS.items():
@@ -111,6 +166,7 @@ def main() -> None:
     parser.add_argument("--images", nargs="+", help="corpus names (default: all)")
     parser.add_argument("--bpp", nargs="+", type=float, default=[0.05, 0.1, 0.2, 0.3, 0.5])
     parser.add_argument("--no-plot", action="store_true")
+    parser.add_argument("--skip-holes", action="store_true", help="skip the nodata and float tables")
     args = parser.parse_args()
     images = corpus()
     names = args.images or list(images)
@@ -142,6 +198,9 @@ def main() -> None:
                     if cell is not None:
                         curves[name][k].append((8 * cell[0] / (h * w), psnr(cell[1])))
         print(f"<!-- {name}: {time.perf_counter() - start:.0f} s -->", file=sys.stderr)
+    if not args.skip_holes:
+        holes_table(args.bpp)
+        elevation_table()
     if not args.no_plot:
         plot(curves)
 

@@ -7,13 +7,23 @@ from pathlib import Path
 import numpy as np
 
 
-def disparity() -> np.ndarray:
-    """skimage's motorcycle disparity map as uint8: infinite values (holes) become 0,
-    the finite range is scaled linearly to 0..255."""
+def disparity_raw() -> np.ndarray:
+    """skimage's motorcycle disparity map as stored: float, infinite where unknown."""
     import skimage
 
     path = Path(skimage.__file__).parent / "data" / "motorcycle_disp.npz"
-    disp = np.load(path)["arr_0"].astype(np.float64)
+    return np.load(path)["arr_0"].astype(np.float64)
+
+
+def disparity_holes() -> np.ndarray:
+    """Where the disparity map has no measurement."""
+    return ~np.isfinite(disparity_raw())
+
+
+def disparity() -> np.ndarray:
+    """The disparity map as uint8: holes become 0, the finite range is scaled linearly
+    to 0..255."""
+    disp = disparity_raw()
     disp[~np.isfinite(disp)] = 0
     return np.round(255 * disp / disp.max()).astype(np.uint8)
 
