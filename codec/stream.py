@@ -8,7 +8,7 @@ decoded rows as each band's chunk arrives.
 from __future__ import annotations
 
 import numbers
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
@@ -57,8 +57,11 @@ class StreamEncoder:
         precision: float | None = None,
         nodata: float | None = None,
         metadata: dict | None = None,
+        progress: Callable[[int, int], None] | None = None,
         **options,
     ):
+        # progress(rows_done, height) is called after each band is written; it watches
+        # the work and never changes it, so the bytes are the same with or without it
         for name, value in (("width", width), ("height", height)):
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
                 raise OptionError(f"{name} must be a positive whole number, not {value!r}")
@@ -135,6 +138,7 @@ class StreamEncoder:
         self._received = 0
         self._top: tuple[np.ndarray, np.ndarray] | None = None
         self._closed = False
+        self._progress = progress
         #: Totals over the bands written so far (shared-row vertices count in both bands).
         self.bands = self.vertices = self.triangles = 0
 
@@ -221,6 +225,8 @@ class StreamEncoder:
         self._holes[0] = self._holes[self._filled - 1]
         self._y0 += self._filled - 1
         self._filled = 1
+        if self._progress is not None:
+            self._progress(self._y0 + 1, self.height)
 
     def close(self) -> None:
         """Finish the file. Raises ATMError if fewer rows came than were declared."""
