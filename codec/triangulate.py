@@ -63,3 +63,75 @@ def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[
         # a zero-length step is no edge
         out.append(idx[np.r_[True, idx[1:] != idx[:-1]]])
     return out
+
+
+def uncrossed(vertices: np.ndarray, polylines: list[np.ndarray], cell: int = 8) -> list[np.ndarray]:
+    """The polylines without the segments that properly cross an earlier one (a later
+    polyline, or a later segment of the same one, gives way), each cut where a segment
+    went. Candidate pairs come from a grid of `cell`-pixel buckets, the test is exact."""
+    if not polylines:
+        return polylines
+    v = np.asarray(vertices, dtype=np.int64)
+    lens = np.array([len(c) - 1 for c in polylines])
+    a = np.concatenate([c[:-1] for c in polylines])
+    b = np.concatenate([c[1:] for c in polylines])
+    if len(a) < 2:
+        return polylines
+    p, q = v[a], v[b]
+    lo, hi = np.minimum(p, q) // cell, np.maximum(p, q) // cell
+    nx, ny = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
+    count = nx * ny
+    seg = np.repeat(np.arange(len(a)), count)
+    k = np.arange(len(seg)) - np.repeat(np.cumsum(count) - count, count)
+    cx = lo[seg, 0] + k % nx[seg]
+    cy = lo[seg, 1] + k // nx[seg]
+    key = cy * (int(cx.max()) + 2) + cx
+    order = np.lexsort((seg, key))
+    key, seg = key[order], seg[order]
+    pairs = []
+    d = 1
+    while True:
+        same = key[d:] == key[:-d]
+        if not same.any():
+            break
+        pairs.append(np.stack([seg[:-d][same], seg[d:][same]], 1))
+        d += 1
+    if not pairs:
+        return polylines
+    pr = np.sort(np.concatenate(pairs), axis=1)
+    pk = np.unique(pr[:, 0] * len(a) + pr[:, 1])  # one test per pair of segments
+    i, j = pk // len(a), pk % len(a)
+    shared = (a[i] == a[j]) | (a[i] == b[j]) | (b[i] == a[j]) | (b[i] == b[j])
+
+    def orient(o, s, t):
+        return np.sign((s[:, 0] - o[:, 0]) * (t[:, 1] - o[:, 1]) - (s[:, 1] - o[:, 1]) * (t[:, 0] - o[:, 0]))
+
+    o1, o2 = orient(p[i], q[i], p[j]), orient(p[i], q[i], q[j])
+    o3, o4 = orient(p[j], q[j], p[i]), orient(p[j], q[j], q[i])
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0) & ~shared
+    # collinear overlap of two segments that share no vertex also needs a new vertex
+    collinear = (o1 == 0) & (o2 == 0) & ~shared
+    if collinear.any():
+        axis = np.where(np.abs(q[i, 0] - p[i, 0]) >= np.abs(q[i, 1] - p[i, 1]), 0, 1)
+        r = np.arange(len(i))
+        lo_i = np.minimum(p[i][r, axis], q[i][r, axis])
+        hi_i = np.maximum(p[i][r, axis], q[i][r, axis])
+        lo_j = np.minimum(p[j][r, axis], q[j][r, axis])
+        hi_j = np.maximum(p[j][r, axis], q[j][r, axis])
+        proper |= collinear & (np.minimum(hi_i, hi_j) > np.maximum(lo_i, lo_j))
+    dropped = np.zeros(len(a), bool)
+    dropped[j[proper]] = True
+    if not dropped.any():
+        return polylines
+    out = []
+    start = 0
+    for line, n in zip(polylines, lens):
+        cut = np.flatnonzero(dropped[start : start + n])
+        start += n
+        bounds = np.r_[0, cut + 1]
+        ends = np.r_[cut + 1, n + 1]
+        for s, e in zip(bounds, ends):
+            piece = line[s:e]
+            if len(piece) >= 2:
+                out.append(piece)
+    return out
