@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 
 import numpy as np
@@ -131,3 +132,18 @@ def test_import_is_light():
     code = "import sys, codec; print(sorted(m for m in ('cv2', 'moderngl', 'triangle', 'zstandard') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_images_over_the_limits_are_refused_before_work(monkeypatch):
+    from codec import limits
+
+    monkeypatch.setattr(limits, "MAX_IMAGE_PIXELS", 1000)
+    with pytest.raises(codec.LimitError, match="MAX_IMAGE_PIXELS"):
+        codec.encode(np.zeros((40, 30), np.uint8))
+    with pytest.raises(codec.LimitError, match="MAX_IMAGE_PIXELS"):
+        codec.StreamEncoder(io.BytesIO(), 100, 100)
+    monkeypatch.setattr(limits, "MAX_IMAGE_PIXELS", 1 << 28)
+    data = codec.encode(np.zeros((40, 30), np.uint8))
+    monkeypatch.setattr(limits, "MAX_IMAGE_PIXELS", 1000)
+    with pytest.raises(codec.LimitError, match="1,200 pixels"):
+        codec.decode(data)
