@@ -1,4 +1,5 @@
-"""`atm`: encode images to .atm, decode them back, and describe .atm files.
+"""`atm`: encode images to .atm and back (one file or many), describe .atm files,
+export their meshes and compare images.
 
 Errors print one line, `atm: error: ...`, and exit 1 for bad data, 2 for bad usage.
 Output files are written atomically: a failed run leaves no partial file and does not
@@ -8,115 +9,54 @@ touch an existing one.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import sys
 from pathlib import Path
-from typing import BinaryIO
-
-import numpy as np
 
 import codec
-from cli import rowio
+from cli import batch, convert, tools
+from cli.progress import Progress
 from codec.errors import ATMError
 
 EPILOG = "Use - for standard input or output. Run 'atm COMMAND --help' for a command's options."
 
 
-def _open_input(name: str) -> BinaryIO:
-    if name == "-":
-        return contextlib.nullcontext(sys.stdin.buffer)
-    try:
-        return open(name, "rb")
-    except OSError as exc:
-        raise ATMError(f"cannot read {name}: {exc.strerror}") from None
-
-
-def _open_output(name: str):
-    """Standard output as it is, or a file that only appears if the command succeeds."""
-    if name == "-":
-        return contextlib.nullcontext(sys.stdout.buffer)
-    from codec.files import atomic_open
-
-    return atomic_open(name)
-
-
-class _Counter:
-    """Counts the bytes written through it."""
-
-    def __init__(self, f: BinaryIO):
-        self._f = f
-        self.count = 0
-
-    def write(self, data: bytes) -> int:
-        self.count += len(data)
-        return self._f.write(data)
-
-
 def cmd_encode(args: argparse.Namespace) -> int:
-    src = rowio.open_rows(args.input)
-    options = {}
-    if args.mesher:
-        options["mesher"] = args.mesher
-    with _open_output(args.output) as f:
-        out = _Counter(f)
-        enc = codec.StreamEncoder(
-            out,
-            src.width,
-            src.height,
-            dtype=src.dtype,
-            channels=src.channels,
-            points=args.points,
-            band_height=args.band_height,
-            **options,
-        )
-        for block in src.blocks:
-            enc.write(block)
-        enc.close()
+    if batch.is_batch(args.inputs):
+        return batch.run(args, "encode")
+    (source,) = args.inputs
+    bar = Progress(1, quiet=args.quiet or args.verbose)
+    label = f"encoding {Path(source).name if source != '-' else 'standard input'}"
+
+    def show(rows: int, height: int) -> None:
+        bar.total = height
+        bar.update(rows, f"{label}: {rows:,}/{height:,} rows")
+
+    try:
+        enc, written = convert.encode_file(source, args.output, convert.encode_options(args), show if bar.enabled else None)
+    finally:
+        bar.clear()
     if args.verbose:
-        pixels = src.width * src.height
+        pixels = enc.width * enc.height
         print(
-            f"{args.input} -> {args.output}: {src.width}x{src.height}, {enc.bands} band(s), "
-            f"{enc.vertices:,} vertices, {enc.triangles:,} triangles, {out.count:,} bytes "
-            f"({8 * out.count / pixels:.3f} bits/pixel)",
+            f"{source} -> {args.output}: {enc.width}x{enc.height}, {enc.bands} band(s), "
+            f"{enc.vertices:,} vertices, {enc.triangles:,} triangles, {written:,} bytes "
+            f"({8 * written / pixels:.3f} bits/pixel)",
             file=sys.stderr,
         )
     return 0
 
 
-STREAMED = {"pgm", "ppm", "pnm", "npy"}
-
-
 def cmd_decode(args: argparse.Namespace) -> int:
-    from codec.files import encode_image
-
-    fmt = args.format or (Path(args.output).suffix.lstrip(".").lower() if args.output != "-" else "png")
-    with _open_input(args.input) as f:
-        dec = codec.StreamDecoder(f, backend=args.backend)
-        if fmt in STREAMED:
-            with _open_output(args.output) as out:
-                if fmt == "npy":
-                    np.lib.format.write_array_header_1_0(
-                        out, {"descr": np.lib.format.dtype_to_descr(np.dtype(dec.dtype)), "fortran_order": False, "shape": dec.shape}
-                    )
-                    for _, rows in dec:
-                        out.write(rows.tobytes())
-                else:
-                    out.write(rowio.pnm_header(dec.width, dec.height, dec.dtype, dec.channels))
-                    for _, rows in dec:
-                        out.write(rowio.pnm_rows(rows))
-            return 0
-        image = np.empty(dec.shape, dec.dtype)
-        for y0, rows in dec:
-            image[y0 : y0 + len(rows)] = rows
-    data = encode_image(image, "." + fmt)
-    with _open_output(args.output) as out:
-        out.write(data)
+    if batch.is_batch(args.inputs):
+        return batch.run(args, "decode")
+    (source,) = args.inputs
+    convert.decode_file(source, args.output, convert.output_format(args.output, args.format), args.backend)
     return 0
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    with _open_input(args.input) as f:
+    with convert.open_input(args.input) as f:
         data = f.read()
     i = codec.info(data)
     if args.json:
@@ -127,6 +67,19 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i['vertices']:,} vertices, {i['triangles']:,} triangles, {i['constraints']:,} walls")
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
     return 0
+
+
+BATCH_HELP = (
+    "Batch: with more than one IN, or one IN that is a directory or a glob pattern "
+    "(quote it: 'scans/*.png'), OUT is a directory (created if missing) and each input "
+    "NAME.ext becomes {out}; a directory contributes its {kind}. Files are converted in "
+    "parallel (--jobs); a file that fails is named and the others still convert (exit 1)."
+)
+
+
+def _add_batch_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-j", "--jobs", type=int, metavar="N", help="batch: worker processes (default: one per CPU)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and, in batch, no summary line")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -141,42 +94,81 @@ def build_parser() -> argparse.ArgumentParser:
 
     enc = sub.add_parser(
         "encode",
-        help="encode an image as .atm",
+        help="encode images as .atm (one file, or many into a directory)",
+        usage="atm encode [options] IN OUT\n       atm encode [options] DIR_OR_GLOB... OUTDIR",
         description=(
             "Encode an image (any format OpenCV reads, or .npy) as .atm. Binary PGM/PPM and "
             ".npy input (a file or standard input) is read and encoded band by band, in "
-            "memory bounded by the band; other formats (PNG, TIFF, ...) are read whole."
+            "memory bounded by the band; other formats (PNG, TIFF, ...) are read whole. "
+            "On a terminal a long encode shows its progress band by band."
         ),
-        epilog=EPILOG,
+        epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .jpg, .npy, ...)") + " " + EPILOG,
     )
-    enc.add_argument("input", help="image file, or - for standard input")
-    enc.add_argument("output", help=".atm file, or - for standard output")
+    enc.add_argument("inputs", nargs="+", metavar="IN", help="image file, - for standard input, or (batch) directories, glob patterns, files")
+    enc.add_argument("output", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")
     enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels)")
+    enc.add_argument("--quality", type=int, metavar="Q", help="1..100, like JPEG's (an RMS bound; 100 is lossless)")
+    enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
+    enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
     enc.add_argument(
         "--band-height",
         type=int,
         metavar="ROWS",
         help="rows per band (default: about a megapixel per band)",
     )
-    enc.add_argument("--mesher", help="mesher: uniform (default: the codec's default)")
+    enc.add_argument("--mesher", help="mesher: adaptive or uniform (default: the codec's default)")
     enc.add_argument("-v", "--verbose", action="store_true", help="print a summary line on stderr")
+    _add_batch_options(enc)
     enc.set_defaults(run=cmd_encode)
 
     dec = sub.add_parser(
         "decode",
-        help="decode an .atm file to an image",
+        help="decode .atm files to images (one file, or many into a directory)",
+        usage="atm decode [options] IN OUT\n       atm decode [options] DIR_OR_GLOB... OUTDIR",
         description=(
             "Decode an .atm file to PNG, PGM/PPM, TIFF or .npy (chosen by the output's "
             "extension or --format). PGM/PPM and .npy output is written band by band as the "
             "input arrives, in memory bounded by the band; PNG and TIFF are assembled in memory."
         ),
-        epilog=EPILOG,
+        epilog=BATCH_HELP.format(out="OUTDIR/NAME.png (or --format)", kind=".atm files") + " " + EPILOG,
     )
-    dec.add_argument("input", help=".atm file, or - for standard input")
-    dec.add_argument("output", help="image file, or - for standard output (PNG unless --format)")
+    dec.add_argument("inputs", nargs="+", metavar="IN", help=".atm file, - for standard input, or (batch) directories, glob patterns, files")
+    dec.add_argument("output", metavar="OUT", help="image file, - for standard output (PNG unless --format), or (batch) the output directory")
     dec.add_argument("--backend", default="cpu", help="decoder: cpu (default) or gl (OpenGL via EGL, same pixels)")
     dec.add_argument("--format", choices=["png", "pgm", "ppm", "pnm", "tif", "tiff", "npy"], help="output format")
+    _add_batch_options(dec)
     dec.set_defaults(run=cmd_decode)
+
+    msh = sub.add_parser(
+        "mesh",
+        help="export an .atm file's mesh as OBJ, PLY, SVG, or a PNG drawn over the image",
+        description=(
+            "Write the mesh of an .atm file: .obj or .ply (x = column, y = row, z = sample "
+            "value; walls as OBJ l-lines / PLY edges), .svg (the triangulation, walls in red), "
+            "or .png (the decoded image with the triangle edges in blue and walls in red)."
+        ),
+        epilog=EPILOG,
+    )
+    msh.add_argument("input", help=".atm file, or - for standard input")
+    msh.add_argument("output", help="OUT.obj, OUT.ply, OUT.svg or OUT.png, or - with --format")
+    msh.add_argument("--format", choices=list(tools.MESH_FORMATS), help="output format (default: the extension)")
+    msh.add_argument("--scale", type=int, metavar="K", help="PNG: enlarge the image K times (default: to about 1024 pixels)")
+    msh.set_defaults(run=tools.cmd_mesh)
+
+    cmp = sub.add_parser(
+        "compare",
+        help="RMS, PSNR and largest error between two images",
+        description=(
+            "Compare two images of the same size and sample type, in any format OpenCV reads, "
+            ".npy or .atm (decoded): RMS, PSNR (peak: 255, 65535, or the first image's range "
+            "for float data) and the largest absolute error, per channel for colour."
+        ),
+        epilog=EPILOG,
+    )
+    cmp.add_argument("a", metavar="A", help="the reference image")
+    cmp.add_argument("b", metavar="B", help="the image to measure against it")
+    cmp.add_argument("--json", action="store_true", help="print JSON (rms, psnr, max_error, ...)")
+    cmp.set_defaults(run=tools.cmd_compare)
 
     inf = sub.add_parser(
         "info",
@@ -199,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         print(f"atm: error: {exc}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(exc, batch.UsageError) else 1
     except BrokenPipeError:
         return 1
     except KeyboardInterrupt:

@@ -1,0 +1,185 @@
+"""Batch conversion: many images to .atm (or back) in one command, on a process pool.
+
+The rule (also in `atm encode --help`): the command works in batch when it is given more
+than one input, or one input that is a directory or a glob pattern (`*`, `?` or `[`, and
+no file of that exact name). The last argument is then an output directory, created if
+missing; each input X becomes OUTDIR/X-stem.atm (encode) or OUTDIR/X-stem.png (decode,
+or the --format). A file that fails is reported and the others still convert; the exit
+status is 1 if any failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+
+from cli import convert
+from cli.progress import Progress
+from codec.errors import ATMError
+
+#: What a directory's images are recognised by (encode); .atm for decode.
+IMAGE_SUFFIXES = {
+    ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp",
+    ".webp", ".jp2", ".npy",
+}  # fmt: skip
+GLOB_CHARS = set("*?[")
+
+
+class UsageError(ATMError):
+    """The batch arguments do not make sense together (exit status 2)."""
+
+
+def is_batch(inputs: list[str]) -> bool:
+    """Whether the inputs name many files: several, a directory, or a glob pattern."""
+    if len(inputs) != 1:
+        return True
+    name = inputs[0]
+    if name == "-":
+        return False
+    return os.path.isdir(name) or (bool(GLOB_CHARS & set(name)) and not os.path.exists(name))
+
+
+def expand(inputs: list[str], command: str) -> list[Path]:
+    """The input files, in order, each once: directories give their image files
+    (encode) or .atm files (decode), patterns the files they match."""
+    suffixes = IMAGE_SUFFIXES if command == "encode" else {".atm"}
+    found: list[Path] = []
+    for name in inputs:
+        if name == "-":
+            raise UsageError("standard input (-) cannot be one of several inputs")
+        if os.path.isdir(name):
+            # hidden files are skipped: they include atomic writes still in progress
+            found += sorted(
+                p for p in Path(name).iterdir()
+                if p.is_file() and p.suffix.lower() in suffixes and not p.name.startswith(".")
+            )
+        elif os.path.exists(name):
+            found.append(Path(name))
+        elif GLOB_CHARS & set(name):
+            found += sorted(Path(p) for p in glob.glob(name) if os.path.isfile(p))
+        else:
+            raise ATMError(f"cannot read {name}: No such file or directory")
+    unique = list(dict.fromkeys(found))
+    if not unique:
+        kinds = "images" if command == "encode" else ".atm files"
+        raise ATMError(f"no {kinds} in {' '.join(inputs)}")
+    return unique
+
+
+def plan(files: list[Path], outdir: Path, suffix: str) -> list[tuple[Path, Path]]:
+    """(input, output) pairs; two inputs that would write one output are refused before
+    anything is converted, since one would silently replace the other."""
+    pairs = [(f, outdir / (f.stem + suffix)) for f in files]
+    seen: dict[Path, Path] = {}
+    for src, dst in pairs:
+        if dst in seen:
+            raise ATMError(f"{seen[dst]} and {src} would both be written to {dst}; convert them separately")
+        seen[dst] = src
+    return pairs
+
+
+@dataclass
+class Result:
+    """How one file's conversion went."""
+
+    source: str
+    ok: bool
+    bytes_in: int = 0
+    bytes_out: int = 0
+    error: str = ""
+
+
+def convert_one(command: str, src: str, dst: str, options: dict) -> Result:
+    """Convert one file; every failure becomes a Result so that the batch goes on."""
+    try:
+        size = os.path.getsize(src)
+        if command == "encode":
+            written = convert.encode_file(src, dst, options["encode"])[1]
+        else:
+            written = convert.decode_file(src, dst, options["format"], options["backend"])
+        return Result(src, True, size, written)
+    except ATMError as exc:
+        return Result(src, False, error=str(exc))
+    except OSError as exc:
+        return Result(src, False, error=f"{exc.strerror or exc}")
+    except Exception as exc:  # a bug on one file must not stop the others converting
+        return Result(src, False, error=f"internal error ({type(exc).__name__}: {exc}); rerun it alone with --debug")
+
+
+def _quiet_worker() -> None:
+    # each worker is one of --jobs processes: OpenCV's own thread pool would oversubscribe
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def run(args: argparse.Namespace, command: str) -> int:
+    """Convert every input of a batch command; print failures, a summary, and return
+    the exit status."""
+    outdir = Path(args.output)
+    if outdir.exists() and not outdir.is_dir():
+        raise UsageError(f"{outdir} is a file; in batch mode the last argument is an output directory")
+    if command == "encode":
+        options = {"encode": convert.encode_options(args)}
+        suffix = ".atm"
+    else:
+        fmt = args.format or "png"
+        options = {"format": fmt, "backend": args.backend}
+        suffix = "." + fmt
+    pairs = plan(expand(args.inputs, command), outdir, suffix)
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ATMError(f"cannot create {outdir}: {exc.strerror}") from None
+    jobs = args.jobs or os.cpu_count() or 1
+    if jobs < 1:
+        raise UsageError(f"--jobs must be at least 1, not {jobs}")
+    bar = Progress(len(pairs), quiet=args.quiet)
+    start = time.monotonic()
+    results: list[Result] = []
+
+    def record(r: Result) -> None:
+        results.append(r)
+        if not r.ok:
+            # most codec messages already start with the file's name
+            where = "" if r.error.startswith(r.source) else f"{r.source}: "
+            bar.message(f"atm: error: {where}{r.error}")
+        bar.update(len(results), f"{len(results)}/{len(pairs)} {Path(r.source).name}")
+
+    bar.update(0, f"0/{len(pairs)}")
+    if jobs == 1 or len(pairs) == 1:
+        for src, dst in pairs:
+            record(convert_one(command, str(src), str(dst), options))
+    else:
+        with ProcessPoolExecutor(min(jobs, len(pairs)), initializer=_quiet_worker) as pool:
+            pending = {pool.submit(convert_one, command, str(s), str(d), options) for s, d in pairs}
+            try:
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        record(future.result())
+            except BaseException:
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+    bar.clear()
+    failed = [r for r in results if not r.ok]
+    ok = [r for r in results if r.ok]
+    if not args.quiet:
+        bytes_in, bytes_out = sum(r.bytes_in for r in ok), sum(r.bytes_out for r in ok)
+        verb = "encoded" if command == "encode" else "decoded"
+        print(
+            f"atm: {verb} {len(ok)} of {len(results)} file(s) into {outdir}, {len(failed)} failed; "
+            f"{bytes_in:,} bytes in, {bytes_out:,} bytes out, {time.monotonic() - start:.1f} s",
+            file=sys.stderr,
+        )
+    if failed:
+        names = ", ".join(r.source for r in failed)
+        print(f"atm: error: {len(failed)} of {len(results)} file(s) failed: {names}", file=sys.stderr)
+        return 1
+    return 0

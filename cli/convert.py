@@ -1,0 +1,115 @@
+"""Converting one file: an image to .atm or .atm to an image, through files or pipes.
+
+Shared by the single-file commands and the batch workers (cli/batch.py)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+
+import codec
+from cli import rowio
+from codec.errors import ATMError
+
+
+def open_input(name: str) -> BinaryIO:
+    if name == "-":
+        return contextlib.nullcontext(sys.stdin.buffer)
+    try:
+        return open(name, "rb")
+    except OSError as exc:
+        raise ATMError(f"cannot read {name}: {exc.strerror}") from None
+
+
+def open_output(name: str):
+    """Standard output as it is, or a file that only appears if the command succeeds."""
+    if name == "-":
+        return contextlib.nullcontext(sys.stdout.buffer)
+    from codec.files import atomic_open
+
+    return atomic_open(name)
+
+
+class _Counter:
+    """Counts the bytes written through it."""
+
+    def __init__(self, f: BinaryIO):
+        self._f = f
+        self.count = 0
+
+    def write(self, data: bytes) -> int:
+        self.count += len(data)
+        return self._f.write(data)
+
+
+def encode_options(args: argparse.Namespace) -> dict:
+    """The encoder options the command line sets (the ones left unset take the codec's
+    defaults)."""
+    names = ("points", "band_height", "mesher", "quality", "max_rms", "max_error")
+    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
+
+
+def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> tuple[codec.StreamEncoder, int]:
+    """Encode one image (a path or -) to one .atm output (a path or -), band by band.
+    Returns the finished encoder (its statistics) and the bytes written."""
+    src = rowio.open_rows(src_name)
+    with open_output(dst_name) as f:
+        out = _Counter(f)
+        enc = codec.StreamEncoder(
+            out,
+            src.width,
+            src.height,
+            dtype=src.dtype,
+            channels=src.channels,
+            progress=progress,
+            **options,
+        )
+        for block in src.blocks:
+            enc.write(block)
+        enc.close()
+    return enc, out.count
+
+
+STREAMED = {"pgm", "ppm", "pnm", "npy"}
+
+
+def output_format(output: str, fmt: str | None) -> str:
+    """The image format a decode writes: --format, else the output's extension, else PNG."""
+    if fmt:
+        return fmt
+    return Path(output).suffix.lstrip(".").lower() if output != "-" else "png"
+
+
+def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") -> int:
+    """Decode one .atm input (a path or -) to an image output (a path or -) in `fmt`;
+    PGM/PPM and .npy are written band by band. Returns the bytes written."""
+    from codec.files import encode_image
+
+    with open_input(src_name) as f:
+        dec = codec.StreamDecoder(f, backend=backend)
+        if fmt in STREAMED:
+            with open_output(dst_name) as raw:
+                out = _Counter(raw)
+                if fmt == "npy":
+                    np.lib.format.write_array_header_1_0(
+                        out, {"descr": np.lib.format.dtype_to_descr(np.dtype(dec.dtype)), "fortran_order": False, "shape": dec.shape}
+                    )
+                    for _, rows in dec:
+                        out.write(rows.tobytes())
+                else:
+                    out.write(rowio.pnm_header(dec.width, dec.height, dec.dtype, dec.channels))
+                    for _, rows in dec:
+                        out.write(rowio.pnm_rows(rows))
+            return out.count
+        image = np.empty(dec.shape, dec.dtype)
+        for y0, rows in dec:
+            image[y0 : y0 + len(rows)] = rows
+    data = encode_image(image, "." + fmt)
+    with open_output(dst_name) as out:
+        out.write(data)
+    return len(data)

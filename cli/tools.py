@@ -1,0 +1,132 @@
+"""`atm mesh` (the mesh as OBJ, PLY, SVG or an overlay PNG) and `atm compare`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+import codec
+from cli import convert
+from codec.errors import ATMError, UnsupportedError
+
+MESH_FORMATS = ("obj", "ply", "svg", "png")
+SIGNATURE = b"\x89ATM\r\n\x1a\n"
+
+
+def _read_bytes(name: str) -> bytes:
+    with convert.open_input(name) as f:
+        return f.read()
+
+
+def cmd_mesh(args: argparse.Namespace) -> int:
+    from codec import export
+    from codec.files import atomic_write, encode_image
+
+    fmt = args.format or Path(args.output).suffix.lstrip(".").lower()
+    if fmt not in MESH_FORMATS:
+        raise UnsupportedError(
+            f"cannot write the mesh as {'.' + fmt if fmt else 'a file without an extension'}; "
+            f"use .obj, .ply, .svg or .png (or --format)"
+        )
+    data = _read_bytes(args.input)
+    mesh = codec.decode_mesh(data)
+    if fmt == "obj":
+        out = export.to_obj(mesh)
+    elif fmt == "ply":
+        out = export.to_ply(mesh)
+    elif fmt == "svg":
+        out = export.to_svg(mesh).encode()
+    else:
+        scale = args.scale or export.auto_scale(mesh.width, mesh.height)
+        out = encode_image(export.overlay_png(mesh, codec.decode(data), scale=scale), ".png")
+    if args.output == "-":
+        with convert.open_output("-") as f:
+            f.write(out)
+    else:
+        atomic_write(args.output, out)
+    return 0
+
+
+def load_any(name: str) -> np.ndarray:
+    """An image from any file OpenCV reads, a .npy, or an .atm (decoded)."""
+    from codec.files import decode_image
+
+    data = _read_bytes(name)
+    if data.startswith(SIGNATURE):
+        return codec.decode(data)
+    return decode_image(data, name)
+
+
+def _describe(image: np.ndarray) -> str:
+    h, w = image.shape[:2]
+    kind = "gray" if image.ndim == 2 else f"{image.shape[2]}-channel"
+    return f"{w}x{h} {kind} {image.dtype}"
+
+
+def compare(a: np.ndarray, b: np.ndarray) -> dict:
+    """RMS, PSNR and largest absolute error of b against a, overall and per channel.
+
+    PSNR's peak is the sample type's largest value (255, 65535), or the range of a's
+    values for float data; pixels that are NaN (holes) in either image are left out.
+    """
+    if a.shape != b.shape:
+        raise ATMError(f"the images differ in shape: {_describe(a)} against {_describe(b)}")
+    if a.dtype != b.dtype and not (a.dtype.kind == b.dtype.kind == "f"):
+        raise ATMError(
+            f"the images differ in sample type: {a.dtype} against {b.dtype}; convert one first"
+        )
+    fa, fb = a.astype(np.float64), b.astype(np.float64)
+    if a.dtype.kind == "f":
+        finite = np.isfinite(fa)
+        peak = float(fa[finite].max() - fa[finite].min()) if finite.any() else 0.0
+    else:
+        peak = float(np.iinfo(a.dtype).max)
+    diff = fb - fa
+    valid = np.isfinite(diff)
+    if not valid.any():
+        raise ATMError("the images have no pixel where both hold a value")
+    flat = diff.reshape(a.shape[0] * a.shape[1], -1)
+    mask = valid.reshape(flat.shape)
+    per_channel = []
+    for c in range(flat.shape[1]):
+        d = flat[mask[:, c], c]
+        per_channel.append(_stats(d, peak))
+    result = _stats(diff[valid], peak)
+    result.update(
+        width=int(a.shape[1]),
+        height=int(a.shape[0]),
+        channels=1 if a.ndim == 2 else int(a.shape[2]),
+        dtype=str(a.dtype),
+        peak=peak,
+        pixels_compared=int(valid.all(axis=-1).sum() if a.ndim == 3 else valid.sum()),
+    )
+    if len(per_channel) > 1:
+        result["per_channel"] = per_channel
+    return result
+
+
+def _stats(d: np.ndarray, peak: float) -> dict:
+    rms = float(np.sqrt(np.mean(d**2))) if len(d) else 0.0
+    # identical images have no finite PSNR; JSON has no infinity, so it is null there
+    psnr = 20 * math.log10(peak / rms) if rms > 0 and peak > 0 else None
+    return {"rms": rms, "psnr": psnr, "max_error": float(np.abs(d).max()) if len(d) else 0.0}
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    r = compare(load_any(args.a), load_any(args.b))
+    if args.json:
+        print(json.dumps(r, indent=2))
+        return 0
+    psnr = "inf (identical)" if r["psnr"] is None else f"{r['psnr']:.2f} dB"
+    print(
+        f"{args.a} vs {args.b}: {r['width']}x{r['height']} {r['dtype']}: "
+        f"RMS {r['rms']:.4g}, PSNR {psnr}, max error {r['max_error']:.6g}"
+    )
+    for name, c in zip("RGB", r.get("per_channel", [])):
+        cpsnr = "inf" if c["psnr"] is None else f"{c['psnr']:.2f} dB"
+        print(f"  {name}: RMS {c['rms']:.4g}, PSNR {cpsnr}, max error {c['max_error']:.6g}")
+    return 0
