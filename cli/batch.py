@@ -2,8 +2,8 @@
 
 The rule (also in `atm encode --help`): the command works in batch when it is given more
 than one input, or one input that is a directory or a glob pattern (`*`, `?` or `[`, and
-no file of that exact name). The last argument is then an output directory, created if
-missing; each input X becomes OUTDIR/X-stem.atm (encode) or OUTDIR/X-stem.png (decode,
+no file of that exact name), or when the last argument is an existing directory. The
+last argument is then an output directory, created if missing; each input X becomes OUTDIR/X-stem.atm (encode) or OUTDIR/X-stem.png (decode,
 or the --format). A file that fails is reported and the others still convert; the exit
 status is 1 if any failed.
 """
@@ -35,14 +35,19 @@ class UsageError(ATMError):
     """The batch arguments do not make sense together (exit status 2)."""
 
 
-def is_batch(inputs: list[str]) -> bool:
-    """Whether the inputs name many files: several, a directory, or a glob pattern."""
+def is_batch(inputs: list[str], output: str) -> bool:
+    """Whether the command converts into a directory: several inputs, an input that is
+    a directory or a glob pattern, or an output that is an existing directory."""
     if len(inputs) != 1:
         return True
     name = inputs[0]
     if name == "-":
         return False
-    return os.path.isdir(name) or (bool(GLOB_CHARS & set(name)) and not os.path.exists(name))
+    return (
+        os.path.isdir(name)
+        or (bool(GLOB_CHARS & set(name)) and not os.path.exists(name))
+        or os.path.isdir(output)
+    )
 
 
 def expand(inputs: list[str], command: str) -> list[Path]:

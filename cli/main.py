@@ -22,7 +22,7 @@ EPILOG = "Use - for standard input or output. Run 'atm COMMAND --help' for a com
 
 
 def cmd_encode(args: argparse.Namespace) -> int:
-    if batch.is_batch(args.inputs):
+    if batch.is_batch(args.inputs, args.output):
         return batch.run(args, "encode")
     (source,) = args.inputs
     bar = Progress(1, quiet=args.quiet or args.verbose)
@@ -48,7 +48,7 @@ def cmd_encode(args: argparse.Namespace) -> int:
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
-    if batch.is_batch(args.inputs):
+    if batch.is_batch(args.inputs, args.output):
         return batch.run(args, "decode")
     (source,) = args.inputs
     convert.decode_file(source, args.output, convert.output_format(args.output, args.format), args.backend)
@@ -70,8 +70,8 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 BATCH_HELP = (
-    "Batch: with more than one IN, or one IN that is a directory or a glob pattern "
-    "(quote it: 'scans/*.png'), OUT is a directory (created if missing) and each input "
+    "Batch: with more than one IN, one IN that is a directory or a glob pattern "
+    "(quote it: 'scans/*.png'), or an OUT that is an existing directory, OUT is a directory (created if missing) and each input "
     "NAME.ext becomes {out}; a directory contributes its {kind}. Files are converted in "
     "parallel (--jobs); a file that fails is named and the others still convert (exit 1)."
 )
@@ -193,6 +193,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"atm: error: {exc}", file=sys.stderr)
         return 2 if isinstance(exc, batch.UsageError) else 1
     except BrokenPipeError:
+        return 1
+    except OSError as exc:
+        # the file system refused (a directory in the way, a full disk): one line too
+        if args.debug:
+            raise
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"atm: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("atm: interrupted", file=sys.stderr)
