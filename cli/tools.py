@@ -24,7 +24,7 @@ def _read_bytes(name: str) -> bytes:
 
 def cmd_mesh(args: argparse.Namespace) -> int:
     from codec import export
-    from codec.files import atomic_write, encode_image
+    from codec.files import atomic_write
 
     fmt = args.format or Path(args.output).suffix.lstrip(".").lower()
     if fmt not in MESH_FORMATS:
@@ -42,7 +42,7 @@ def cmd_mesh(args: argparse.Namespace) -> int:
         out = export.to_svg(mesh).encode()
     else:
         scale = args.scale or export.auto_scale(mesh.width, mesh.height)
-        out = encode_image(export.overlay_png(mesh, codec.decode(data), scale=scale), ".png")
+        out = export.png_bytes(export.overlay_png(mesh, codec.decode(data), scale=scale))
     if args.output == "-":
         with convert.open_output("-") as f:
             f.write(out)

@@ -1,9 +1,10 @@
 """Round trips for the three sample kinds .atm stores: uint8 gray, uint16 gray, uint8 RGB.
 
-Two properties pin the error down without depending on how a mesher places its points:
-- with a vertex on every pixel the mesh is the image, so the round trip is exact;
+Three properties pin the error down without depending on how a mesher places its points:
+- quality=100 is lossless, so the round trip is exact;
 - a plane is reproduced by any triangulation of samples on it, so at any vertex count
-  the only error left is rounding: at most 1 per sample, hence RMS <= 1 per channel.
+  the only error left is rounding: at most 1 per sample, hence RMS <= 1 per channel;
+- a max_rms bound holds on every channel of the decoded image.
 """
 
 from __future__ import annotations
@@ -62,8 +63,8 @@ def _errors(decoded: np.ndarray, image: np.ndarray) -> np.ndarray:
 
 @SETTINGS
 @given(images())
-def test_every_pixel_a_vertex_round_trips_exactly(image):
-    data = codec.encode(image, points=image.shape[0] * image.shape[1])
+def test_lossless_round_trips_exactly(image):
+    data = codec.encode(image, quality=100)
     decoded = codec.decode(data)
     assert decoded.shape == image.shape and decoded.dtype == image.dtype
     info = codec.info(data)
@@ -87,12 +88,23 @@ def test_planes_round_trip_within_rounding_at_any_vertex_count(case):
 @SETTINGS
 @given(images(), st.integers(1, 5))
 def test_kind_survives_banding_and_the_mesh_carries_per_vertex_samples(image, band_height):
-    # a band's vertex budget counts only its new rows, not the row it shares with the
-    # band above, so twice the pixel count puts a vertex on every pixel of every band
-    data = codec.encode(image, points=2 * image.shape[0] * image.shape[1], band_height=band_height)
+    data = codec.encode(image, quality=100, band_height=band_height)
     np.testing.assert_array_equal(codec.decode(data), image)
     m = codec.decode_mesh(data)
     assert m.dtype == image.dtype and m.channels == (1 if image.ndim == 2 else 3)
-    # one shared mesh: every vertex carries all channels, read at its own pixel
+    # one shared mesh: every vertex carries all channels, and (lossless) they are its
+    # own pixel's samples
     x, y = m.vertices[:, 0], m.vertices[:, 1]
     np.testing.assert_array_equal(m.values, image[y, x])
+
+
+@SETTINGS
+@given(images(), st.floats(0.5, 40.0))
+def test_max_rms_holds_per_channel(image, bound):
+    top = np.iinfo(image.dtype).max
+    bound = bound * top / 255  # the same bound relative to the sample range
+    decoded = codec.decode(codec.encode(image, max_rms=bound))
+    assert decoded.shape == image.shape and decoded.dtype == image.dtype
+    err = _errors(decoded, image).reshape(image.shape[0] * image.shape[1], -1)
+    rms_per_channel = np.sqrt(np.mean(err**2, axis=0))
+    assert (rms_per_channel <= bound * (1 + 1e-9)).all(), (rms_per_channel, bound)
