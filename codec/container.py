@@ -333,7 +333,7 @@ class Reader:
             raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {schema.Quantisation.sizeof()}")
         q = schema.Quantisation.parse(payload)
         top = abs(q.offset) + q.scale * 65535 if np.isfinite(q.offset) and np.isfinite(q.scale) else np.inf
-        if not (q.scale > 0 and top <= np.finfo(np.float32).max):
+        if not (q.scale > 0 and top <= float(np.finfo(np.float32).max)):
             raise CorruptError(
                 f"QUNT chunk has scale {q.scale!r} and offset {q.offset!r}: values must be finite "
                 "and within float32's range"
@@ -362,7 +362,7 @@ class Reader:
             info = np.iinfo(h.dtype)
             if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):
                 raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")
-        elif np.isinf(value) or (np.isfinite(value) and abs(value) > np.finfo(np.float32).max):
+        elif np.isinf(value) or (np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max)):
             raise CorruptError(f"NDAT value {value!r} is not a finite float32 or NaN")
         return Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, float(value), h.metadata)
 
