@@ -14,7 +14,7 @@ import numpy as np
 
 import codec
 from cli import rowio
-from codec.errors import ATMError
+from codec.errors import ATMError, UnsupportedError
 
 
 def open_input(name: str) -> BinaryIO:
@@ -76,6 +76,8 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
 
 
 STREAMED = {"pgm", "ppm", "pnm", "npy"}
+#: Output formats that keep float samples as they are.
+FLOAT_FORMATS = {"tif", "tiff", "npy"}
 
 
 def output_format(output: str, fmt: str | None) -> str:
@@ -92,6 +94,11 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
 
     with open_input(src_name) as f:
         dec = codec.StreamDecoder(f, backend=backend)
+        if np.dtype(dec.dtype).kind == "f" and fmt not in FLOAT_FORMATS:
+            # OpenCV would quietly cut float samples to 8 bits; PNM cannot hold them at all
+            raise UnsupportedError(
+                f"{src_name} holds float data, which .{fmt} cannot store; decode it to .tif or .npy"
+            )
         if fmt in STREAMED:
             with open_output(dst_name) as raw:
                 out = _Counter(raw)

@@ -139,3 +139,19 @@ def test_an_existing_directory_as_output_takes_a_single_file(folder, tmp_path):
     r = atm("encode", folder / "a.png", tmp_path / "dir", "-q")
     assert r.returncode == 0, r.stderr
     assert [p.name for p in (tmp_path / "dir").iterdir()] == ["a.atm"]
+
+
+@pytest.mark.parametrize("command", ["mesh", "compare"])
+def test_new_commands_have_help(command):
+    r = atm(command, "--help")
+    assert r.returncode == 0 and b"usage: atm " + command.encode() in r.stdout
+
+
+def test_float_data_decodes_only_to_formats_that_keep_it(tmp_path):
+    depth = np.linspace(0.5, 4.0, 12 * 10, dtype=np.float32).reshape(10, 12)
+    codec.write(tmp_path / "d.atm", depth, max_error=0.01)
+    r = atm("decode", tmp_path / "d.atm", tmp_path / "d.png")
+    assert r.returncode == 1 and b"decode it to .tif or .npy" in r.stderr
+    assert not (tmp_path / "d.png").exists()
+    assert atm("decode", tmp_path / "d.atm", tmp_path / "d.npy").returncode == 0
+    assert np.abs(np.load(tmp_path / "d.npy") - depth).max() <= 0.01 + 1e-6
