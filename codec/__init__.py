@@ -53,7 +53,9 @@ def encode(
     quality: 1..100, like JPEG's (an RMS bound; 100 is lossless); or
     max_rms / max_error: a bound on the decoded image's RMS / largest error, per
     channel, in sample units, guaranteed by refinement.
-    mesher: "uniform" (the grid baseline); further options go to the mesher.
+    mesher: "adaptive" (default: walls along discontinuities, curvature sampling,
+    least-squares values) or "uniform" (the grid baseline); further options go to
+    the mesher (see codec.adaptive.build).
     band_height: rows per band (default: about a megapixel per band); images are coded
     band by band so that StreamEncoder/StreamDecoder can work in bounded memory.
     """

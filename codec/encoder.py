@@ -16,8 +16,8 @@ from .image import as_image
 from .mesh import Mesh
 
 #: Mesher name -> module with a `build(image, points, **options) -> Mesh` function.
-MESHERS = {"uniform": "codec.uniform"}
-DEFAULT_MESHER = "uniform"
+MESHERS = {"adaptive": "codec.adaptive", "uniform": "codec.uniform"}
+DEFAULT_MESHER = "adaptive"
 #: Vertex density used when no size is asked for (the seed's Lenna setting, 2.8 %).
 DEFAULT_DENSITY = 0.028
 

@@ -1,0 +1,77 @@
+"""Stage 1: edge detection with OpenCV's Canny, thresholds chosen from the image.
+
+Thresholds are in gray levels of an 8-bit scale (uint16 images are scaled down by
+257): the height a sharp step must have for its pixel to count as an edge. The
+gradient is a Sobel derivative of the lightly smoothed image, divided by 4 so that a
+sharp step of height h gives a gradient of about h.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import OptionError
+
+#: Gaussian smoothing before differentiation; keeps texture and noise from breaking
+#: edges into fragments without moving sharp steps by more than a pixel.
+SIGMA = 1.0
+#: Lowest automatic high threshold: steps fainter than this are not worth a wall.
+MIN_HIGH = 12.0
+#: Fixed-point scale of the int16 derivatives handed to cv2.Canny.
+_SCALE = 16.0
+
+
+def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """dx, dy and magnitude (float32, 8-bit gray levels per step) of a float image
+    whose full scale is `peak`."""
+    import cv2
+
+    g = gray.astype(np.float32) * np.float32(255.0 / peak)
+    g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
+    dx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) / 4
+    dy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) / 4
+    return dx, dy, cv2.magnitude(dx, dy)
+
+
+def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
+    """(low, high): high by Otsu's method on the gradient magnitudes (the split between
+    flat-or-textured pixels and edge pixels), at least MIN_HIGH; low = high / 2."""
+    import cv2
+
+    top = float(magnitude.max())
+    if top <= 0:
+        return MIN_HIGH / 2, MIN_HIGH
+    levels = np.clip(magnitude * (255.0 / top), 0, 255).astype(np.uint8)
+    otsu, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    high = max(MIN_HIGH, float(otsu) * top / 255.0)
+    return high / 2, high
+
+
+def check_thresholds(canny) -> tuple[float, float] | None:
+    """Validate a user's `canny=(low, high)` option (None: automatic)."""
+    if canny is None:
+        return None
+    try:
+        low, high = (float(c) for c in canny)
+    except (TypeError, ValueError):
+        raise OptionError(f"canny must be a pair (low, high) of gray levels, not {canny!r}") from None
+    if not (0 < low <= high) or not np.isfinite(high):
+        raise OptionError(f"canny thresholds need 0 < low <= high, got ({low}, {high})")
+    return low, high
+
+
+def detect(gray: np.ndarray, peak: float, canny: tuple[float, float] | None = None):
+    """Canny edges of a float image of full scale `peak`.
+
+    Returns (edges: H x W bool, magnitude: H x W float32, (low, high) used).
+    """
+    import cv2
+
+    dx, dy, mag = gradient(gray, peak)
+    low, high = canny if canny is not None else auto_thresholds(mag)
+    limit = 32767 / _SCALE
+    ix = np.round(np.clip(dx, -limit, limit) * _SCALE).astype(np.int16)
+    iy = np.round(np.clip(dy, -limit, limit) * _SCALE).astype(np.int16)
+    # cv2.Canny on derivatives compares |(dx, dy)| (L2) against the thresholds
+    edges = cv2.Canny(ix, iy, low * _SCALE, high * _SCALE, L2gradient=True) > 0
+    return edges, mag, (low, high)

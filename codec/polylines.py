@@ -1,0 +1,280 @@
+"""Stage 2: edge polylines by the seed's rule (§3.3.2.1, "Edge Adaptive Sampling").
+
+The edge map is thinned to one pixel, cut at bifurcations (pixels with three or more
+8-neighbours) into simple chains, and each chain is ordered from its start point: its
+first end in scan-line order (for a closed chain, its first pixel, the chain then
+returning to it). Along a chain the seed's rule picks the control points: from the
+starting point A a reference point C `segment_length` pixels ahead; while every pixel
+between A and C is within `segment_error` of segment AC, C advances by
+`segment_length`; otherwise the first offending pixel becomes the next starting point.
+A chain ends at its extreme or at the bifurcation pixel, which closes the polyline.
+Chains are taken in the scan-line order of their start points and share no pixels but
+bifurcations, so the result depends on the image alone.
+
+Everything is vectorised: chain ordering by pointer doubling over the chains'
+directed steps, and the segment rule runs in lockstep over all chains at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import OptionError
+
+# 8-neighbour offsets (dy, dx) in a fixed order; bit k of a pixel's code is neighbour k
+_OFFSETS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1)])
+
+
+def _simple_table() -> np.ndarray:
+    """For each 8-neighbourhood code: True when the centre pixel is redundant (it has at
+    least two neighbours and they stay 8-connected without it), i.e. a staircase
+    corner whose removal leaves a thinner curve with the same connectivity."""
+    table = np.zeros(256, dtype=bool)
+    for code in range(256):
+        on = [k for k in range(8) if code >> k & 1]
+        if len(on) < 2:
+            continue
+        seen, todo = {on[0]}, [on[0]]
+        while todo:
+            a = todo.pop()
+            for b in on:
+                if b not in seen and np.abs(_OFFSETS[a] - _OFFSETS[b]).max() <= 1:
+                    seen.add(b)
+                    todo.append(b)
+        table[code] = len(seen) == len(on)
+    return table
+
+
+_REDUNDANT = _simple_table()
+
+
+class _Grid:
+    """The image padded by one pixel and flattened, so that the 8 neighbours of a pixel
+    are fixed index offsets with no bounds checks."""
+
+    def __init__(self, mask: np.ndarray):
+        h, w = mask.shape
+        self.h, self.w, self.stride = h, w, w + 2
+        self.on = np.pad(mask, 1).ravel()
+        self.offsets = _OFFSETS[:, 0] * self.stride + _OFFSETS[:, 1]
+
+    def pixels(self) -> np.ndarray:
+        return np.flatnonzero(self.on)
+
+    def neighbours(self, p: np.ndarray) -> np.ndarray:
+        """n x 8 bool: which neighbours of the padded pixels p are on."""
+        return self.on[p[:, None] + self.offsets[None, :]]
+
+    def unpad(self, p: np.ndarray) -> np.ndarray:
+        """Row-major index in the unpadded image."""
+        return (p // self.stride - 1) * self.w + (p % self.stride - 1)
+
+
+_BITS = 1 << np.arange(8)
+
+
+def thin(grid: _Grid) -> None:
+    """Remove redundant staircase pixels in place (two passes over the two checkerboard
+    colours, so that no two removed pixels are 4-neighbours and connectivity is kept)."""
+    for parity in (0, 1):
+        p = grid.pixels()
+        p = p[(p // grid.stride + p % grid.stride) % 2 == parity]
+        code = grid.neighbours(p) @ _BITS
+        grid.on[p[_REDUNDANT[code]]] = False
+
+
+@dataclass(eq=False)
+class Polylines:
+    """Control points of all polylines: points[i] = (x, y); polyline k is
+    points[starts[k]:starts[k+1]]. chain_pixels[k] / strength[k]: the edge pixels each
+    polyline approximates and their summed squared gradient (its worth as a wall)."""
+
+    points: np.ndarray
+    starts: np.ndarray
+    pixels: np.ndarray  # P x 2 (x, y) of all chain pixels
+    pixel_line: np.ndarray  # P: polyline of each chain pixel
+    strength: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.starts) - 1
+
+    def line(self, k: int) -> np.ndarray:
+        return self.points[self.starts[k] : self.starts[k + 1]]
+
+    def select(self, keep: np.ndarray) -> "Polylines":
+        """The polylines with keep[k] True, in their order."""
+        keep = np.asarray(keep, dtype=bool)
+        sizes = np.diff(self.starts)
+        pt_keep = np.repeat(keep, sizes)
+        renum = np.cumsum(keep) - 1
+        px_keep = keep[self.pixel_line]
+        return Polylines(
+            self.points[pt_keep],
+            np.concatenate([[0], np.cumsum(sizes[keep])]),
+            self.pixels[px_keep],
+            renum[self.pixel_line[px_keep]],
+            self.strength[keep],
+        )
+
+
+def _order_chains(simple: np.ndarray, shape: tuple[int, int], offsets: np.ndarray):
+    """Order the pixels of the simple chains (max degree 2) of a padded flat mask.
+
+    Returns (flat, chain, closed): padded pixel indices in chain order, the chain of
+    each, and for each chain whether it is a closed loop.
+    """
+    import cv2
+
+    flat = np.flatnonzero(simple)
+    n = len(flat)
+    if n == 0:
+        return flat, flat, np.zeros(0, bool)
+    index = np.full(len(simple), -1, dtype=np.int64)
+    index[flat] = np.arange(n)
+    nbr = index[flat[:, None] + offsets[None, :]]
+    deg = (nbr >= 0).sum(axis=1)
+    nb = np.take_along_axis(nbr, np.argsort(nbr < 0, axis=1, kind="stable")[:, :2], axis=1)
+    _, labels = cv2.connectedComponents(simple.reshape(shape).astype(np.uint8), connectivity=8)
+    comp = labels.ravel()[flat] - 1  # label 0 is the background
+    ncomp = comp.max() + 1
+    big = np.int64(n + 1)
+    # start: the first end (degree <= 1) in scan-line order, else the first pixel
+    first_end = np.full(ncomp, big)
+    np.minimum.at(first_end, comp, np.where(deg <= 1, np.arange(n), big))
+    first_any = np.full(ncomp, big)
+    np.minimum.at(first_any, comp, np.arange(n))
+    closed_c = first_end == big
+    start = np.where(closed_c, first_any, first_end)
+    # open each loop between its start and the start's later neighbour
+    s = start[closed_c]
+    cut = np.maximum(nb[s, 0], nb[s, 1])
+    for a, b in ((s, cut), (cut, s)):
+        nb[a, np.argmax(nb[a] == b[:, None], axis=1)] = -1
+    # directed steps (p -> q): state 2p + slot; the next step leaves q by its other slot
+    state_q = nb.ravel()
+    valid = state_q >= 0
+    p_of = np.repeat(np.arange(n), 2)
+    qs = np.where(valid, state_q, 0)
+    back_slot = np.argmax(nb[qs] == p_of[:, None], axis=1)
+    other = nb[qs, 1 - back_slot]
+    ident = np.arange(2 * n)
+    nxt = np.where(valid & (other >= 0), 2 * qs + (1 - back_slot), ident)
+    dist = (nxt != ident).astype(np.int64)
+    # pointer doubling: the distance to, and the last step of, every walk
+    while True:
+        nxt_new = nxt[nxt]
+        if np.array_equal(nxt_new, nxt):
+            break
+        dist = dist + dist[nxt]
+        nxt = nxt_new
+    end_pixel = np.where(valid[nxt], state_q[nxt], p_of)
+    # a pixel's rank is the length of its walk back to the chain's start
+    towards_start = valid & (end_pixel == start[comp[p_of]])
+    rank = np.zeros(n, dtype=np.int64)
+    rank[p_of[towards_start]] = dist[towards_start] + 1
+    # chains in the scan-line order of their start points
+    comp_order = np.argsort(start, kind="stable")
+    comp_rank = np.empty_like(comp_order)
+    comp_rank[comp_order] = np.arange(ncomp)
+    order = np.lexsort((rank, comp_rank[comp]))
+    return flat[order], comp_rank[comp][order], closed_c[comp_order]
+
+
+def _attach(flat_order, chain, closed, junction: np.ndarray, offsets: np.ndarray):
+    """Close loops and end chains at an adjacent bifurcation pixel, as the seed does."""
+    nchains = int(chain.max()) + 1 if len(chain) else 0
+    first = np.searchsorted(chain, np.arange(nchains), side="left")
+    last = np.searchsorted(chain, np.arange(nchains), side="right") - 1
+
+    def adjacent_junction(p):
+        q = p[:, None] + offsets[None, :]
+        hit = junction[q]
+        return np.where(hit.any(axis=1), q[np.arange(len(p)), np.argmax(hit, axis=1)], -1)
+
+    head = np.where(closed, -1, adjacent_junction(flat_order[first]))
+    tail = np.where(closed, flat_order[first], adjacent_junction(flat_order[last]))
+    hk, tk = head >= 0, tail >= 0
+    pix = np.concatenate([flat_order, head[hk], tail[tk]])
+    ch = np.concatenate([chain, np.flatnonzero(hk), np.flatnonzero(tk)])
+    key = np.concatenate([np.arange(len(flat_order)) * 3, first[hk] * 3 - 1, last[tk] * 3 + 1])
+    order = np.argsort(key, kind="stable")
+    return pix[order], ch[order]
+
+
+def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int, d: float):
+    """The seed's segment rule on all chains at once: indices into xy of the control
+    points, in chain order."""
+    a = first.copy()
+    c = np.minimum(a + k, last)
+    emitted = [first]
+    active = np.flatnonzero(last > first)
+    a, c, end = a[active], c[active], last[active]
+    d2 = d * d
+    while len(active):
+        counts = np.maximum(c - a - 1, 0)
+        local = np.repeat(np.arange(len(active)), counts)
+        idx = np.repeat(a + 1, counts) + (
+            np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+        )
+        pa, pc, pp = xy[a[local]], xy[c[local]], xy[idx]
+        seg = pc - pa
+        rel = pp - pa
+        length2 = (seg * seg).sum(axis=1)
+        t = np.clip((rel * seg).sum(axis=1) / np.maximum(length2, 1e-12), 0.0, 1.0)
+        off = rel - t[:, None] * seg
+        bad = (off * off).sum(axis=1) > d2
+        offender = np.full(len(active), -1, dtype=np.int64)
+        bad_local = local[bad]
+        first_bad = np.ones(len(bad_local), dtype=bool)
+        first_bad[1:] = bad_local[1:] != bad_local[:-1]
+        offender[bad_local[first_bad]] = idx[bad][first_bad]
+        restart = offender >= 0
+        done = ~restart & (c == end)
+        emitted.append(offender[restart])
+        emitted.append(end[done])
+        a = np.where(restart, offender, a)
+        c = np.where(restart, np.minimum(offender + k, end), np.minimum(c + k, end))
+        keep = ~done
+        active, a, c, end = active[keep], a[keep], c[keep], end[keep]
+    return np.sort(np.concatenate(emitted))
+
+
+def trace(
+    edges: np.ndarray,
+    magnitude: np.ndarray,
+    *,
+    segment_length: int = 4,
+    segment_error: float = 1.0,
+    min_pixels: int = 3,
+) -> Polylines:
+    """Polylines approximating the edges of a boolean edge map (see the module doc)."""
+    if isinstance(segment_length, bool) or not isinstance(segment_length, (int, np.integer)) or segment_length < 1:
+        raise OptionError(f"segment_length must be a whole number >= 1, not {segment_length!r}")
+    if not isinstance(segment_error, (int, float, np.number)) or not segment_error >= 0:
+        raise OptionError(f"segment_error must be a number >= 0, not {segment_error!r}")
+    h, w = edges.shape
+    grid = _Grid(edges.astype(bool))
+    thin(grid)
+    p = grid.pixels()
+    degree = grid.neighbours(p).sum(axis=1)
+    junction = np.zeros_like(grid.on)
+    junction[p[degree >= 3]] = True
+    simple = grid.on & ~junction
+    flat_order, chain, closed = _order_chains(simple, (h + 2, w + 2), grid.offsets)
+    pix, ch = _attach(flat_order, chain, closed, junction, grid.offsets)
+    if len(pix):
+        sizes = np.bincount(ch)
+        long_enough = sizes >= max(2, min_pixels)
+        keep = long_enough[ch]
+        pix, ch = pix[keep], (np.cumsum(long_enough) - 1)[ch[keep]]
+    xy = np.stack([pix % grid.stride - 1, pix // grid.stride - 1], axis=1).astype(np.int64)
+    nchains = int(ch.max()) + 1 if len(ch) else 0
+    first = np.searchsorted(ch, np.arange(nchains), side="left")
+    last = np.searchsorted(ch, np.arange(nchains), side="right") - 1
+    ctrl = _control_points(xy.astype(np.float64), first, last, int(segment_length), float(segment_error))
+    line_of = ch[ctrl]
+    starts = np.concatenate([[0], np.cumsum(np.bincount(line_of, minlength=nchains))])
+    strength = np.bincount(ch, weights=magnitude.ravel()[grid.unpad(pix)].astype(np.float64) ** 2, minlength=nchains)
+    return Polylines(xy[ctrl], starts, xy, ch, strength)

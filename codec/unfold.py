@@ -1,0 +1,126 @@
+"""Stage 3: unfold each edge polyline into two parallel polylines, the walls' feet.
+
+For every control point P an exploration line crosses the edge: it bisects the two
+segments meeting at P (at the polyline's ends it is perpendicular to the end segment).
+The pixels along it are read outwards on both sides of P; the first one whose value
+differs significantly from P's is P's opposite point O (significant: at least half of
+the largest difference found within `reach` pixels on that side, and at least
+`min_step`). When no side changes significantly, O is P's neighbour on the side that
+changes most, so that every control point still gets a partner.
+
+The pairs (P, O) are then swapped so that each of the two new polylines keeps to one
+side of the edge: the *left* polyline collects, at every control point, whichever of
+P and O lies to the left of the polyline's direction, the *right* one the other. As
+triangulate() refuses crossing constraints, walls that would cross each other or any
+other wall are cut back: of two conflicting segments the one from the weaker
+polyline (or the later one) is dropped, its vertices kept as plain samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .polylines import Polylines
+from .triangulate import uncrossed
+
+
+@dataclass(eq=False)
+class Walls:
+    """Wall feet (N x 2 int64 (x, y)) and the wall polylines through them (arrays of
+    indices into points), none crossing another."""
+
+    points: np.ndarray
+    lines: list[np.ndarray]
+
+
+def _directions(lines: Polylines) -> tuple[np.ndarray, np.ndarray]:
+    """Unit tangent at every control point (the bisecting direction of the two segments
+    meeting there; the end segment's direction at the ends) and its left normal."""
+    p = lines.points.astype(np.float64)
+    n = len(p)
+    line_of = np.repeat(np.arange(len(lines)), np.diff(lines.starts))
+    seg = np.zeros((n + 1, 2))
+    d = p[1:] - p[:-1]
+    same = line_of[1:] == line_of[:-1]
+    length = np.hypot(d[:, 0], d[:, 1])
+    unit = np.where((same & (length > 0))[:, None], d / np.maximum(length, 1e-12)[:, None], 0.0)
+    seg[1:n] = unit  # seg[i]: unit vector of the segment ending at point i
+    t = seg[:n] + seg[1 : n + 1]
+    norm = np.hypot(t[:, 0], t[:, 1])
+    # a hairpin (opposite segments) has no bisector: fall back to the incoming segment
+    t = np.where((norm > 1e-6)[:, None], t / np.maximum(norm, 1e-12)[:, None], seg[:n] + seg[1:] * 0)
+    zero = np.hypot(t[:, 0], t[:, 1]) < 1e-6
+    t[zero] = seg[1 : n + 1][zero]
+    left = np.stack([t[:, 1], -t[:, 0]], axis=1)  # left of the direction of travel, y down
+    return t, left
+
+
+def opposite_points(
+    lines: Polylines, gray: np.ndarray, *, reach: int = 3, min_step: float = 4.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right): the two wall feet at each control point, N x 2 int64 each."""
+    h, w = gray.shape
+    p = lines.points.astype(np.int64)
+    tangent, normal = _directions(lines)
+    steps = np.arange(1, reach + 1, dtype=np.float64)
+    sides = []
+    for sign in (1.0, -1.0):
+        q = np.rint(p[:, None, :] + sign * steps[None, :, None] * normal[:, None, :]).astype(np.int64)
+        q[..., 0] = np.clip(q[..., 0], 0, w - 1)
+        q[..., 1] = np.clip(q[..., 1], 0, h - 1)
+        change = np.abs(gray[q[..., 1], q[..., 0]] - gray[p[:, 1], p[:, 0]][:, None])
+        # a step that lands back on P (clipped at the border) is no partner
+        change[(q == p[:, None, :]).all(axis=2)] = -1.0
+        biggest = change.max(axis=1)
+        limit = np.maximum(0.5 * biggest, min_step)
+        hit = change >= limit[:, None]
+        first = np.where(hit.any(axis=1), np.argmax(hit, axis=1), reach)
+        sides.append((q, change, first))
+    (qa, ca, fa), (qb, cb, fb) = sides
+    rows = np.arange(len(p))
+    # the side whose change comes first wins; a tie goes to the larger change
+    take_a = (fa < fb) | ((fa == fb) & (ca[rows, np.minimum(fa, reach - 1)] >= cb[rows, np.minimum(fb, reach - 1)]))
+    # no significant change on either side: the neighbour on the side that changes more
+    none = (fa == reach) & (fb == reach)
+    take_a = np.where(none, ca[:, 0] >= cb[:, 0], take_a)
+    ia = np.where(none, 0, np.minimum(fa, reach - 1))
+    ib = np.where(none, 0, np.minimum(fb, reach - 1))
+    opp = np.where(take_a[:, None], qa[rows, ia], qb[rows, ib])
+    stuck = (opp == p).all(axis=1)  # both sides clipped away (a 1-pixel-wide image)
+    opp[stuck] = p[stuck]
+    # the seed's swap: each polyline keeps the points on its own side of the edge
+    rel = opp - p
+    on_left = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1] > 0
+    left = np.where(on_left[:, None], opp, p)
+    right = np.where(on_left[:, None], p, opp)
+    return left, right
+
+
+def unfold(lines: Polylines, gray: np.ndarray, *, min_step: float = 4.0) -> Walls:
+    """The parallel polylines of every edge polyline, with crossing walls cut back.
+
+    Polylines earlier in `lines` win conflicts: order them by importance first.
+    """
+    if len(lines.points) == 0:
+        return Walls(np.zeros((0, 2), np.int64), [])
+    left, right = opposite_points(lines, gray, min_step=min_step)
+    n = len(left)
+    points = np.concatenate([left, right])
+    # one vertex per pixel: merge the feet that landed on the same pixel, first come
+    # first numbered
+    key = points[:, 1] * gray.shape[1] + points[:, 0]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    ids = rank[inverse.ravel()]
+    merged = points[first[order]]
+    walls = []
+    for lo, hi in zip(lines.starts[:-1], lines.starts[1:]):
+        for foot in (ids[lo:hi], ids[n + lo : n + hi]):
+            foot = foot[np.r_[True, foot[1:] != foot[:-1]]]
+            if len(foot) >= 2:
+                walls.append(foot)
+    return Walls(merged, uncrossed(merged, walls))

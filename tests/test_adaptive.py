@@ -1,0 +1,232 @@
+"""The adaptive (discontinuity-preserving) mesher: walls, coverage, determinism, size."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import codec
+from codec import adaptive
+from codec.decoder_cpu import render
+from codec.errors import OptionError
+from codec.mesh import doubled_areas, validate
+from codec.synthetic import planar_steps, range_scene
+
+
+def segments_of(m) -> np.ndarray:
+    if not m.constraints:
+        return np.zeros((0, 2), np.int64)
+    return np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in m.constraints])
+
+
+def check_tiling(m) -> None:
+    """Triangles tile the image exactly once: positive areas summing to (W-1)(H-1)
+    doubled, every directed edge used once, and an edge without its twin lies on the
+    image border."""
+    validate(m)
+    areas = doubled_areas(m.vertices, m.triangles)
+    assert areas.min() > 0
+    assert int(areas.sum()) == 2 * (m.width - 1) * (m.height - 1)
+    t = m.triangles
+    directed = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    keys = directed[:, 0] * len(m.vertices) + directed[:, 1]
+    assert len(np.unique(keys)) == len(keys), "two triangles overlap along an edge"
+    twin = directed[:, 1] * len(m.vertices) + directed[:, 0]
+    lonely = directed[~np.isin(twin, keys)]
+    a, b = m.vertices[lonely[:, 0]], m.vertices[lonely[:, 1]]
+    on_border = ((a[:, 0] == b[:, 0]) & np.isin(a[:, 0], [0, m.width - 1])) | (
+        (a[:, 1] == b[:, 1]) & np.isin(a[:, 1], [0, m.height - 1])
+    )
+    assert on_border.all(), "an edge inside the image has a triangle on one side only"
+
+
+def check_walls_are_edges(m) -> None:
+    edges = {tuple(sorted(e)) for t in m.triangles.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    for a, b in segments_of(m).tolist():
+        assert tuple(sorted((a, b))) in edges
+
+
+def check_no_crossings(m) -> None:
+    """No two constraint segments meet anywhere but at a shared end point."""
+    s = segments_of(m)
+    if len(s) < 2:
+        return
+    i, j = np.triu_indices(len(s), 1)
+    p, q, r, u = (m.vertices[x].astype(np.int64) for x in (s[i, 0], s[i, 1], s[j, 0], s[j, 1]))
+
+    def orient(a, b, c):
+        return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+    def between(a, b, c):  # c on the closed box of a-b
+        return (np.minimum(a, b) <= c).all(1) & (c <= np.maximum(a, b)).all(1)
+
+    o1, o2, o3, o4 = orient(p, q, r), orient(p, q, u), orient(r, u, p), orient(r, u, q)
+    shared = (s[i, 0] == s[j, 0]) | (s[i, 0] == s[j, 1]) | (s[i, 1] == s[j, 0]) | (s[i, 1] == s[j, 1])
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
+    # an end point inside the other segment (touching or collinear overlap)
+    touch = (
+        ((o1 == 0) & between(p, q, r) & (s[j, 0] != s[i, 0]) & (s[j, 0] != s[i, 1]))
+        | ((o2 == 0) & between(p, q, u) & (s[j, 1] != s[i, 0]) & (s[j, 1] != s[i, 1]))
+        | ((o3 == 0) & between(r, u, p) & (s[i, 0] != s[j, 0]) & (s[i, 0] != s[j, 1]))
+        | ((o4 == 0) & between(r, u, q) & (s[i, 1] != s[j, 0]) & (s[i, 1] != s[j, 1]))
+    )
+    # two segments from one end point, running along each other
+    c = np.where((s[i, 0] == s[j, 0]) | (s[i, 0] == s[j, 1]), s[i, 0], s[i, 1])
+    a = np.where(s[i, 0] == c, s[i, 1], s[i, 0])
+    b = np.where(s[j, 0] == c, s[j, 1], s[j, 0])
+    va, vb, vc = (m.vertices[x].astype(np.int64) for x in (a, b, c))
+    same = a == b
+    along = shared & (o1 == 0) & (o2 == 0) & (np.einsum("ij,ij->i", va - vc, vb - vc) > 0) & ~same
+    bad = proper | (touch & ~shared) | along
+    assert not bad.any(), f"{bad.sum()} pairs of walls cross: {s[i[bad]].tolist()} {s[j[bad]].tolist()}"
+
+
+def step_zone(image: np.ndarray, jump: int = 4) -> np.ndarray:
+    """Pixels within one pixel of a step (neighbours differing by more than `jump`)."""
+    import cv2
+
+    im = image.astype(np.int64)
+    step = np.zeros(image.shape, bool)
+    dx = np.abs(np.diff(im, axis=1)) > jump
+    dy = np.abs(np.diff(im, axis=0)) > jump
+    step[:, 1:] |= dx
+    step[:, :-1] |= dx
+    step[1:] |= dy
+    step[:-1] |= dy
+    return cv2.dilate(step.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_planar_steps_are_walls_and_exact_away_from_them(seed):
+    """With the pixel values at the vertices (the seed's values) the walls make the
+    mesh exact away from the steps. Least squares trades that exactness for a lower
+    RMS overall: pixels on the steps pull the wall vertices' values a little, so it is
+    held to the bulk of the pixels only."""
+    img = planar_steps(160, 120, seed=seed)
+    far = ~step_zone(img)
+    m = codec.mesh(img, points=600, values="sample")
+    check_tiling(m)
+    assert m.constraints, "no walls on a piecewise-planar image"
+    check_walls_are_edges(m)
+    check_no_crossings(m)
+    err = np.abs(render(m).astype(np.int64) - img)[far]
+    assert err.max() <= 1, f"{(err > 1).sum()} pixels away from steps are off by up to {err.max()}"
+    fitted = codec.mesh(img, points=600)
+    assert np.array_equal(fitted.vertices, m.vertices)
+    out = render(fitted).astype(np.int64)
+    assert np.mean(np.abs(out - img)[far] <= 1) >= 0.98
+    assert np.mean((out - img) ** 2.0) < np.mean((render(m).astype(np.int64) - img) ** 2.0)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_range_scene_tiles_and_walls(dtype):
+    img = range_scene(200, 150, seed=3, dtype=dtype)
+    m = codec.mesh(img, points=900)
+    check_tiling(m)
+    check_walls_are_edges(m)
+    check_no_crossings(m)
+    assert m.dtype == dtype
+
+
+def test_same_image_same_mesh():
+    img = range_scene(160, 128, seed=5)
+    a, b = codec.mesh(img, points=700), codec.mesh(img.copy(), points=700)
+    assert np.array_equal(a.vertices, b.vertices)
+    assert np.array_equal(a.triangles, b.triangles)
+    assert np.array_equal(a.values, b.values)
+    assert len(a.constraints) == len(b.constraints)
+    assert all(np.array_equal(p, q) for p, q in zip(a.constraints, b.constraints))
+    assert codec.encode(img, points=700) == codec.encode(img.copy(), points=700)
+
+
+@pytest.mark.parametrize("n", [300, 1500, 5000])
+def test_points_land_within_ten_percent(n, corpus):
+    for name in ("camera", "coins"):
+        img = corpus[name]
+        m = codec.mesh(img, points=n)
+        assert abs(len(m.vertices) - n) <= 0.1 * n, (name, n, len(m.vertices))
+    m = codec.mesh(range_scene(256, 256, seed=2), points=n)
+    assert abs(len(m.vertices) - n) <= 0.1 * n
+
+
+def test_least_squares_beats_samples_and_uniform(corpus):
+    img = corpus["camera"]
+    n = int(0.01 * img.size)
+    rms = {}
+    for key, kw in {"lsq": {}, "sample": {"values": "sample"}, "uniform": {"mesher": "uniform"}}.items():
+        out = render(codec.mesh(img, points=n, **kw)).astype(np.float64)
+        rms[key] = np.sqrt(np.mean((out - img) ** 2))
+    assert rms["lsq"] < rms["sample"] < rms["uniform"]
+    assert rms["lsq"] <= 0.75 * rms["uniform"]
+
+
+def test_rgb_values_per_channel():
+    gray = range_scene(96, 80, seed=1)
+    rgb = np.stack([gray, 255 - gray, gray // 2], axis=2)
+    m = codec.mesh(rgb, points=400)
+    assert m.values.shape == (len(m.vertices), 3)
+    out = render(m).astype(np.float64)
+    assert np.sqrt(np.mean((out - rgb) ** 2)) < 6
+
+
+def test_seed_parameters_by_name():
+    img = range_scene(128, 128, seed=4)
+    m = codec.mesh(img, points=10, tiles=(3, 3), per_tile=(4, 4), segment_length=6, segment_error=1.5, canny=(10, 30))
+    validate(m)
+    assert len(m.vertices) > 10 * 3  # explicit tiles and samples are honoured
+
+
+@pytest.mark.parametrize(
+    "opts",
+    [
+        {"tiles": (0, 3)},
+        {"tiles": 4},
+        {"per_tile": (2, "x")},
+        {"canny": (30, 10)},
+        {"canny": "auto"},
+        {"segment_length": 0},
+        {"segment_error": -1},
+        {"values": "median"},
+        {"edge_share": 2},
+        {"walls": True},
+    ],
+)
+def test_bad_options_are_option_errors(opts):
+    with pytest.raises(OptionError):
+        codec.mesh(np.zeros((16, 16), np.uint8), **opts)
+
+
+def _images():
+    sizes = st.sampled_from([(1, 1), (2, 2), (1, 7), (9, 1), (2, 13), (3, 3), (17, 5), (24, 31), (40, 40)])
+    kinds = st.sampled_from(["noise", "constant", "contrast", "steps", "stripes"])
+    return st.tuples(sizes, kinds, st.sampled_from([np.uint8, np.uint16]), st.booleans(), st.integers(0, 2**16))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_images())
+def test_any_image_gives_a_valid_mesh(args):
+    (h, w), kind, dtype, rgb, seed = args
+    rng = np.random.default_rng(seed)
+    top = np.iinfo(dtype).max
+    if kind == "noise":
+        img = rng.integers(0, top + 1, (h, w))
+    elif kind == "constant":
+        img = np.full((h, w), rng.integers(0, top + 1))
+    elif kind == "contrast":
+        img = np.where(rng.random((h, w)) < 0.5, 0, top)
+    elif kind == "steps":
+        img = np.where(np.add.outer(np.arange(h), np.arange(w)) > (h + w) // 2, top, 0)
+    else:
+        img = np.where(np.arange(w)[None, :] % 2 == 0, top, 0).repeat(h, axis=0)
+    img = img.astype(dtype)
+    if rgb:
+        img = np.stack([img, img[::-1], top - img], axis=2)
+    m = codec.mesh(img, points=int(rng.integers(1, h * w + 1)))
+    validate(m)
+    if m.width > 1 and m.height > 1:
+        check_tiling(m)
+        check_no_crossings(m)
+    out = codec.decode(codec.encode(img, points=max(4, len(m.vertices))))
+    assert out.shape == img.shape and out.dtype == img.dtype
