@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import sys
 from pathlib import Path
 from typing import BinaryIO
@@ -50,14 +51,29 @@ class _Counter:
 def encode_options(args: argparse.Namespace) -> dict:
     """The encoder options the command line sets (the ones left unset take the codec's
     defaults)."""
-    names = ("points", "band_height", "mesher", "quality", "max_rms", "max_error")
-    return {n: getattr(args, n) for n in names if getattr(args, n) is not None}
+    names = ("points", "band_height", "mesher", "quality", "max_rms", "max_error", "precision", "nodata")
+    options = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
+    if getattr(args, "value_range", None) is not None:
+        options["value_range"] = tuple(args.value_range)
+    if getattr(args, "metadata", None) is not None:
+        try:
+            options["metadata"] = json.loads(args.metadata)
+        except ValueError as exc:
+            raise codec.OptionError(f"--metadata is not JSON: {exc}") from None
+    return options
 
 
 def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> tuple[codec.StreamEncoder, int]:
     """Encode one image (a path or -) to one .atm output (a path or -), band by band.
     Returns the finished encoder (its statistics) and the bytes written."""
     src = rowio.open_rows(src_name)
+    if src.dtype.kind == "f" and "value_range" not in options:
+        if src.value_range is None:
+            raise codec.OptionError(
+                f"{src_name}: float data from a stream needs --value-range LOW HIGH "
+                "(the header carries the quantisation before the rows arrive)"
+            )
+        options = dict(options, value_range=src.value_range)
     with open_output(dst_name) as f:
         out = _Counter(f)
         enc = codec.StreamEncoder(

@@ -60,12 +60,18 @@ def cmd_info(args: argparse.Namespace) -> int:
         data = f.read()
     i = codec.info(data)
     if args.json:
+        if i["nodata"] is not None and i["nodata"] != i["nodata"]:
+            i["nodata"] = "NaN"  # JSON has no NaN
         print(json.dumps(i, indent=2))
     else:
         kind = "gray" if i["channels"] == 1 else "RGB"
         print(f"{args.input}: .atm version {i['version']}, {i['width']}x{i['height']} {kind} {i['dtype']}, {i['bands']} band(s)")
         print(f"  {i['vertices']:,} vertices, {i['triangles']:,} triangles, {i['constraints']:,} walls")
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
+        if i["nodata"] is not None:
+            print(f"  holes decode to {i['nodata']:g}")
+        for key, value in i["metadata"].items():
+            print(f"  {key}: {json.dumps(value, ensure_ascii=False)}")
     return 0
 
 
@@ -116,6 +122,10 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ROWS",
         help="rows per band (default: about a megapixel per band)",
     )
+    enc.add_argument("--precision", type=float, metavar="STEP", help="float data: quantisation step (default: the finest 16 bits allow)")
+    enc.add_argument("--value-range", type=float, nargs=2, metavar=("LOW", "HIGH"), help="float data: the range of the values (needed when they come from a stream)")
+    enc.add_argument("--nodata", type=float, metavar="V", help="samples equal to V are holes, kept exactly (NaN and infinity always are in float data)")
+    enc.add_argument("--metadata", metavar="JSON", help='a JSON object stored with the image, e.g. \'{"units": "m"}\'')
     enc.add_argument("--mesher", help="mesher: adaptive or uniform (default: the codec's default)")
     enc.add_argument("-v", "--verbose", action="store_true", help="print a summary line on stderr")
     _add_batch_options(enc)
@@ -191,7 +201,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.debug:
             raise
         print(f"atm: error: {exc}", file=sys.stderr)
-        return 2 if isinstance(exc, batch.UsageError) else 1
+        # bad options are bad usage (argparse's 2); bad data is 1
+        return 2 if isinstance(exc, (batch.UsageError, codec.OptionError)) else 1
     except BrokenPipeError:
         return 1
     except OSError as exc:

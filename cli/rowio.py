@@ -26,6 +26,9 @@ class RowSource:
     dtype: np.dtype
     channels: int
     blocks: Iterator[np.ndarray]
+    #: lowest and highest finite value of float data, when it can be known before the
+    #: rows are streamed (files; not standard input)
+    value_range: tuple[float, float] | None = None
 
 
 def _read_exact(f: BinaryIO, n: int, name: str) -> bytes:
@@ -111,7 +114,20 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
                 data = _read_exact(f, n * row_items * dtype.itemsize, name)
                 yield np.frombuffer(data, dtype).reshape((n,) + tuple(shape[1:])).astype(dtype.newbyteorder("="))
 
-    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks())
+    value_range = None
+    if array is not None and np.dtype(dtype).kind == "f":
+        value_range = _finite_range(array[y : y + BLOCK_ROWS] for y in range(0, height, BLOCK_ROWS))
+    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks(), value_range)
+
+
+def _finite_range(blocks) -> tuple[float, float]:
+    """(lowest, highest) finite value over blocks of rows, one block in memory at a time."""
+    lo, hi = np.inf, -np.inf
+    for block in blocks:
+        finite = block[np.isfinite(block)]
+        if finite.size:
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+    return (lo, hi) if lo <= hi else (0.0, 0.0)
 
 
 def open_rows(name: str) -> RowSource:
@@ -139,7 +155,8 @@ def open_rows(name: str) -> RowSource:
         raise ATMError(f"{name}: not a 2-D image")
     h, w = image.shape[:2]
     channels = 1 if image.ndim == 2 else image.shape[2]
-    return RowSource(w, h, image.dtype, channels, iter([image]))
+    value_range = _finite_range([image]) if image.dtype.kind == "f" else None
+    return RowSource(w, h, image.dtype, channels, iter([image]), value_range)
 
 
 class _Prefixed:

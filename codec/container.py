@@ -244,23 +244,33 @@ class Reader:
                 raise CorruptError(f"float data needs a QUNT chunk after AHDR; found {ctype.decode('latin-1')}")
             self.header = self._parse_quant(self.header, payload)
         self.header = self.header.header
-        self._pending = None
+        self._pending_head = None
         self._pending_error = None
-        # the chunks before the first band: NDAT, meta and ancillary ones
+        # the chunks before the first band (NDAT, meta, ancillary ones); the first band's
+        # chunk is left unread, so that opening a file reads its header and no more
         while True:
             try:
-                chunk = self._next_chunk()
+                head = self._next_head()
             except TruncatedError as exc:
                 # the header is intact: report the truncation when the bands are read
                 self._pending_error = exc
                 break
-            if chunk[0] == schema.NODATA and self.header.nodata is None:
-                self.header = self._parse_nodata(self.header, chunk[1])
-            elif chunk[0] == schema.META:
-                self._read_metadata(chunk[1], chunk[2])
-            elif chunk[0][0] & 0x20 == 0 or chunk[0] == schema.NODATA:
-                self._pending = chunk  # the first band's chunk: __iter__ takes it
+            ctype = head[0]
+            if (ctype[0] & 0x20 == 0 and ctype != schema.NODATA) or (
+                ctype == schema.NODATA and self.header.nodata is not None
+            ):
+                self._pending_head = head  # __iter__ reads it
                 break
+            self._pending_head = head
+            try:
+                ctype, payload, offset = self._next_chunk()
+            except TruncatedError as exc:
+                self._pending_error = exc
+                break
+            if ctype == schema.NODATA:
+                self.header = self._parse_nodata(self.header, payload)
+            elif ctype == schema.META:
+                self._read_metadata(payload, offset)
         self._iterated = False
 
     def _read_signature(self) -> int:
@@ -278,30 +288,37 @@ class Reader:
             )
         return version
 
-    def _next_chunk(self) -> tuple[bytes, bytes, int]:
-        """(type, payload, offset) of the next chunk, its CRC verified."""
-        if getattr(self, "_pending", None) is not None:
-            chunk, self._pending = self._pending, None
-            return chunk
+    def _next_head(self) -> tuple[bytes, bytes, int, int]:
+        """(type, raw head, length, offset) of the next chunk; its body is not read."""
+        if getattr(self, "_pending_head", None) is not None:
+            head, self._pending_head = self._pending_head, None
+            return head
         if getattr(self, "_pending_error", None) is not None:
             raise self._pending_error
         s = self._stream
         offset = s.offset
-        head = s.read(schema.ChunkHead.sizeof())
-        if not head:
+        raw = s.read(schema.ChunkHead.sizeof())
+        if not raw:
             raise TruncatedError(f"the file ends at byte {offset}, before its AEND chunk")
-        if len(head) < schema.ChunkHead.sizeof():
+        if len(raw) < schema.ChunkHead.sizeof():
             raise TruncatedError(f"the file ends inside a chunk header at byte {s.offset}")
-        parsed = schema.ChunkHead.parse(head)
+        parsed = schema.ChunkHead.parse(raw)
         length, ctype = parsed.length, parsed.type
         if not all(65 <= c <= 90 or 97 <= c <= 122 for c in ctype):
             raise CorruptError(f"invalid chunk type {ctype!r} at byte {offset}")
-        name = ctype.decode("latin-1")
         if length > limits.MAX_CHUNK_BYTES:
-            raise LimitError(f"chunk {name} at byte {offset} declares {length:,} bytes, over the limit")
-        body = s.read_exact(length + 4, f"chunk {name}")
+            raise LimitError(
+                f"chunk {ctype.decode('latin-1')} at byte {offset} declares {length:,} bytes, over the limit"
+            )
+        return ctype, raw, length, offset
+
+    def _next_chunk(self) -> tuple[bytes, bytes, int]:
+        """(type, payload, offset) of the next chunk, its CRC verified."""
+        ctype, raw, length, offset = self._next_head()
+        name = ctype.decode("latin-1")
+        body = self._stream.read_exact(length + 4, f"chunk {name}")
         try:
-            chunk = schema.Chunk.parse(head + body)
+            chunk = schema.Chunk.parse(raw + body)
         except ChecksumError:
             raise CorruptError(
                 f"chunk {name} at byte {offset} fails its CRC check (the file is damaged)"

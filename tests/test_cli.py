@@ -168,3 +168,39 @@ def test_npy_of_unsupported_type_is_refused(tmp_path):
     r = atm("encode", tmp_path / "f.npy", tmp_path / "f.atm")
     assert r.returncode == 1 and b"int32" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.npy"]
+
+
+def test_float_npy_with_holes_bounds_and_metadata(tmp_path):
+    z = range_scene(60, 40, seed=2).astype(np.float32) * 0.1 + 300
+    z[5:10, 5:10] = np.nan
+    np.save(tmp_path / "dem.npy", z)
+    r = atm("encode", tmp_path / "dem.npy", tmp_path / "dem.atm", "--max-error", "0.05",
+            "--metadata", '{"units": "m"}')
+    assert r.returncode == 0, r.stderr
+    info = json.loads(atm("info", tmp_path / "dem.atm", "--json").stdout)
+    assert info["metadata"] == {"units": "m"} and info["nodata"] == "NaN" and info["dtype"] == "float32"
+    assert b"units" in atm("info", tmp_path / "dem.atm").stdout
+    assert atm("decode", tmp_path / "dem.atm", tmp_path / "out.npy").returncode == 0
+    out = np.load(tmp_path / "out.npy")
+    assert np.isnan(out[5:10, 5:10]).all() and np.nanmax(np.abs(out - z)) <= 0.05
+    # from a pipe the range must be given; without it the message says how
+    r = atm("encode", "-", "-", stdin=(tmp_path / "dem.npy").read_bytes())
+    assert r.returncode == 2 and b"--value-range" in r.stderr
+    r = atm("encode", "-", "-", "--value-range", "300", "330", stdin=(tmp_path / "dem.npy").read_bytes())
+    assert r.returncode == 0, r.stderr
+
+
+def test_nodata_flag_and_bad_option_values(tmp_path, png):
+    image = range_scene(50, 30, seed=3)
+    image[3:8, 10:20] = 0
+    write_image(tmp_path / "v.png", image)
+    assert atm("encode", tmp_path / "v.png", tmp_path / "v.atm", "--nodata", "0").returncode == 0
+    import codec
+
+    out = codec.read(tmp_path / "v.atm")
+    assert (out[3:8, 10:20] == 0).all()
+    r = atm("encode", png, tmp_path / "x.atm", "--points", "0")
+    assert r.returncode == 2 and b"points" in r.stderr
+    r = atm("encode", png, tmp_path / "x.atm", "--quality", "200")
+    assert r.returncode == 2 and b"quality" in r.stderr
+    assert not (tmp_path / "x.atm").exists()

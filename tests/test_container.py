@@ -255,3 +255,15 @@ def test_tall_sliver_fans_are_refused_before_rendering(monkeypatch):
         validate(mesh)
     with pytest.raises(codec.LimitError, match="rows in all"):
         codec.decode(data)
+
+
+def test_reading_the_header_reads_no_band(sample_file):
+    """Opening a file (e.g. Pillow's _open) reads the header chunks and stops at the
+    first band's chunk head, so a huge band costs nothing until it is decoded."""
+    import io
+
+    mesh_at = chunks(sample_file)[1][0]
+    stream = io.BytesIO(sample_file[: mesh_at + 8])  # the MESH chunk's head only
+    header = container.read_header(stream)
+    assert (header.width, header.height) == (20, 12)
+    assert stream.tell() == mesh_at + 8
