@@ -82,6 +82,9 @@ def encode_image(image: np.ndarray, ext: str) -> bytes:
         raise UnsupportedError(
             f"cannot write {ext or 'files without an extension'}; use one of {', '.join(WRITABLE)}"
         )
+    if image.dtype.kind == "f" and ext not in (".tif", ".tiff"):
+        # OpenCV would quietly cut float samples to 8 bits
+        raise UnsupportedError(f"float data cannot be written as {ext}; use .tif or .npy")
     if ext in (".pgm", ".ppm", ".pnm"):
         ext = ".pgm" if image.ndim == 2 else ".ppm"
     if image.ndim == 3:
