@@ -26,17 +26,17 @@ from .errors import OptionError
 from .image import structure
 from .mesh import Mesh
 from .raster import RowPrefix, element_sse, rasterize
-from .triangulate import through_vertices, triangulate
+from .triangulate import triangulate
 from .unfold import Walls, unfold
 
 #: Default shares of the vertex budget: at most EDGE_SHARE on walls, REGION_SHARE on
 #: curvature sampling; refinement takes the rest.
 EDGE_SHARE = 0.3
-REGION_SHARE = 0.45
+REGION_SHARE = 0.3
 #: Side of a tile in pixels when tiles are chosen automatically.
 TILE = 80
 #: Refinement rounds: each inserts about an equal part of what is left.
-ROUNDS = 2
+ROUNDS = 4
 
 
 def _check_share(value, name: str) -> float:
@@ -99,11 +99,32 @@ def _merge(width: int, *groups: np.ndarray) -> np.ndarray:
     return pts[np.sort(first)]
 
 
-def _segments(lines: list[np.ndarray]) -> np.ndarray:
-    """Constraint segments (pairs of vertex indices) of polylines."""
-    if not lines:
-        return np.zeros((0, 2), np.int64)
-    return np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in lines])
+def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Cut every segment at the vertices lying inside it (as the constrained
+    triangulation does), keeping the order along it."""
+    if len(segments) == 0:
+        return segments
+    lookup = np.full(width * height, -1, dtype=np.int64)
+    lookup[vertices[:, 1] * width + vertices[:, 0]] = np.arange(len(vertices))
+    a, b = vertices[segments[:, 0]], vertices[segments[:, 1]]
+    d = b - a
+    g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
+    steps = g + 1  # the lattice points from a to b, both included
+    seg = np.repeat(np.arange(len(segments)), steps)
+    t = np.arange(int(steps.sum())) - np.repeat(np.cumsum(steps) - steps, steps)
+    pts = a[seg] + t[:, None] * (d[seg] // g[seg][:, None])
+    vid = lookup[pts[:, 1] * width + pts[:, 0]]
+    seg, vid = seg[vid >= 0], vid[vid >= 0]
+    same = seg[1:] == seg[:-1]
+    return np.stack([vid[:-1][same], vid[1:][same]], axis=1)
+
+
+def _chains(segments: np.ndarray) -> list[np.ndarray]:
+    """Constraint polylines: the runs of segments that continue each other."""
+    if len(segments) == 0:
+        return []
+    breaks = np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1
+    return [np.append(segments[r, 0], segments[r[-1], 1]) for r in np.split(np.arange(len(segments)), breaks)]
 
 
 def refine(
@@ -111,12 +132,12 @@ def refine(
     vertices: np.ndarray,
     segments: np.ndarray,
     target: int,
-    excluded: np.ndarray,
     rounds: int = ROUNDS,
 ) -> np.ndarray:
     """Add vertices until there are `target`: in each round, the triangles with the
     largest squared error (against the mesh through the sampled pixel values) each get
-    a vertex at their worst pixel that is not next to a wall."""
+    a vertex at their worst pixel. Pixels beside walls may get one: where a wall's
+    straight segments cut a corner of the true edge, that is where the error is."""
     height, width = gray.shape
     prefix = RowPrefix(gray)
     for r in range(rounds):
@@ -133,15 +154,16 @@ def refine(
         cand = cand[sse[cand] > 0]
         if len(cand) == 0:
             break
-        elem, x, y = ras.pixels(cand)
+        elem, x, y = ras.pixels(np.sort(cand))  # grouped by element
         f = (ras.weights_at(elem, x, y) * z[ras.corners[elem]]).sum(axis=1)
         err = np.abs(gray[y, x] - f)
-        ok = ~excluded[y, x] & (err > 0.5)
-        elem, x, y, err = elem[ok], x[ok], y[ok], err[ok]
-        order = np.lexsort((-err, elem))
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = elem[order][1:] != elem[order][:-1]
-        best = order[first]
+        starts = np.flatnonzero(np.r_[True, elem[1:] != elem[:-1]])
+        group = np.cumsum(np.r_[False, elem[1:] != elem[:-1]])
+        # each element's worst pixel: the first reaching the element's maximum
+        peak = np.maximum.reduceat(err, starts)
+        at_peak = np.flatnonzero(err == peak[group])
+        best = at_peak[np.r_[True, group[at_peak][1:] != group[at_peak][:-1]]]
+        best = best[err[best] > 0.5]
         rank = np.argsort(np.argsort(-sse[elem[best]], kind="stable"), kind="stable")
         best = best[rank < batch]
         new = np.stack([x[best], y[best]], axis=1)
@@ -186,7 +208,7 @@ def build(
     peak = float(np.iinfo(image.dtype).max)
     corners = _corners(width, height)
     wall_pts = np.zeros((0, 2), np.int64)
-    wall_lines: list[np.ndarray] = []
+    segments = np.zeros((0, 2), np.int64)
     excluded = np.zeros((height, width), dtype=bool)
     if width > 2 and height > 2:
         found, magnitude, _ = edge_stage.detect(gray, peak, thresholds)
@@ -195,7 +217,7 @@ def build(
         )
         lines = _select_lines(lines, int(edge_share * points))
         walls = unfold(lines, gray * np.float32(255.0 / peak))
-        wall_pts, wall_lines = walls.points, walls.lines
+        wall_pts, segments = walls.points, walls.segments
         excluded = _excluded(lines, walls, (height, width))
     region = max(0, int(region_share * points))
     if tiles is None:
@@ -207,9 +229,9 @@ def build(
     dens = sampling.density(sampling.curvature(gray), excluded)
     samples = sampling.sample(dens, tiles, per_tile) if region > 0 else np.zeros((0, 2), np.int64)
     vertices = _merge(width, wall_pts, corners, samples)
-    vertices = refine(gray, vertices, _segments(wall_lines), points, excluded)
+    vertices = refine(gray, vertices, segments, points)
     # vertices that landed on a wall split it, as the triangulation will
-    wall_lines = through_vertices(vertices, wall_lines)
-    triangles = triangulate(vertices, _segments(wall_lines))
+    segments = split_at_vertices(vertices, segments, width, height)
+    triangles = triangulate(vertices, segments)
     vals = vertex_values.fit(image, vertices, triangles, values)
-    return Mesh(vertices, vals, triangles, width, height, wall_lines)
+    return Mesh(vertices, vals, triangles, width, height, _chains(segments))

@@ -203,39 +203,66 @@ def _attach(flat_order, chain, closed, junction: np.ndarray, offsets: np.ndarray
     return pix[order], ch[order]
 
 
+def _starts_of_runs(labels: np.ndarray) -> np.ndarray:
+    """Mask of the first element of every run of equal labels."""
+    out = np.ones(len(labels), dtype=bool)
+    out[1:] = labels[1:] != labels[:-1]
+    return out
+
+
+#: Reference points tried at once per chain in each lockstep round of the segment rule.
+_LOOKAHEAD = 8
+
+
 def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int, d: float):
     """The seed's segment rule on all chains at once: indices into xy of the control
-    points, in chain order."""
-    a = first.copy()
-    c = np.minimum(a + k, last)
+    points, in chain order.
+
+    Each round tries the next _LOOKAHEAD reference points C, C + k, ... of every chain
+    together; the outcome is the one the one-at-a-time rule reaches (the first C whose
+    segment has an offending pixel decides), in fewer rounds.
+    """
     emitted = [first]
     active = np.flatnonzero(last > first)
-    a, c, end = a[active], c[active], last[active]
+    a, c, end = first[active], np.minimum(first[active] + k, last[active]), last[active]
     d2 = d * d
+    j = np.arange(_LOOKAHEAD)
     while len(active):
-        counts = np.maximum(c - a - 1, 0)
-        local = np.repeat(np.arange(len(active)), counts)
-        idx = np.repeat(a + 1, counts) + (
+        # candidate reference points per chain, up to the chain's end
+        cands = np.minimum(c[:, None] + k * j[None, :], end[:, None])
+        valid = np.ones_like(cands, dtype=bool)
+        valid[:, 1:] = cands[:, :-1] < end[:, None]
+        slot_chain, slot_j = np.nonzero(valid)
+        slot_c = cands[slot_chain, slot_j]
+        counts = np.maximum(slot_c - a[slot_chain] - 1, 0)
+        slot = np.repeat(np.arange(len(slot_c)), counts)
+        idx = np.repeat(a[slot_chain] + 1, counts) + (
             np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
         )
-        pa, pc, pp = xy[a[local]], xy[c[local]], xy[idx]
+        pa, pc, pp = xy[a[slot_chain[slot]]], xy[slot_c[slot]], xy[idx]
         seg = pc - pa
         rel = pp - pa
         length2 = (seg * seg).sum(axis=1)
         t = np.clip((rel * seg).sum(axis=1) / np.maximum(length2, 1e-12), 0.0, 1.0)
         off = rel - t[:, None] * seg
         bad = (off * off).sum(axis=1) > d2
+        # first offending pixel of each slot, then the first failing slot of each chain
+        bad_slot = slot[bad]
+        lead = _starts_of_runs(bad_slot)
+        slot_offender = np.full(len(slot_c), -1, dtype=np.int64)
+        slot_offender[bad_slot[lead]] = idx[bad][lead]
+        failing = np.flatnonzero(slot_offender >= 0)
+        fchain = slot_chain[failing]
+        firstf = _starts_of_runs(fchain)
         offender = np.full(len(active), -1, dtype=np.int64)
-        bad_local = local[bad]
-        first_bad = np.ones(len(bad_local), dtype=bool)
-        first_bad[1:] = bad_local[1:] != bad_local[:-1]
-        offender[bad_local[first_bad]] = idx[bad][first_bad]
+        offender[fchain[firstf]] = slot_offender[failing[firstf]]
         restart = offender >= 0
-        done = ~restart & (c == end)
+        last_cand = cands[:, -1]
+        done = ~restart & (last_cand == end)
         emitted.append(offender[restart])
         emitted.append(end[done])
         a = np.where(restart, offender, a)
-        c = np.where(restart, np.minimum(offender + k, end), np.minimum(c + k, end))
+        c = np.where(restart, np.minimum(offender + k, end), np.minimum(last_cand + k, end))
         keep = ~done
         active, a, c, end = active[keep], a[keep], c[keep], end[keep]
     return np.sort(np.concatenate(emitted))

@@ -23,16 +23,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from .polylines import Polylines
-from .triangulate import uncrossed
 
 
 @dataclass(eq=False)
 class Walls:
-    """Wall feet (N x 2 int64 (x, y)) and the wall polylines through them (arrays of
-    indices into points), none crossing another."""
+    """Wall feet (N x 2 int64 (x, y)), the wall segments between them (S x 2 indices
+    into points, wall by wall in order along each), none meeting another but at a
+    shared end, and the wall of each segment (2k: left of polyline k, 2k+1: right)."""
 
     points: np.ndarray
-    lines: list[np.ndarray]
+    segments: np.ndarray
+    wall: np.ndarray
 
 
 def _directions(lines: Polylines) -> tuple[np.ndarray, np.ndarray]:
@@ -98,13 +99,63 @@ def opposite_points(
     return left, right
 
 
+def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def conflicts(points: np.ndarray, segments: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """For segment pairs (i, j): do they meet anywhere but at a shared end point?"""
+    a, b = points[segments[i, 0]], points[segments[i, 1]]
+    c, d = points[segments[j, 0]], points[segments[j, 1]]
+    o1, o2 = _orient(a, b, c), _orient(a, b, d)
+    o3, o4 = _orient(c, d, a), _orient(c, d, b)
+    collinear = (o1 == 0) & (o2 == 0)
+    # collinear: compare the extents along the axis a-b runs along most
+    k = (np.abs(b[:, 0] - a[:, 0]) < np.abs(b[:, 1] - a[:, 1])).astype(np.int64)
+    r = np.arange(len(i))
+    lo1, hi1 = np.minimum(a[r, k], b[r, k]), np.maximum(a[r, k], b[r, k])
+    lo2, hi2 = np.minimum(c[r, k], d[r, k]), np.maximum(c[r, k], d[r, k])
+    overlap = np.minimum(hi1, hi2) - np.maximum(lo1, lo2)
+    si, sj = segments[i], segments[j]
+    shared = (si[:, :1] == sj).any(axis=1) | (si[:, 1:] == sj).any(axis=1)
+    general = ~collinear & (o1 * o2 <= 0) & (o3 * o4 <= 0)
+    # sharing an end point, two segments conflict only by running along each other
+    return np.where(shared, collinear & (overlap > 0), general | (collinear & (overlap >= 0)))
+
+
+def drop_conflicts(points: np.ndarray, segments: np.ndarray, cell: int = 8) -> np.ndarray:
+    """Keep-mask over segments such that no two kept ones meet anywhere but at a shared
+    end point: of two that do, the later goes. Candidates are the pairs whose bounding
+    boxes share a cell of a `cell`-pixel grid; the test is exact."""
+    keep = np.ones(len(segments), dtype=bool)
+    if len(segments) < 2:
+        return keep
+    a, b = points[segments[:, 0]], points[segments[:, 1]]
+    lo, hi = np.minimum(a, b) // cell, np.maximum(a, b) // cell
+    nx, ny = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
+    count = nx * ny
+    seg = np.repeat(np.arange(len(segments)), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    key = (lo[seg, 1] + k // nx[seg]) * (int(hi[:, 0].max()) + 2) + lo[seg, 0] + k % nx[seg]
+    order = np.lexsort((seg, key))
+    key, seg = key[order], seg[order]
+    after = np.searchsorted(key, key, side="right") - np.arange(len(key)) - 1
+    first = np.repeat(np.arange(len(key)), after)
+    second = first + 1 + np.arange(int(after.sum())) - np.repeat(np.cumsum(after) - after, after)
+    pair = np.unique(seg[first] * len(segments) + seg[second])
+    i, j = pair // len(segments), pair % len(segments)
+    bad = conflicts(points, segments, i, j)
+    keep[np.maximum(i[bad], j[bad])] = False
+    return keep
+
+
 def unfold(lines: Polylines, gray: np.ndarray, *, min_step: float = 4.0) -> Walls:
     """The parallel polylines of every edge polyline, with crossing walls cut back.
 
     Polylines earlier in `lines` win conflicts: order them by importance first.
     """
     if len(lines.points) == 0:
-        return Walls(np.zeros((0, 2), np.int64), [])
+        return Walls(np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
     left, right = opposite_points(lines, gray, min_step=min_step)
     n = len(left)
     points = np.concatenate([left, right])
@@ -117,10 +168,18 @@ def unfold(lines: Polylines, gray: np.ndarray, *, min_step: float = 4.0) -> Wall
     rank[order] = np.arange(len(order))
     ids = rank[inverse.ravel()]
     merged = points[first[order]]
-    walls = []
-    for lo, hi in zip(lines.starts[:-1], lines.starts[1:]):
-        for foot in (ids[lo:hi], ids[n + lo : n + hi]):
-            foot = foot[np.r_[True, foot[1:] != foot[:-1]]]
-            if len(foot) >= 2:
-                walls.append(foot)
-    return Walls(merged, uncrossed(merged, walls))
+    # segments of the left walls, then the right walls, polyline by polyline
+    line_of = np.repeat(np.arange(len(lines)), np.diff(lines.starts))
+    step = np.flatnonzero(line_of[1:] == line_of[:-1])
+    segs = np.concatenate([np.stack([ids[step], ids[step + 1]], 1), np.stack([ids[n + step], ids[n + step + 1]], 1)])
+    rank = np.concatenate([line_of[step] * 2, line_of[step] * 2 + 1])
+    order = np.argsort(rank, kind="stable")
+    segs, rank = segs[order], rank[order]
+    real = segs[:, 0] != segs[:, 1]
+    segs, rank = segs[real], rank[real]
+    # the same segment twice (feet merged): keep the first
+    key = np.minimum(segs[:, 0], segs[:, 1]) * len(merged) + np.maximum(segs[:, 0], segs[:, 1])
+    once = np.sort(np.unique(key, return_index=True)[1])
+    segs, rank = segs[once], rank[once]
+    keep = drop_conflicts(merged, segs)
+    return Walls(merged, segs[keep], rank[keep])
