@@ -149,14 +149,12 @@ def refine(
         ras = rasterize(vertices, tris, width, height)
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         sse = element_sse(ras, prefix, z)
-        # a few more candidates than needed: some have no admissible pixel
-        cand = np.argsort(-sse, kind="stable")[: batch + batch // 2 + 8]
+        cand = np.argsort(-sse, kind="stable")[:batch]
         cand = cand[sse[cand] > 0]
         if len(cand) == 0:
             break
         elem, x, y = ras.pixels(np.sort(cand))  # grouped by element
-        f = (ras.weights_at(elem, x, y) * z[ras.corners[elem]]).sum(axis=1)
-        err = np.abs(gray[y, x] - f)
+        err = np.abs(gray[y, x] - ras.evaluate(ras.affine(z), elem, x, y))
         starts = np.flatnonzero(np.r_[True, elem[1:] != elem[:-1]])
         group = np.cumsum(np.r_[False, elem[1:] != elem[:-1]])
         # each element's worst pixel: the first reaching the element's maximum
@@ -164,8 +162,6 @@ def refine(
         at_peak = np.flatnonzero(err == peak[group])
         best = at_peak[np.r_[True, group[at_peak][1:] != group[at_peak][:-1]]]
         best = best[err[best] > 0.5]
-        rank = np.argsort(np.argsort(-sse[elem[best]], kind="stable"), kind="stable")
-        best = best[rank < batch]
         new = np.stack([x[best], y[best]], axis=1)
         if len(new) == 0:
             break

@@ -54,14 +54,6 @@ class Raster:
         e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
 
-    def weights_at(self, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """P x 3 weights of the pixels (x, y) in their elements."""
-        u = (x - self.origin[elem, 0]).astype(np.float64)
-        v = (y - self.origin[elem, 1]).astype(np.float64)
-        c = self.coef[elem]
-        num = c[:, :, 0] * u[:, None] + c[:, :, 1] * v[:, None] + c[:, :, 2]
-        return num / self.den[elem][:, None]
-
     def moments(self) -> np.ndarray:
         """E x 6 sums over each element's pixels of 1, u, v, uu, uv, vv."""
         e, n = self.span_elem, self.span_n.astype(np.float64)
@@ -78,13 +70,25 @@ class Raster:
         """E x 4 sums over each element's pixels of b, u b, v b and b^2 for the plane b
         of `prefix`."""
         e, y, x, n = self.span_elem, self.span_y, self.span_x, self.span_n
-        sb = prefix.sum[y, x + n] - prefix.sum[y, x]
-        sxb = prefix.sum_x[y, x + n] - prefix.sum_x[y, x]
-        sbb = prefix.sum_sq[y, x + n] - prefix.sum_sq[y, x]
+        lo = y * prefix.stride + x
+        hi = lo + n
+        sb = prefix.sum[hi] - prefix.sum[lo]
+        sxb = prefix.sum_x[hi] - prefix.sum_x[lo]
+        sbb = prefix.sum_sq[hi] - prefix.sum_sq[lo]
         sub = sxb - self.origin[e, 0] * sb
         svb = (y - self.origin[e, 1]) * sb
         m = len(self.den)
         return np.stack([np.bincount(e, weights=p, minlength=m) for p in (sb, sub, svb, sbb)], axis=1)
+
+    def affine(self, vertex_values: np.ndarray) -> np.ndarray:
+        """E x 3: the mesh value in each element as (a, b, c) with f = a u + b v + c."""
+        z = np.asarray(vertex_values, dtype=np.float64)[self.corners]
+        return np.einsum("eik,ei->ek", self.coef.astype(np.float64), z) / self.den[:, None]
+
+    def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The mesh value (unrounded) at pixels (x, y) of their elements."""
+        f = affine[elem]
+        return f[:, 0] * (x - self.origin[elem, 0]) + f[:, 1] * (y - self.origin[elem, 1]) + f[:, 2]
 
 
 class RowPrefix:
@@ -94,12 +98,13 @@ class RowPrefix:
     def __init__(self, plane: np.ndarray):
         h, w = plane.shape
         b = plane.astype(np.float64)
-        self.sum = np.zeros((h, w + 1))
-        self.sum_x = np.zeros((h, w + 1))
-        self.sum_sq = np.zeros((h, w + 1))
-        np.cumsum(b, axis=1, out=self.sum[:, 1:])
-        np.cumsum(b * np.arange(w, dtype=np.float64), axis=1, out=self.sum_x[:, 1:])
-        np.cumsum(b * b, axis=1, out=self.sum_sq[:, 1:])
+        self.stride = w + 1
+        sums = []
+        for term in (b, b * np.arange(w, dtype=np.float64), b * b):
+            out = np.zeros((h, w + 1))
+            np.cumsum(term, axis=1, out=out[:, 1:])
+            sums.append(out.ravel())  # flat: row y, columns [x, x+n) is y*stride + x .. + n
+        self.sum, self.sum_x, self.sum_sq = sums
 
 
 def _triangle_spans(v: np.ndarray, t: np.ndarray):
@@ -206,12 +211,7 @@ def element_sse(raster: Raster, prefix: RowPrefix, vertex_values: np.ndarray, mo
     over each element's pixels: sum b^2 - 2 sum b f + sum f^2 with f affine per element."""
     m = raster.moments() if moments is None else moments  # 1, u, v, uu, uv, vv
     mb = raster.image_moments(prefix)  # b, ub, vb, bb
-    z = np.asarray(vertex_values, dtype=np.float64)[raster.corners]  # E x 3
-    coef = raster.coef.astype(np.float64)
-    den = raster.den.astype(np.float64)
-    a = (coef[:, :, 0] * z).sum(axis=1) / den
-    b = (coef[:, :, 1] * z).sum(axis=1) / den
-    c = (coef[:, :, 2] * z).sum(axis=1) / den
+    a, b, c = raster.affine(vertex_values).T
     ff = a * a * m[:, 3] + 2 * a * b * m[:, 4] + b * b * m[:, 5] + 2 * a * c * m[:, 1] + 2 * b * c * m[:, 2] + c * c * m[:, 0]
     bf = a * mb[:, 1] + b * mb[:, 2] + c * mb[:, 0]
     return np.maximum(mb[:, 3] - 2 * bf + ff, 0.0)
