@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh import Mesh, without_vertices
-from .triangulate import triangulate
+from .triangulate import through_vertices, triangulate
 
 #: Default band size in pixels: bands of about a megapixel keep the encoder's working
 #: memory small while leaving the mesher room to place vertices freely.
@@ -47,3 +47,55 @@ def pin_top_row(mesh: Mesh, xs: np.ndarray, values: np.ndarray) -> Mesh:
     )
     triangles = triangulate(vertices, segments)
     return Mesh(vertices, vals, triangles, mesh.width, mesh.height, constraints, mesh.holes)
+
+
+def sample_last_row(mesh: Mesh, band: np.ndarray, tolerance: float) -> Mesh:
+    """Add vertices on the band's last row until the row, which the next band shares and
+    which decodes as a polyline through those vertices, is within `tolerance` of the
+    image everywhere (per channel), or every pixel of the row is a vertex.
+
+    Greedy, coarse to fine: each round adds, between every two neighbouring row
+    vertices, the pixel of largest error if it is over the tolerance."""
+    y = mesh.height - 1
+    if y == 0 or mesh.width < 3:
+        return mesh
+    row = band[y].reshape(mesh.width, -1).astype(np.float64)
+    xs, vals = bottom_row(mesh)
+    vals = vals.reshape(len(xs), -1).astype(np.float64)
+    added = []
+    while True:
+        pos = np.arange(mesh.width)
+        k = np.clip(np.searchsorted(xs, pos, side="right") - 1, 0, len(xs) - 2)
+        a, b = xs[k], xs[k + 1]
+        t = ((pos - a) / np.maximum(b - a, 1))[:, None]
+        approx = vals[k] * (1 - t) + vals[k + 1] * t
+        err = np.abs(approx - row).max(axis=1)
+        err[xs] = 0.0
+        if err.max() <= tolerance:
+            break
+        # the worst pixel of each stretch between neighbouring vertices
+        starts = xs[:-1]
+        worst = np.maximum.reduceat(err, starts)
+        stretch = np.flatnonzero(worst > tolerance)
+        new = []
+        for s in stretch:  # a loop over stretches of one row, each a numpy argmax
+            lo, hi = xs[s], xs[s + 1]
+            new.append(lo + int(np.argmax(err[lo:hi])))
+        new = np.asarray(new, dtype=np.int64)
+        added.append(new)
+        order = np.argsort(np.concatenate([xs, new]), kind="stable")
+        xs = np.concatenate([xs, new])[order]
+        vals = np.concatenate([vals, row[new]])[order]
+    if not added:
+        return mesh
+    new = np.concatenate(added)
+    top = np.stack([new, np.full_like(new, y)], 1)
+    vertices = np.concatenate([mesh.vertices, top])
+    values = np.concatenate([mesh.values, band[y, new]]).astype(mesh.dtype)
+    # a new vertex may sit on a wall that runs along the row: the wall then passes it
+    constraints = through_vertices(vertices, mesh.constraints)
+    segments = (
+        np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in constraints]) if constraints else None
+    )
+    triangles = triangulate(vertices, segments)
+    return Mesh(vertices, values, triangles, mesh.width, mesh.height, constraints, mesh.holes)

@@ -70,7 +70,13 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
     sorted_keys = keys[order]
     gaps = np.diff(sorted_keys, prepend=-1) - 1
     h = _hilbert_order(vertices)
-    seq = values[h].astype(np.int64)
+    # samples that are all multiples of a step are stored divided by it: an encoder
+    # that rounds values to a coarser step pays fewer bits for them
+    step = int(np.gcd.reduce(values.ravel().astype(np.int64))) if values.size else 1
+    step = min(max(step, 1), 65535)
+    while step > 1 and (values % step).any():  # only when the gcd exceeded 65535
+        step -= 1
+    seq = values[h].astype(np.int64) // step
     residuals = np.diff(seq, axis=0, prepend=np.zeros((1, seq.shape[1]), np.int64))
     residuals %= 1 << (8 * mesh.dtype.itemsize)
     flat = np.concatenate(lines) if lines else np.zeros(0, np.int64)
@@ -89,6 +95,7 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
         polyline_index_count=len(flat),
         connectivity=schema.DELAUNAY if delaunay else schema.LISTED,
         triangle_crc=triangle_crc(triangles),
+        sample_step=step,
         positions=varints(gaps),
         samples=_to_planes(residuals, mesh.dtype),
         polyline_lengths=varints(np.array([len(c) for c in lines], dtype=np.int64)),
@@ -115,8 +122,13 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
     vertices = np.stack([keys % width, keys // width], 1)
 
+    if m.sample_step < 1:
+        raise CorruptError(f"{where}: sample step 0")
     residuals = _from_planes(m.samples, dtype, n * channels).astype(np.int64).reshape(n, channels)
     seq = np.cumsum(residuals, axis=0) % (1 << (8 * dtype.itemsize))
+    seq *= m.sample_step
+    if n and seq.max() > np.iinfo(dtype).max:
+        raise CorruptError(f"{where}: a sample times the step {m.sample_step} exceeds {dtype}")
     values = np.empty((n, channels), dtype=dtype)
     values[_hilbert_order(vertices)] = seq
     values = values[:, 0] if channels == 1 else values

@@ -19,6 +19,11 @@ from .image import SAMPLE_TYPES
 from .mesh import Mesh
 
 
+#: The automatic value step, as a fraction of the first band's RMS error: rounding to it
+#: adds step^2 / 12, about 4 % of the mean squared error.
+STEP_FACTOR = 0.7
+
+
 class StreamEncoder:
     """Encode an image arriving in rows to a writable binary file object.
 
@@ -58,6 +63,7 @@ class StreamEncoder:
         nodata: float | None = None,
         metadata: dict | None = None,
         progress: Callable[[int, int], None] | None = None,
+        value_step: int | str = "auto",
         **options,
     ):
         # progress(rows_done, height) is called after each band is written; it watches
@@ -106,6 +112,12 @@ class StreamEncoder:
                 raise OptionError("give quality or max_rms, not both")
             max_rms = refine.quality_rms(quality, storage)
         self._bound = refine.Bound(max_rms=max_rms, max_error=max_error)
+        if value_step != "auto" and (
+            isinstance(value_step, bool) or not isinstance(value_step, numbers.Integral) or not 1 <= value_step <= 65535
+        ):
+            raise OptionError(f"value_step must be 'auto' or a whole number 1..65535, not {value_step!r}")
+        # under an error bound, refinement decides every value exactly
+        self._step = 1 if self._bound.active else (None if value_step == "auto" else int(value_step))
         self._build = encoder.mesher_build(self._mesher_name, options)
         self._values = encoder.values_method(self._build, options)
         self._options = options
@@ -201,12 +213,16 @@ class StreamEncoder:
             mesh = holes.cut(mesh, band_holes.copy())
         if self._top is not None:
             mesh = banding.pin_top_row(mesh, *self._top)
+        if self._received < self.height:
+            # the next band starts from this band's last row: make that row good
+            mesh = banding.sample_last_row(mesh, band, self._row_tolerance(mesh, band))
         if has_holes:
             fitted = vertex_values.fit(band, mesh.vertices, mesh.triangles, self._values)
             if self._top is not None:
                 top = mesh.vertices[:, 1] == 0
                 fitted[top] = mesh.values[top]
             mesh.values = fitted
+        mesh = self._round_values(mesh, band, band_holes if has_holes else None)
         mesh = refine.refine(
             mesh,
             band,
@@ -227,6 +243,41 @@ class StreamEncoder:
         self._filled = 1
         if self._progress is not None:
             self._progress(self._y0 + 1, self.height)
+
+    def _row_tolerance(self, mesh: Mesh, band: np.ndarray) -> float:
+        """How closely a shared row must follow the image: the error bound if there is
+        one, else twice the band's RMS error (the row should not be the band's worst)."""
+        if self._bound.max_error is not None:
+            return float(self._bound.max_error)
+        if self._bound.max_rms is not None:
+            return float(self._bound.max_rms)
+        from . import decoder_cpu
+
+        diff = decoder_cpu.render(mesh).astype(np.float64) - band
+        return max(1.0, 2.0 * float(np.sqrt(np.mean(diff**2))))
+
+    def _round_values(self, mesh: Mesh, band: np.ndarray, band_holes: np.ndarray | None) -> Mesh:
+        """Round vertex values to multiples of the value step (pinned first-row values
+        already are). The automatic step, set by the first band, costs about 4 % of the
+        mean squared error and saves about log2(step) bits per stored sample."""
+        if self._step is None:
+            from . import decoder_cpu
+
+            diff = decoder_cpu.render(mesh).astype(np.float64) - band
+            diff = diff.reshape(mesh.height, mesh.width, -1)
+            if band_holes is not None:
+                diff = diff[~band_holes]
+            mse = float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
+            self._step = max(1, int(STEP_FACTOR * np.sqrt(mse)))
+        step = self._step
+        if step == 1:
+            return mesh
+        top = (np.iinfo(mesh.dtype).max // step) * step
+        fixed = mesh.vertices[:, 1] == 0 if self._top is not None else np.zeros(len(mesh.vertices), bool)
+        rounded = np.clip(np.rint(mesh.values / step) * step, 0, top).astype(mesh.dtype)
+        rounded[fixed] = mesh.values[fixed]
+        mesh.values = rounded
+        return mesh
 
     def close(self) -> None:
         """Finish the file. Raises ATMError if fewer rows came than were declared."""

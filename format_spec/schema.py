@@ -153,6 +153,7 @@ MeshPayload = Struct(
     "polyline_index_count" / Int32ul,
     "connectivity" / Int8ul,
     "triangle_crc" / Int32ul,
+    "sample_step" / Int16ul,
     "positions" / Section,
     "samples"
     / NDArray(

@@ -267,3 +267,23 @@ def test_reading_the_header_reads_no_band(sample_file):
     header = container.read_header(stream)
     assert (header.width, header.height) == (20, 12)
     assert stream.tell() == mesh_at + 8
+
+
+def test_samples_on_a_step_are_stored_divided_by_it():
+    from codec import meshcode
+
+    mesh = random_mesh(3, 30, 20, extra=60)
+    mesh.values = (mesh.values // 12 * 12).astype(np.uint8)
+    fields = meshcode.encode_band(0, mesh)
+    assert fields["sample_step"] == 12 or (mesh.values == 0).all()
+    _, [(_, back)] = container.unpack(container.pack(mesh))
+    assert_same_mesh(mesh, back)
+
+
+def test_value_step_option():
+    image = np.add.outer(np.arange(40), np.arange(50)).astype(np.uint8) * 2
+    for step in (1, 5, 16):
+        m = codec.decode_mesh(codec.encode(image, value_step=step, points=200))
+        assert (m.values % step == 0).all()
+    with pytest.raises(codec.OptionError, match="value_step"):
+        codec.encode(image, value_step=0)

@@ -187,8 +187,9 @@ def test_gl_agrees_with_cpu(gl, mesh: Mesh) -> None:
     exact = decoder_gl.render(mesh)
     assert exact.dtype == cpu.dtype and exact.shape == cpu.shape
     assert np.array_equal(exact, cpu)
+    # the float32 fallback: within 1 for 8-bit data, 1/2048 of full scale for 16-bit
     worst, _ = agreement(decoder_gl.render(mesh, exact=False), cpu)
-    assert worst <= 1
+    assert worst <= (1 if mesh.dtype == np.uint8 else 32)
 
 
 def test_gl_covers_border_pixels(gl) -> None:
@@ -250,8 +251,10 @@ def test_corpus_agreement(gl, corpus_meshes) -> None:
         worst, same = agreement(decoder_gl.render(mesh), cpu)
         assert worst <= 1 and same >= 0.99, (name, worst, same)
         assert same == 1.0, (name, same)  # the exact shader reproduces the CPU decoder
+        # the float32 fallback (GL < 4.0) interpolates in float: within 1 for 8-bit
+        # data; for 16-bit, steep walls cost it up to 1/2048 of full scale
         worst, same = agreement(decoder_gl.render(mesh, exact=False), cpu)
-        assert worst <= 1, (name, worst)
+        assert worst <= (1 if mesh.dtype == np.uint8 else 32), (name, worst)
 
 
 def test_corpus_backends_through_the_api(gl, corpus) -> None:

@@ -55,13 +55,17 @@ def test_bands_decode_without_seams(band_height):
     assert whole.shape == image.shape
 
 
-def test_banded_quality_is_close_to_one_band():
+def test_banded_size_is_close_to_one_band_at_equal_error():
+    """Bands cost some bytes (shared rows, walls cut at band edges), not many: under
+    the same error bound a 16-row banding stays within 1.8x the one-band size."""
     image = range_scene(128, 128, seed=5)
-    rms = {}
+    sizes = {}
     for bh in (16, 128):
-        out = codec.decode(codec.encode(image, band_height=bh, points=800))
-        rms[bh] = np.sqrt(np.mean((out.astype(float) - image) ** 2))
-    assert rms[16] < 1.5 * rms[128] + 1
+        data = codec.encode(image, band_height=bh, max_rms=1.0)
+        out = codec.decode(data)
+        assert np.sqrt(np.mean((out.astype(float) - image) ** 2)) <= 1.0
+        sizes[bh] = len(data)
+    assert sizes[16] < 1.8 * sizes[128]
 
 
 def test_decoder_knows_the_header_before_any_band():
