@@ -122,13 +122,29 @@ def validate(mesh: Mesh) -> None:
         along = x if h == 1 else y
         if along.min() != 0 or along.max() != max(w, h) - 1:
             raise CorruptError("a one-pixel-wide mesh needs a vertex at each end of the line")
-    for line in mesh.constraints:
-        if len(line) < 2 or line.min() < 0 or line.max() >= len(v):
+    walls = segments(mesh.constraints)
+    if mesh.constraints:
+        lengths = np.fromiter((len(c) for c in mesh.constraints), np.int64, len(mesh.constraints))
+        if lengths.min() < 2 or walls.min() < 0 or walls.max() >= len(v):
             raise CorruptError("a constraint polyline refers to a missing vertex")
-    if mesh.constraints and len(t):
-        walls = np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in mesh.constraints])
-        if not np.isin(_edge_keys(walls, len(v)), _edge_keys(edges(t), len(v))).all():
+    if len(walls) and len(t):
+        known = np.sort(_edge_keys(edges(t), len(v)))
+        keys = _edge_keys(walls, len(v))
+        at = np.clip(np.searchsorted(known, keys), 0, len(known) - 1)
+        if not (known[at] == keys).all():
             raise CorruptError("a constraint polyline runs along no triangle edge")
+
+
+def segments(polylines: list[np.ndarray]) -> np.ndarray:
+    """The (i, j) vertex pairs of every step of every polyline, as one K x 2 array."""
+    if not polylines:
+        return np.zeros((0, 2), np.int64)
+    flat = np.concatenate(polylines).astype(np.int64)
+    # a step joins consecutive indices of one polyline, not the last of one to the next
+    inner = np.ones(len(flat) - 1, bool)
+    ends = np.cumsum([len(c) for c in polylines])[:-1]
+    inner[ends - 1] = False
+    return np.stack([flat[:-1][inner], flat[1:][inner]], axis=1)
 
 
 def edges(triangles: np.ndarray) -> np.ndarray:

@@ -24,14 +24,12 @@ from .coding import (
     zigzag,
 )
 from .errors import ATMError, CorruptError, LimitError
-from .mesh import Mesh
+from .mesh import Mesh, segments
 from .triangulate import triangulate
 
 
 def _segments(constraints: list[np.ndarray]) -> np.ndarray | None:
-    if not constraints:
-        return None
-    return np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in constraints])
+    return segments(constraints) if constraints else None
 
 
 def _hilbert_order(vertices: np.ndarray) -> np.ndarray:
