@@ -81,7 +81,8 @@ def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:
     """Decode .atm bytes to an array of the encoded shape and dtype (float32 for float
     data; hole pixels hold the file's nodata value, NaN for float data).
 
-    backend: "cpu" (exact integer scanline decoder).
+    backend: "cpu" (exact integer scanline decoder) or "gl" (OpenGL through EGL; the
+    same pixels, BackendError where no GL context can be made).
     """
     import io
 
