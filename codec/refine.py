@@ -167,34 +167,3 @@ def _spread(score: np.ndarray, count: int) -> np.ndarray:
     oy, ox = np.divmod(best[keep], cell)
     return np.stack([bx * cell + ox, by * cell + oy], 1).astype(np.int64)
 
-
-def grow(mesh: Mesh, image: np.ndarray, total: int, *, rounds: int = 4) -> Mesh:
-    """Spend a vertex budget where the error is largest: insert vertices in `rounds`
-    batches (greedy, coarse to fine) until the mesh has about `total` of them. New
-    vertices take their pixel's value; walls are kept and never split."""
-    h, w = mesh.height, mesh.width
-    walls = _segments_mask(mesh)
-    segments = (
-        np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in mesh.constraints])
-        if mesh.constraints
-        else None
-    )
-    for r in range(rounds):
-        missing = total - len(mesh.vertices)
-        if missing <= 0:
-            break
-        batch = missing if r == rounds - 1 else max(8, missing // (rounds - r))
-        worst = _squared_errors(mesh, image).max(axis=2)
-        is_vertex = np.zeros((h, w), bool)
-        is_vertex[mesh.vertices[:, 1], mesh.vertices[:, 0]] = True
-        score = np.where(is_vertex | walls, 0.0, worst)
-        new = _spread(score, batch)
-        if len(new) == 0:
-            break
-        if len(new) > batch:
-            keep = np.argsort(-score[new[:, 1], new[:, 0]], kind="stable")[:batch]
-            new = new[np.sort(keep)]
-        vertices = np.concatenate([mesh.vertices, new])
-        values = np.concatenate([mesh.values, image[new[:, 1], new[:, 0]]])
-        mesh = Mesh(vertices, values, triangulate(vertices, segments), w, h, mesh.constraints, mesh.holes)
-    return mesh
