@@ -26,7 +26,7 @@ from .errors import OptionError
 from .image import structure
 from .mesh import Mesh
 from .raster import RowPrefix, element_sse, rasterize
-from .triangulate import triangulate
+from .triangulate import split_at_vertices, triangulate
 from .unfold import Walls, unfold
 
 #: Default shares of the vertex budget: at most EDGE_SHARE on walls, REGION_SHARE on
@@ -97,26 +97,6 @@ def _merge(width: int, *groups: np.ndarray) -> np.ndarray:
     pts = np.concatenate(groups)
     _, first = np.unique(pts[:, 1] * width + pts[:, 0], return_index=True)
     return pts[np.sort(first)]
-
-
-def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Cut every segment at the vertices lying inside it (as the constrained
-    triangulation does), keeping the order along it."""
-    if len(segments) == 0:
-        return segments
-    lookup = np.full(width * height, -1, dtype=np.int64)
-    lookup[vertices[:, 1] * width + vertices[:, 0]] = np.arange(len(vertices))
-    a, b = vertices[segments[:, 0]], vertices[segments[:, 1]]
-    d = b - a
-    g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
-    steps = g + 1  # the lattice points from a to b, both included
-    seg = np.repeat(np.arange(len(segments)), steps)
-    t = np.arange(int(steps.sum())) - np.repeat(np.cumsum(steps) - steps, steps)
-    pts = a[seg] + t[:, None] * (d[seg] // g[seg][:, None])
-    vid = lookup[pts[:, 1] * width + pts[:, 0]]
-    seg, vid = seg[vid >= 0], vid[vid >= 0]
-    same = seg[1:] == seg[:-1]
-    return np.stack([vid[:-1][same], vid[1:][same]], axis=1)
 
 
 def _chains(segments: np.ndarray) -> list[np.ndarray]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh, without_vertices
+from .mesh import Mesh, without_vertices, segments as wall_steps
 from .triangulate import through_vertices, triangulate
 
 #: Default band size in pixels: bands of about a megapixel keep the encoder's working
@@ -42,9 +42,7 @@ def pin_top_row(mesh: Mesh, xs: np.ndarray, values: np.ndarray) -> Mesh:
     vertices = np.concatenate([top, base.vertices])
     vals = np.concatenate([values, base.values]).astype(mesh.dtype)
     constraints = [c + len(xs) for c in base.constraints]
-    segments = (
-        np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in constraints]) if constraints else None
-    )
+    segments = wall_steps(constraints) if constraints else None
     triangles = triangulate(vertices, segments)
     return Mesh(vertices, vals, triangles, mesh.width, mesh.height, constraints, mesh.holes)
 
@@ -94,8 +92,6 @@ def sample_last_row(mesh: Mesh, band: np.ndarray, tolerance: float) -> Mesh:
     values = np.concatenate([mesh.values, band[y, new]]).astype(mesh.dtype)
     # a new vertex may sit on a wall that runs along the row: the wall then passes it
     constraints = through_vertices(vertices, mesh.constraints)
-    segments = (
-        np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in constraints]) if constraints else None
-    )
+    segments = wall_steps(constraints) if constraints else None
     triangles = triangulate(vertices, segments)
     return Mesh(vertices, values, triangles, mesh.width, mesh.height, constraints, mesh.holes)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ATMError
-from .mesh import Mesh, without_vertices
+from .mesh import Mesh, without_vertices, segments as wall_steps
 from .triangulate import through_vertices, triangulate
 
 #: Simplification tolerance of hole outlines, in pixels (the seed's d for walls).
@@ -110,11 +110,9 @@ def cut(mesh: Mesh, holes: np.ndarray) -> Mesh:
         for r in rims:
             constraints.append(where[start : start + len(r)])
             start += len(r)
-        constraints = [c for c in through_vertices(vertices, constraints) if len(np.unique(c)) >= 2]
-        segments = None
-        if constraints:
-            segments = np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in constraints])
-            segments = segments[segments[:, 0] != segments[:, 1]]
+        # through_vertices also drops the zero-length steps of rims that double back
+        constraints = through_vertices(vertices, constraints)
+        segments = wall_steps(constraints) if constraints else None
         try:
             triangles = triangulate(vertices, segments)
         except ATMError:

@@ -16,7 +16,7 @@ import numpy as np
 from . import decoder_cpu
 from . import values as vertex_values
 from .errors import OptionError
-from .mesh import Mesh
+from .mesh import Mesh, segments as wall_steps
 from .triangulate import triangulate
 
 
@@ -98,11 +98,7 @@ def refine(
     fixed = mesh.vertices[:, 1] < pinned_rows
     fixed_values = mesh.values[fixed]
     walls = _segments_mask(mesh)
-    segments = (
-        np.concatenate([np.stack([c[:-1], c[1:]], 1) for c in mesh.constraints])
-        if mesh.constraints
-        else None
-    )
+    segments = wall_steps(mesh.constraints) if mesh.constraints else None
     sampled = np.zeros(len(mesh.vertices), bool)
     while True:
         sq = _squared_errors(mesh, image)

@@ -6,7 +6,7 @@ import numpy as np
 import triangle
 
 from .errors import ATMError
-from .mesh import orient
+from .mesh import orient, segments
 
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
@@ -34,33 +34,46 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.
     return orient(vertices, result["triangles"])
 
 
+def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int, height: int,
+                      *, origin: bool = False):
+    """Cut every segment at the vertices lying inside it (as the constrained
+    triangulation does), keeping the order along it. With origin=True, also return the
+    index of the input segment each piece comes from. Zero-length segments vanish."""
+    segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
+    source = np.flatnonzero(segments[:, 0] != segments[:, 1])
+    segments = segments[source]
+    if len(segments) == 0:
+        return (segments, source) if origin else segments
+    lookup = np.full(width * height, -1, dtype=np.int64)
+    lookup[vertices[:, 1] * width + vertices[:, 0]] = np.arange(len(vertices))
+    a, b = vertices[segments[:, 0]], vertices[segments[:, 1]]
+    d = b - a
+    g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
+    steps = g + 1  # the lattice points from a to b, both included
+    seg = np.repeat(np.arange(len(segments)), steps)
+    t = np.arange(int(steps.sum())) - np.repeat(np.cumsum(steps) - steps, steps)
+    pts = a[seg] + t[:, None] * (d[seg] // g[seg][:, None])
+    vid = lookup[pts[:, 1] * width + pts[:, 0]]
+    seg, vid = seg[vid >= 0], vid[vid >= 0]
+    same = seg[1:] == seg[:-1]
+    pieces = np.stack([vid[:-1][same], vid[1:][same]], axis=1)
+    return (pieces, source[seg[:-1][same]]) if origin else pieces
+
+
 def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[np.ndarray]:
     """The polylines with every vertex that lies exactly on one of their segments put
-    in its place along the segment. A constrained triangulation splits a segment at
-    such vertices, so these are the polylines whose steps are its edges."""
+    in its place along the segment (split_at_vertices, polyline by polyline): their
+    steps are then the edges a constrained triangulation keeps."""
     if not polylines:
         return polylines
     v = np.asarray(vertices, dtype=np.int64)
-    width = int(v[:, 0].max()) + 1
-    keys = v[:, 1] * width + v[:, 0]
-    order = np.argsort(keys)
-    sorted_keys = keys[order]
+    pieces, source = split_at_vertices(
+        v, segments(polylines), int(v[:, 0].max()) + 1, int(v[:, 1].max()) + 1, origin=True
+    )
+    # each step came from one polyline: regroup the pieces by it
+    owner = np.repeat(np.arange(len(polylines)), [len(c) - 1 for c in polylines])[source]
     out = []
-    for line in polylines:
-        a, b = v[line[:-1]], v[line[1:]]
-        d = b - a
-        g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
-        steps = np.maximum(g, 1)
-        # lattice points a + k (b - a) / g, k = 0 .. g-1, of every segment, then the end
-        seg = np.repeat(np.arange(len(a)), steps)
-        k = np.arange(len(seg)) - np.repeat(np.cumsum(steps) - steps, steps)
-        pts = a[seg] + (d[seg] // steps[seg, None]) * k[:, None]
-        pts = np.concatenate([pts, v[line[-1:]]])
-        pk = pts[:, 1] * width + pts[:, 0]
-        at = np.clip(np.searchsorted(sorted_keys, pk), 0, len(keys) - 1)
-        hit = sorted_keys[at] == pk
-        idx = order[at[hit]]
-        # a zero-length step is no edge
-        out.append(idx[np.r_[True, idx[1:] != idx[:-1]]])
+    for run in np.split(np.arange(len(pieces)), np.flatnonzero(np.diff(owner)) + 1):
+        if len(run):
+            out.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
     return out
-
