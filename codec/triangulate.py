@@ -6,7 +6,7 @@ import numpy as np
 import triangle
 
 from .errors import ATMError
-from .mesh import orient, segments
+from .mesh import segments
 
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
@@ -31,7 +31,10 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.
             "constraint segments cross each other, so the triangulation would need vertices "
             "off the pixel grid"
         )
-    return orient(vertices, result["triangles"])
+    # Triangle lists every triangle counterclockwise with x right and y up, which is a
+    # positive doubled area here; mesh.validate checks it wherever a mesh is written or
+    # read, so it is not computed a second time on this hot path
+    return np.asarray(result["triangles"], dtype=np.int64)
 
 
 def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int, height: int,
