@@ -1,8 +1,9 @@
 """One band's mesh <-> the fields of its MESH payload (format_spec/ATM.md §4.2).
 
-Vertices are stored in raster order as gaps between their pixel indices; samples as
-differences along the Hilbert curve through the vertices; polylines as index
-differences; triangles either listed (canonical order, differences) or not stored at
+Polylines are stored as chains: a start pixel and the steps to each next vertex. The
+vertices on no polyline are stored in raster order as gaps between their pixel
+indices. Samples are differences along the polylines, then along the Hilbert curve
+through the other vertices; triangles either listed (canonical order, differences) or not stored at
 all and rebuilt by constrained Delaunay triangulation, with a CRC of the canonical
 list either way so that a decoder can prove it has the encoder's triangles.
 """
@@ -47,6 +48,20 @@ def _from_planes(planes: np.ndarray, dtype: np.dtype, count: int) -> np.ndarray:
     return b.view(dtype.newbyteorder("<")).ravel().astype(dtype)
 
 
+def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """(key, x, y) rows of every polyline point, polyline after polyline: each
+    polyline's start plus the running sum of its steps (vectorised over all of them)."""
+    firsts = np.cumsum(lengths) - lengths
+    inc = np.empty((int(lengths.sum()), 2), dtype=np.int64)
+    rest = np.ones(len(inc), dtype=bool)
+    rest[firsts] = False
+    inc[rest] = steps
+    inc[firsts] = starts
+    run = np.cumsum(inc, axis=0)
+    before = run[firsts] - starts  # the running sum up to each polyline's start
+    return run - np.repeat(before, lengths, axis=0)
+
+
 def encode_band(y0: int, mesh: Mesh) -> dict:
     """The MeshPayload fields for a validated band mesh."""
     w, n = mesh.width, len(mesh.vertices)
@@ -56,7 +71,10 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
     inverse[order] = np.arange(n)
     vertices = mesh.vertices[order]
     values = mesh.values[order].reshape(n, -1)
+    sorted_keys = keys[order]
     triangles = canonical_triangles(inverse[mesh.triangles])
+    # the polylines keep their order: with cocircular vertices, the constrained
+    # Delaunay triangulation a decoder rebuilds depends on the order of the segments
     lines = [inverse[c] for c in mesh.constraints]
 
     try:
@@ -65,19 +83,34 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
     except ATMError:
         delaunay = False
 
-    sorted_keys = keys[order]
-    gaps = np.diff(sorted_keys, prepend=-1) - 1
-    h = _hilbert_order(vertices)
+    flat = np.concatenate(lines) if lines else np.zeros(0, np.int64)
+    lengths = np.array([len(c) for c in lines], dtype=np.int64)
+    firsts = np.cumsum(lengths) - lengths
+    step_rows = np.ones(len(flat), dtype=bool)
+    step_rows[firsts] = False
+    steps = (vertices[flat[1:]] - vertices[flat[:-1]])[step_rows[1:]]
+    start_keys = sorted_keys[flat[firsts]]
+
+    # samples: the polyline vertices in the order the polylines first reach them (a
+    # wall's vertices sit on one side of a step, so each predicts the next well), then
+    # every other vertex along the Hilbert curve
+    first_seen = np.unique(flat, return_index=True)[1]
+    on_line = flat[np.sort(first_seen)]
+    free = np.ones(n, dtype=bool)
+    free[on_line] = False
+    free_idx = np.flatnonzero(free)
+    free_idx = free_idx[_hilbert_order(vertices[free_idx])]
+    seq_order = np.concatenate([on_line, free_idx])
     # samples that are all multiples of a step are stored divided by it: an encoder
     # that rounds values to a coarser step pays fewer bits for them
     step = int(np.gcd.reduce(values.ravel().astype(np.int64))) if values.size else 1
     step = min(max(step, 1), 65535)
     while step > 1 and (values % step).any():  # only when the gcd exceeded 65535
         step -= 1
-    seq = values[h].astype(np.int64) // step
+    seq = values[seq_order].astype(np.int64) // step
     residuals = np.diff(seq, axis=0, prepend=np.zeros((1, seq.shape[1]), np.int64))
     residuals %= 1 << (8 * mesh.dtype.itemsize)
-    flat = np.concatenate(lines) if lines else np.zeros(0, np.int64)
+    free_keys = sorted_keys[free]
     tri_fields = np.zeros(0, np.int64)
     if not delaunay and len(triangles):
         a = triangles[:, 0]
@@ -94,10 +127,11 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
         connectivity=schema.DELAUNAY if delaunay else schema.LISTED,
         triangle_crc=triangle_crc(triangles),
         sample_step=step,
-        positions=varints(gaps),
+        polyline_lengths=varints(lengths),
+        polyline_starts=varints(zigzag(np.diff(start_keys, prepend=0))),
+        polyline_steps=varints(zigzag(steps).ravel()),
+        positions=varints(np.diff(free_keys, prepend=-1) - 1),
         samples=_to_planes(residuals, mesh.dtype),
-        polyline_lengths=varints(np.array([len(c) for c in lines], dtype=np.int64)),
-        polyline_indices=varints(zigzag(np.diff(flat, prepend=0))),
         triangles=varints(tri_fields),
     )
 
@@ -114,11 +148,46 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
         raise LimitError(f"{where}: {m.polyline_index_count:,} polyline indices is too many")
     if m.connectivity not in (schema.LISTED, schema.DELAUNAY):
         raise CorruptError(f"{where}: unknown connectivity code {m.connectivity}")
+    pixels = width * rows
 
-    keys = np.cumsum(unvarints(m.positions, n, f"{where} positions") + 1) - 1
-    if n and keys[-1] >= width * rows:
+    # polylines first: their points are vertices the positions do not repeat
+    count, total = int(m.polyline_count), int(m.polyline_index_count)
+    lengths = unvarints(m.polyline_lengths, count, f"{where} polyline lengths")
+    if lengths.sum() != total or (count and lengths.min() < 2):
+        raise CorruptError(f"{where}: polyline lengths do not add up")
+    start_keys = np.cumsum(unzigzag(unvarints(m.polyline_starts, count, f"{where} polyline starts")))
+    if count and (start_keys.min() < 0 or start_keys.max() >= pixels):
+        raise CorruptError(f"{where}: a polyline starts outside the {width}x{rows} band")
+    steps = unzigzag(unvarints(m.polyline_steps, 2 * (total - count), f"{where} polyline steps"))
+    steps = steps.reshape(-1, 2)
+    if len(steps) and (
+        not np.abs(steps).any(axis=1).all()
+        or np.abs(steps[:, 0]).max() >= width
+        or np.abs(steps[:, 1]).max() >= rows
+    ):
+        raise CorruptError(f"{where}: a polyline step is empty or longer than the band")
+    starts = np.stack([start_keys % width, start_keys // width], 1)
+    points = _chain_points(lengths, starts, steps)
+    if total and (
+        points.min() < 0 or points[:, 0].max() >= width or points[:, 1].max() >= rows
+    ):
+        raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
+    chain_keys = points[:, 1] * width + points[:, 0]
+    line_keys, first_seen = np.unique(chain_keys, return_index=True)
+
+    free = n - len(line_keys)
+    if free < 0:
+        raise CorruptError(f"{where}: the polylines have more vertices than the {n} stored")
+    free_keys = np.cumsum(unvarints(m.positions, free, f"{where} positions") + 1) - 1
+    if free and free_keys[-1] >= pixels:
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+    keys = np.concatenate([line_keys, free_keys])
+    keys.sort(kind="stable")
+    if n > 1 and not (keys[1:] != keys[:-1]).all():
+        raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
     vertices = np.stack([keys % width, keys // width], 1)
+    flat = np.searchsorted(keys, chain_keys)
+    lines = np.split(flat, np.cumsum(lengths)[:-1]) if count else []
 
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
@@ -127,26 +196,18 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     seq *= m.sample_step
     if n and seq.max() > np.iinfo(dtype).max:
         raise CorruptError(f"{where}: a sample times the step {m.sample_step} exceeds {dtype}")
+    free_idx = np.searchsorted(keys, free_keys)
+    free_idx = free_idx[_hilbert_order(vertices[free_idx])]
+    seq_order = np.concatenate([flat[np.sort(first_seen)], free_idx])
     values = np.empty((n, channels), dtype=dtype)
-    values[_hilbert_order(vertices)] = seq
+    values[seq_order] = seq
     values = values[:, 0] if channels == 1 else values
-
-    lengths = unvarints(m.polyline_lengths, m.polyline_count, f"{where} polyline lengths")
-    if lengths.sum() != m.polyline_index_count or (len(lengths) and lengths.min() < 2):
-        raise CorruptError(f"{where}: polyline lengths do not add up")
-    flat = np.cumsum(unzigzag(unvarints(m.polyline_indices, m.polyline_index_count, f"{where} polylines")))
-    if len(flat) and (flat.min() < 0 or flat.max() >= n):
-        raise CorruptError(f"{where}: a constraint polyline refers to a missing vertex")
-    lines = np.split(flat, np.cumsum(lengths)[:-1]) if len(lengths) else []
 
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
             raise CorruptError(f"{where}: triangles listed for a Delaunay band")
-        segments = _segments(lines)
-        if segments is not None and (segments[:, 0] == segments[:, 1]).any():
-            raise CorruptError(f"{where}: a constraint segment joins a vertex to itself")
         try:
-            triangles = canonical_triangles(triangulate(vertices, segments))
+            triangles = canonical_triangles(triangulate(vertices, _segments(lines)))
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:

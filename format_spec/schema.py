@@ -1,4 +1,4 @@
-"""Byte layout of .atm version 2 as `construct` declarations.
+"""Byte layout of .atm version 3 as `construct` declarations.
 
 Every multi-byte integer is little-endian. ATM.md (beside this file) is the normative
 description; the names here match its field names.
@@ -29,7 +29,7 @@ from construct import (
 )
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-VERSION = 2
+VERSION = 3
 
 #: Chunk types. An upper-case first letter marks a critical chunk.
 HEADER = b"AHDR"
@@ -154,13 +154,14 @@ MeshPayload = Struct(
     "connectivity" / Int8ul,
     "triangle_crc" / Int32ul,
     "sample_step" / Int16ul,
+    "polyline_lengths" / Section,
+    "polyline_starts" / Section,
+    "polyline_steps" / Section,
     "positions" / Section,
     "samples"
     / NDArray(
         "u1",
         lambda ctx: ctx.vertex_count * ctx._.channels * SAMPLE_DTYPES[ctx._.sample_type].itemsize,
     ),
-    "polyline_lengths" / Section,
-    "polyline_indices" / Section,
     "triangles" / Section,
 )

@@ -82,7 +82,7 @@ def sample_file() -> bytes:
 
 def test_layout_matches_spec(sample_file):
     assert sample_file[:8] == b"\x89ATM\r\n\x1a\n"
-    assert struct.unpack_from("<H", sample_file, 8) == (2,)
+    assert struct.unpack_from("<H", sample_file, 8) == (schema.VERSION,)
     types = [c[1] for c in chunks(sample_file)]
     assert types == [b"AHDR", b"MESH", b"AEND"]
     ahdr = chunks(sample_file)[0][2]
@@ -129,10 +129,10 @@ def test_bytes_after_aend_are_ignored(sample_file):
     np.testing.assert_array_equal(codec.decode(sample_file + b"junk"), codec.decode(sample_file))
 
 
-@pytest.mark.parametrize("version", [1, 3])
+@pytest.mark.parametrize("version", [1, 2, 4])
 def test_other_versions_are_unsupported(sample_file, version):
     data = sample_file[:8] + struct.pack("<H", version) + sample_file[10:]
-    with pytest.raises(UnsupportedError, match=f"version {version}; this codec reads version 2"):
+    with pytest.raises(UnsupportedError, match=f"version {version}; this codec reads version {schema.VERSION}"):
         codec.decode(data)
 
 
@@ -168,15 +168,26 @@ def test_mesh_invariants_are_checked(sample_file):
     flipped[0] = flipped[0, [0, 2, 1]]
     beyond = mesh.triangles.copy()
     beyond[-1, 2] = len(mesh.vertices)
-    gaps = np.diff(mesh.vertices[:, 1] * 20 + mesh.vertices[:, 0], prepend=-1) - 1
-    gaps[-1] += 5
+    keys = mesh.vertices[:, 1] * 20 + mesh.vertices[:, 0]
+    on_lines = np.unique(np.concatenate(mesh.constraints)) if mesh.constraints else []
+    free = np.delete(keys, on_lines)
+    gaps = np.diff(free, prepend=-1) - 1
+    gaps[-1] += 20 * 12
+    # one wall from vertex 0 to vertex 1, both of which the positions also list
+    one_wall = dict(polyline_count=1, polyline_index_count=2, polyline_lengths=varints([2]),
+                    polyline_starts=varints(zigzag([keys[0]])),
+                    polyline_steps=varints(zigzag(mesh.vertices[1] - mesh.vertices[0])))
+    twice = dict(one_wall, positions=varints(np.diff(keys[:-2], prepend=-1) - 1))
+    empty_step = dict(one_wall, polyline_steps=varints(zigzag([0, 0])))
+    leaving = dict(one_wall, polyline_starts=varints(zigzag([0])), polyline_steps=varints(zigzag([-1, 0])))
     cases = {
         "wrongly oriented": listed(flipped),
         "beyond": listed(beyond),
         "outside": dict(positions=varints(gaps)),
         "cover": listed(mesh.triangles[:-1]),
-        "missing vertex": dict(polyline_count=1, polyline_index_count=2,
-                               polyline_lengths=varints([2]), polyline_indices=varints(zigzag([0, 99]))),
+        "leaves the": leaving,
+        "step is empty": empty_step,
+        "stored both on a polyline and by position": twice,
         "CRC mismatch": dict(triangle_crc=good["triangle_crc"] ^ 1),
         "hold": dict(positions=good["positions"] + b"\x01"),
     }
@@ -201,7 +212,7 @@ def test_decompression_bomb_is_refused_before_allocation():
     header = schema.Header.build(dict(width=100, height=100, sample_type=0, channels=1))
     bomb = zstandard.ZstdCompressor().compress(bytes(50_000_000))
     data = (
-        schema.FileHeader.build(dict(version=2))
+        schema.FileHeader.build(dict(version=schema.VERSION))
         + make_chunk(b"AHDR", header)
         + make_chunk(b"MESH", bomb)
         + make_chunk(b"AEND", b"")
@@ -212,7 +223,7 @@ def test_decompression_bomb_is_refused_before_allocation():
 
 def test_huge_declared_image_is_refused_quickly():
     header = schema.Header.build(dict(width=100_000, height=100_000, sample_type=0, channels=1))
-    data = schema.FileHeader.build(dict(version=2)) + make_chunk(b"AHDR", header) + make_chunk(b"AEND", b"")
+    data = schema.FileHeader.build(dict(version=schema.VERSION)) + make_chunk(b"AHDR", header) + make_chunk(b"AEND", b"")
     with pytest.raises(codec.LimitError, match="pixels"):
         codec.decode(data)
 
