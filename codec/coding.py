@@ -59,27 +59,45 @@ def unzigzag(u: np.ndarray) -> np.ndarray:
     return np.where(u & 1, -(u >> 1) - 1, u >> 1)
 
 
+# The Hilbert mapping of ATM.md §4.2.2 as a state machine: the reflections and swaps
+# the reference loop applies to the lower bits form the group {identity, swap,
+# complement, both}, so one small table per level replaces its per-level np.where's.
+# Index: state * 4 + 2 * bit_x + bit_y -> (digit, next state); state = 2*swap + complement.
+def _hilbert_tables() -> tuple[np.ndarray, np.ndarray]:
+    digit = np.zeros(16, dtype=np.int64)
+    nxt = np.zeros(16, dtype=np.uint8)
+    for swap in (0, 1):
+        for comp in (0, 1):
+            for bx in (0, 1):
+                for by in (0, 1):
+                    rx, ry = bx ^ comp, by ^ comp
+                    if swap:
+                        rx, ry = ry, rx
+                    s2, c2 = swap, comp
+                    if ry == 0:
+                        s2 ^= 1
+                        c2 ^= rx
+                    i = (2 * swap + comp) * 4 + 2 * bx + by
+                    digit[i] = (3 * rx) ^ ry
+                    nxt[i] = 2 * s2 + c2
+    return digit, nxt
+
+
+_HILBERT_DIGIT, _HILBERT_NEXT = _hilbert_tables()
+
+
 def hilbert_keys(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Position of each (x, y) along the Hilbert curve over the smallest 2^k square
     that holds them all (the classic xy -> d mapping, ATM.md §4.2.2)."""
-    x = np.asarray(x, dtype=np.int64).copy()
-    y = np.asarray(y, dtype=np.int64).copy()
+    x = np.asarray(x, dtype=np.int64)
+    y = np.asarray(y, dtype=np.int64)
     top = int(max(x.max(initial=0), y.max(initial=0)))
-    n = 1
-    while n <= top:
-        n *= 2
     d = np.zeros(x.shape, dtype=np.int64)
-    s = n // 2
-    while s > 0:
-        rx = (x & s) > 0
-        ry = (y & s) > 0
-        d += s * s * ((3 * rx.astype(np.int64)) ^ ry.astype(np.int64))
-        flip = ~ry & rx
-        x = np.where(flip, n - 1 - x, x)
-        y = np.where(flip, n - 1 - y, y)
-        swap = ~ry
-        x, y = np.where(swap, y, x), np.where(swap, x, y)
-        s //= 2
+    state = np.zeros(x.shape, dtype=np.uint8)
+    for k in range(top.bit_length() - 1, -1, -1):
+        i = state * np.uint8(4) + (((x >> k) & 1) * 2 + ((y >> k) & 1)).astype(np.uint8)
+        d = (d << 2) | _HILBERT_DIGIT[i]
+        state = _HILBERT_NEXT[i]
     return d
 
 
@@ -89,13 +107,21 @@ def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     if len(t) == 0:
         return t
-    shift = np.argmin(t, axis=1)
-    idx = (shift[:, None] + np.arange(3)[None, :]) % 3
-    t = np.take_along_axis(t, idx, axis=1)
+    a, b, c = t[:, 0], t[:, 1], t[:, 2]
+    first_b = (b < a) & (b < c)
+    first_c = (c < a) & (c < b)
+    r0 = np.where(first_b, b, np.where(first_c, c, a))
+    r1 = np.where(first_b, c, np.where(first_c, a, b))
+    r2 = np.where(first_b, a, np.where(first_c, b, c))
     n = int(t.max()) + 1
-    if n < 1 << 21:  # the three indices fit one int64 sort key
-        return t[np.argsort((t[:, 0] * n + t[:, 1]) * n + t[:, 2], kind="stable")]
-    return t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
+    if n < 1 << 21:  # the three indices fit one int64 sort key, distinct per triangle
+        keys = np.sort((r0 * n + r1) * n + r2)
+        if len(keys) < 2 or (keys[1:] != keys[:-1]).all():
+            r01, r2 = np.divmod(keys, n)
+            r0, r1 = np.divmod(r01, n)
+            return np.stack([r0, r1, r2], 1)
+    t = np.stack([r0, r1, r2], 1)
+    return t[np.lexsort((r2, r1, r0))]
 
 
 def triangle_crc(canonical: np.ndarray) -> int:

@@ -57,11 +57,9 @@ class Mesh:
 
 def doubled_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Signed doubled areas (x1-x0)(y2-y0) - (x2-x0)(y1-y0), exact in int64."""
-    v = vertices.astype(np.int64)
-    p0, p1, p2 = v[triangles[:, 0]], v[triangles[:, 1]], v[triangles[:, 2]]
-    return (p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p2[:, 0] - p0[:, 0]) * (
-        p1[:, 1] - p0[:, 1]
-    )
+    x = vertices[:, 0].astype(np.int64)[triangles]
+    y = vertices[:, 1].astype(np.int64)[triangles]
+    return (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])
 
 
 def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -72,11 +70,12 @@ def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return triangles
 
 
-def validate(mesh: Mesh) -> None:
+def validate(mesh: Mesh, *, walls_are_edges: bool = False) -> None:
     """Raise CorruptError (or LimitError) unless the mesh is one the decoders can render.
 
     Checked: shapes, index ranges, vertices inside the image and distinct, triangle
-    orientation, total area equal to the image's, and constraint indices.
+    orientation, total area equal to the image's, constraint indices, and that every
+    constraint step is a triangle edge (unless the caller knows it: walls_are_edges).
     """
     w, h = mesh.width, mesh.height
     limits.check_image_size(w, h)
@@ -107,7 +106,7 @@ def validate(mesh: Mesh) -> None:
             raise CorruptError("a triangle is degenerate or wrongly oriented")
         if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
             raise CorruptError("the triangles do not cover the image exactly once")
-        ys = v[:, 1][t]
+        ys = v[:, 1].astype(np.int64)[t]
         extent = int((ys.max(axis=1) - ys.min(axis=1) + 1).sum())
         if extent > limits.max_triangle_rows(w, h):
             raise LimitError(
@@ -127,7 +126,7 @@ def validate(mesh: Mesh) -> None:
         lengths = np.fromiter((len(c) for c in mesh.constraints), np.int64, len(mesh.constraints))
         if lengths.min() < 2 or walls.min() < 0 or walls.max() >= len(v):
             raise CorruptError("a constraint polyline refers to a missing vertex")
-    if len(walls) and len(t):
+    if len(walls) and len(t) and not walls_are_edges:
         known = np.sort(_edge_keys(edges(t), len(v)))
         keys = _edge_keys(walls, len(v))
         at = np.clip(np.searchsorted(known, keys), 0, len(known) - 1)

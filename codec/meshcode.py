@@ -62,6 +62,30 @@ def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) ->
     return run - np.repeat(before, lengths, axis=0)
 
 
+def _check_clear(keys: np.ndarray, points: np.ndarray, lengths: np.ndarray, width: int,
+                 where: str) -> None:
+    """CorruptError if a vertex lies inside a polyline step. Then the triangulation,
+    which adds no vertex, has every step as an edge, which mesh.validate need not
+    check again."""
+    step_of = np.ones(len(points) - 1, dtype=bool) if len(points) else np.zeros(0, bool)
+    step_of[(np.cumsum(lengths) - 1)[:-1]] = False
+    d = (points[1:] - points[:-1])[step_of]
+    g = np.gcd(d[:, 0], d[:, 1])
+    long = np.flatnonzero(g > 1)  # only these steps pass over lattice points
+    if len(long) == 0:
+        return
+    origin = points[:-1][step_of][long]
+    unit = d[long] // g[long, None]
+    inside = g[long] - 1
+    seg = np.repeat(np.arange(len(long)), inside)
+    t = np.arange(int(inside.sum())) - np.repeat(np.cumsum(inside) - inside, inside) + 1
+    p = origin[seg] + t[:, None] * unit[seg]
+    k = p[:, 1] * width + p[:, 0]
+    at = np.minimum(np.searchsorted(keys, k), len(keys) - 1)
+    if (keys[at] == k).any():
+        raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
+
+
 def encode_band(y0: int, mesh: Mesh) -> dict:
     """The MeshPayload fields for a validated band mesh."""
     w, n = mesh.width, len(mesh.vertices)
@@ -187,7 +211,11 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
         raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
     vertices = np.stack([keys % width, keys // width], 1)
     flat = np.searchsorted(keys, chain_keys)
-    lines = np.split(flat, np.cumsum(lengths)[:-1]) if count else []
+    ends = np.cumsum(lengths)
+    lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
+    inner = np.ones(max(total - 1, 0), dtype=bool)
+    inner[ends[:-1] - 1] = False
+    walls = np.stack([flat[:-1][inner], flat[1:][inner]], 1) if total else None
 
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
@@ -206,8 +234,9 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
             raise CorruptError(f"{where}: triangles listed for a Delaunay band")
+        _check_clear(keys, points, lengths, width, where)
         try:
-            triangles = canonical_triangles(triangulate(vertices, _segments(lines)))
+            triangles = canonical_triangles(triangulate(vertices, walls))
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:

@@ -14,6 +14,7 @@ import codec
 from codec import container
 from codec.coding import canonical_triangles
 from codec.errors import ATMError, CorruptError, FormatError, TruncatedError, UnsupportedError
+from codec.triangulate import triangulate
 from format_spec import schema
 from tests.conftest import random_mesh
 
@@ -196,6 +197,29 @@ def test_mesh_invariants_are_checked(sample_file):
     for message, change in cases.items():
         with pytest.raises(CorruptError, match=message):
             codec.decode(repack(**change))
+
+
+def test_a_wall_over_a_vertex_is_corrupt():
+    """A rebuilt triangulation splits such a wall at the vertex, so its step would be
+    no triangle edge; the decoder must refuse the file, not draw a different mesh."""
+    import zstandard
+
+    from codec import meshcode
+    from codec.coding import varints, zigzag
+
+    grid = np.stack(np.meshgrid(np.arange(3), np.arange(3)), -1).reshape(-1, 2)
+    mesh = codec.Mesh(grid, np.arange(9, dtype=np.uint8), triangulate(grid), 3, 3)
+    fields = meshcode.encode_band(0, mesh)
+    free = np.setdiff1d(np.arange(9), [0, 2])  # keys of the pixels off the wall
+    fields.update(polyline_count=1, polyline_index_count=2, polyline_lengths=varints([2]),
+                  polyline_starts=varints(zigzag([0])), polyline_steps=varints(zigzag([2, 0])),
+                  positions=varints(np.diff(free, prepend=-1) - 1))
+    raw = schema.MeshPayload.build(fields, sample_type=0, channels=1)
+    data = container.pack(mesh)
+    mesh_at = chunks(data)[1][0]
+    bad = data[:mesh_at] + make_chunk(b"MESH", zstandard.ZstdCompressor().compress(raw)) + make_chunk(b"AEND", b"")
+    with pytest.raises(CorruptError, match="passes over a vertex"):
+        codec.decode(bad)
 
 
 def test_delaunay_connectivity_is_not_stored(sample_file):
