@@ -25,7 +25,7 @@ from . import values as vertex_values
 from .errors import OptionError
 from .image import structure
 from .mesh import Mesh
-from .raster import RowPrefix, element_sse, rasterize
+from .raster import Statistics, concat, element_sse, line_raster, triangle_raster
 from .triangulate import split_at_vertices, triangulate
 from .unfold import Walls, unfold
 
@@ -86,6 +86,26 @@ def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, i
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
 
+def _near(edges: np.ndarray) -> np.ndarray:
+    """Pixels on or next to edge pixels: those a step may leave between two walls,
+    which least squares leaves out where the image is planar around them."""
+    import cv2
+
+    return cv2.dilate(edges.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def _pixels_near(vertices, triangles, elements, counts, near) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(element, x, y) of the pixels in `near`, elements as in `elements` (the
+    triangles, whose spans are measured again where they have such pixels, then the
+    border lines)."""
+    height, width = near.shape
+    tri = np.flatnonzero(counts[: len(triangles)] > 0)
+    e, x, y = triangle_raster(vertices, triangles[tri], width, height).pixels_in(near)
+    lines = line_raster(vertices, width, height)
+    le, lx, ly = lines.pixels_in(near)
+    return np.concatenate([tri[e], le + len(triangles)]), np.concatenate([x, lx]), np.concatenate([y, ly])
+
+
 def _corners(width: int, height: int) -> np.ndarray:
     c = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], dtype=np.int64)
     return c[np.unique(c[:, 1] * width + c[:, 0], return_index=True)[1]]
@@ -107,46 +127,95 @@ def _chains(segments: np.ndarray) -> list[np.ndarray]:
     return [np.append(segments[r, 0], segments[r[-1], 1]) for r in np.split(np.arange(len(segments)), breaks)]
 
 
+def _canonical(triangles: np.ndarray) -> np.ndarray:
+    """Triangles rotated to start at their smallest vertex index (orientation kept), so
+    that the same triangle always has the same corners in the same order."""
+    first = np.argmin(triangles, axis=1)
+    return np.take_along_axis(triangles, (first[:, None] + np.arange(3)) % 3, axis=1)
+
+
+def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
+    """One integer per canonical triangle, or None when they would overflow int64."""
+    if base**3 >= 2**62:
+        return None
+    t = triangles.astype(np.int64)
+    return (t[:, 0] * base + t[:, 1]) * base + t[:, 2]
+
+
+class _Elements:
+    """The statistics of the triangles met so far, by triangle, so that a triangle that
+    survives a round is not measured again."""
+
+    def __init__(self, layout: Statistics, base: int):
+        self.layout = layout
+        self.base = base
+        self.keys = np.zeros(0, np.int64)  # sorted
+        self.stats = np.zeros((0, layout.width))
+
+    def measure(self, vertices: np.ndarray, triangles: np.ndarray, width: int, height: int) -> np.ndarray:
+        """Statistics of every triangle (canonical), measuring only the new ones."""
+        keys = _keys(triangles, self.base)
+        if keys is None:
+            return self.layout(triangle_raster(vertices, triangles, width, height))
+        pos = np.minimum(np.searchsorted(self.keys, keys), max(len(self.keys) - 1, 0))
+        known = (self.keys[pos] == keys) if len(self.keys) else np.zeros(len(keys), bool)
+        stats = np.empty((len(keys), self.layout.width))
+        stats[known] = self.stats[pos[known]]
+        fresh = ~known
+        if fresh.any():
+            stats[fresh] = self.layout(triangle_raster(vertices, triangles[fresh], width, height))
+        order = np.argsort(keys)
+        self.keys, self.stats = keys[order], stats[order]
+        return stats
+
+
 def refine(
     gray: np.ndarray,
     vertices: np.ndarray,
     segments: np.ndarray,
     target: int,
+    layout: Statistics,
     rounds: int = ROUNDS,
-) -> np.ndarray:
-    """Add vertices until there are `target`: in each round, the triangles with the
+):
+    """Add vertices until there are `target`: in each round, the elements with the
     largest squared error (against the mesh through the sampled pixel values) each get
     a vertex at their worst pixel. Pixels beside walls may get one: where a wall's
-    straight segments cut a corner of the true edge, that is where the error is."""
+    straight segments cut a corner of the true edge, that is where the error is.
+
+    Returns (vertices, triangles, raster, stats): the final vertices and their
+    triangulation (canonical rotation), a raster of its elements (triangles then border
+    lines; the triangles' spans are not kept) and every element's statistics
+    (`layout`, which must have `gray` as its structure plane).
+    """
     height, width = gray.shape
-    prefix = RowPrefix(gray)
-    for r in range(rounds):
+    cache = _Elements(layout, target + len(vertices) + 1)
+    for r in range(rounds + 1):
+        tris = triangulate(vertices, segments)
+        tris = _canonical(tris) if len(tris) else tris
+        tri_stats = cache.measure(vertices, tris, width, height) if len(tris) else np.zeros((0, layout.width))
+        lines = line_raster(vertices, width, height)
+        elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
+        stats = np.concatenate([tri_stats, layout(lines)])
         missing = target - len(vertices)
-        if missing <= 0:
+        if r == rounds or missing <= 0:
             break
         batch = math.ceil(missing / (rounds - r))
-        tris = triangulate(vertices, segments)
-        ras = rasterize(vertices, tris, width, height)
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        sse = element_sse(ras, prefix, z)
+        sse = element_sse(elements, stats, z)
         cand = np.argsort(-sse, kind="stable")[:batch]
-        cand = cand[sse[cand] > 0]
-        if len(cand) == 0:
+        cand = np.sort(cand[sse[cand] > 0])
+        on_tri = cand[cand < len(tris)]
+        found = [
+            triangle_raster(vertices, tris[on_tri], width, height).worst_pixels(gray, z, np.arange(len(on_tri))),
+            lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris)),
+        ]
+        x = np.concatenate([f[1] for f in found])
+        y = np.concatenate([f[2] for f in found])
+        big = np.concatenate([f[3] for f in found]) > 0.5
+        if not big.any():
             break
-        elem, x, y = ras.pixels(np.sort(cand))  # grouped by element
-        err = np.abs(gray[y, x] - ras.evaluate(ras.affine(z), elem, x, y))
-        starts = np.flatnonzero(np.r_[True, elem[1:] != elem[:-1]])
-        group = np.cumsum(np.r_[False, elem[1:] != elem[:-1]])
-        # each element's worst pixel: the first reaching the element's maximum
-        peak = np.maximum.reduceat(err, starts)
-        at_peak = np.flatnonzero(err == peak[group])
-        best = at_peak[np.r_[True, group[at_peak][1:] != group[at_peak][:-1]]]
-        best = best[err[best] > 0.5]
-        new = np.stack([x[best], y[best]], axis=1)
-        if len(new) == 0:
-            break
-        vertices = _merge(width, vertices, new)
-    return vertices
+        vertices = _merge(width, vertices, np.stack([x[big], y[big]], axis=1))
+    return vertices, tris, elements, stats
 
 
 def build(
@@ -186,6 +255,7 @@ def build(
     wall_pts = np.zeros((0, 2), np.int64)
     segments = np.zeros((0, 2), np.int64)
     excluded = np.zeros((height, width), dtype=bool)
+    near = None
     if width > 2 and height > 2:
         found, magnitude, _ = edge_stage.detect(gray, peak, thresholds)
         lines = polyline_stage.trace(
@@ -195,6 +265,7 @@ def build(
         walls = unfold(lines, gray * np.float32(255.0 / peak))
         wall_pts, segments = walls.points, walls.segments
         excluded = _excluded(lines, walls, (height, width))
+        near = _near(found)
     region = max(0, int(region_share * points))
     if tiles is None:
         tiles = (max(1, round(width / TILE)), max(1, round(height / TILE)))
@@ -205,9 +276,14 @@ def build(
     dens = sampling.density(sampling.curvature(gray), excluded)
     samples = sampling.sample(dens, tiles, per_tile) if region > 0 else np.zeros((0, 2), np.int64)
     vertices = _merge(width, wall_pts, corners, samples)
-    vertices = refine(gray, vertices, segments, points)
-    # vertices that landed on a wall split it, as the triangulation will
+    fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
+    layout = Statistics(gray, fit, near if values == "lsq" and image.ndim == 2 else None)
+    vertices, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
+    if values == "lsq":
+        steps = None if layout.MASK is None else _pixels_near(vertices, triangles, elements, stats[:, layout.MASK], near)
+        vals = vertex_values.from_statistics(image, vertices, elements, stats, layout, steps)
+    else:
+        vals = vertex_values.sample(image, vertices)
+    # vertices that landed on a wall split it, as the triangulation did
     segments = split_at_vertices(vertices, segments, width, height)
-    triangles = triangulate(vertices, segments)
-    vals = vertex_values.fit(image, vertices, triangles, values)
     return Mesh(vertices, vals, triangles, width, height, _chains(segments))

@@ -13,7 +13,10 @@ the element's first corner, with integer alpha, beta, gamma and D. Elements are
   them (the mesh is linear there), which own the pixels that rule leaves out.
 
 So the sums over all pixels that least squares and error estimates need (moments of u,
-v and of the image) reduce to closed forms per span, with no per-pixel work.
+v and of the image, optionally weighted per pixel) reduce to closed forms or prefix-sum
+look-ups per span, with no per-pixel work. Elements can be rasterised in parts (a subset
+of the triangles, the border lines) and their statistics kept per element, so that a
+mesh that changes in places only needs its new triangles measured.
 """
 
 from __future__ import annotations
@@ -35,7 +38,8 @@ def _segments(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 @dataclass(eq=False)
 class Raster:
-    """Elements (corners, local origin, affine weight coefficients) and their row spans."""
+    """Elements (corners, local origin, affine weight coefficients) and their row spans,
+    grouped by element (span_elem is non-decreasing)."""
 
     width: int
     height: int
@@ -48,63 +52,170 @@ class Raster:
     span_x: np.ndarray  # S: first column
     span_n: np.ndarray  # S: pixel count (> 0)
 
+    def __len__(self) -> int:
+        return len(self.den)
+
     def pixels(self, elements: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(element, x, y) of every pixel owned by `elements` (default: all)."""
         sel = slice(None) if elements is None else np.isin(self.span_elem, elements)
         e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
 
-    def moments(self) -> np.ndarray:
-        """E x 6 sums over each element's pixels of 1, u, v, uu, uv, vv."""
+    def pixels_in(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(element, x, y) of every pixel of the elements that is True in `mask`."""
+        rows = np.zeros((mask.shape[0], mask.shape[1] + 1), np.int64)
+        np.cumsum(mask, axis=1, out=rows[:, 1:])
+        flat = rows.ravel()
+        lo = self.span_y * (mask.shape[1] + 1) + self.span_x
+        sel = flat[lo + self.span_n] > flat[lo]
+        e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
+        e, x, y = np.repeat(e, n), _segments(x, n), np.repeat(y, n)
+        hit = mask[y, x]
+        return e[hit], x[hit], y[hit]
+
+    def reduce(self, per_span: np.ndarray) -> np.ndarray:
+        """Sum the rows of an S x K array over each element's spans (E x K)."""
+        m = len(self.den)
+        out = np.zeros((m, per_span.shape[1]))
+        if len(per_span):
+            first = np.searchsorted(self.span_elem, np.arange(m))
+            has = first < np.r_[first[1:], len(per_span)]
+            out[has] = np.add.reduceat(per_span, first[has], axis=0)
+        return out
+
+    def span_moments(self) -> np.ndarray:
+        """S x 6 sums over each span's pixels of 1, u, v, uu, uv, vv (u, v relative to
+        the span's element's origin)."""
         e, n = self.span_elem, self.span_n.astype(np.float64)
         u0 = (self.span_x - self.origin[e, 0]).astype(np.float64)
         v = (self.span_y - self.origin[e, 1]).astype(np.float64)
         u1 = u0 + n - 1
         su = (u0 + u1) * n / 2
         suu = (u1 * (u1 + 1) * (2 * u1 + 1) - (u0 - 1) * u0 * (2 * u0 - 1)) / 6
-        parts = [n, su, v * n, suu, v * su, v * v * n]
-        m = len(self.den)
-        return np.stack([np.bincount(e, weights=p, minlength=m) for p in parts], axis=1)
+        return np.stack([n, su, v * n, suu, v * su, v * v * n], axis=1)
 
-    def image_moments(self, prefix: "RowPrefix") -> np.ndarray:
-        """E x 4 sums over each element's pixels of b, u b, v b and b^2 for the plane b
-        of `prefix`."""
-        e, y, x, n = self.span_elem, self.span_y, self.span_x, self.span_n
-        lo = y * prefix.stride + x
-        hi = lo + n
-        sb = prefix.sum[hi] - prefix.sum[lo]
-        sxb = prefix.sum_x[hi] - prefix.sum_x[lo]
-        sbb = prefix.sum_sq[hi] - prefix.sum_sq[lo]
-        sub = sxb - self.origin[e, 0] * sb
-        svb = (y - self.origin[e, 1]) * sb
-        m = len(self.den)
-        return np.stack([np.bincount(e, weights=p, minlength=m) for p in (sb, sub, svb, sbb)], axis=1)
+    def moments(self) -> np.ndarray:
+        """E x 6 sums over each element's pixels of 1, u, v, uu, uv, vv."""
+        return self.reduce(self.span_moments())
+
+    def span_sums(self, planes: "Planes") -> np.ndarray:
+        """S x K sums over each span's pixels of the K planes of `planes`."""
+        lo = self.span_y * planes.stride + self.span_x
+        return planes.flat[lo + self.span_n] - planes.flat[lo]
 
     def affine(self, vertex_values: np.ndarray) -> np.ndarray:
         """E x 3: the mesh value in each element as (a, b, c) with f = a u + b v + c."""
         z = np.asarray(vertex_values, dtype=np.float64)[self.corners]
-        return np.einsum("eik,ei->ek", self.coef.astype(np.float64), z) / self.den[:, None]
+        c = self.coef
+        return (c[:, 0] * z[:, 0:1] + c[:, 1] * z[:, 1:2] + c[:, 2] * z[:, 2:3]) / self.den[:, None]
 
     def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The mesh value (unrounded) at pixels (x, y) of their elements."""
         f = affine[elem]
         return f[:, 0] * (x - self.origin[elem, 0]) + f[:, 1] * (y - self.origin[elem, 1]) + f[:, 2]
 
+    def worst_pixels(self, plane: np.ndarray, vertex_values: np.ndarray, elements: np.ndarray):
+        """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
+        from the mesh through `vertex_values`, the first in raster order of those
+        tied. Returns (element, x, y, |error|)."""
+        elem, x, y = self.pixels(elements)
+        if len(elem) == 0:
+            return elem, x, y, np.zeros(0)
+        err = np.abs(plane[y, x] - self.evaluate(self.affine(vertex_values), elem, x, y))
+        cut = np.r_[True, elem[1:] != elem[:-1]]
+        group = np.cumsum(cut) - 1
+        peak = np.maximum.reduceat(err, np.flatnonzero(cut))
+        at_peak = np.flatnonzero(err == peak[group])
+        best = at_peak[np.r_[True, group[at_peak][1:] != group[at_peak][:-1]]]
+        return elem[best], x[best], y[best], err[best]
 
-class RowPrefix:
-    """Prefix sums along the rows of a plane b (of b, x b and b^2), so that the sums
-    over any row span cost two look-ups."""
 
-    def __init__(self, plane: np.ndarray):
-        h, w = plane.shape
-        b = plane.astype(np.float64)
+class Planes:
+    """Prefix sums along the rows of K planes, stacked, so that the sums over any row
+    span of all K cost two look-ups."""
+
+    def __init__(self, planes: list[np.ndarray]):
+        h, w = planes[0].shape
+        out = np.empty((h, w + 1, len(planes)))
+        out[:, 0] = 0.0
+        for k, plane in enumerate(planes):
+            np.cumsum(plane, axis=1, out=out[:, 1:, k])
         self.stride = w + 1
-        sums = []
-        for term in (b, b * np.arange(w, dtype=np.float64), b * b):
-            out = np.zeros((h, w + 1))
-            np.cumsum(term, axis=1, out=out[:, 1:])
-            sums.append(out.ravel())  # flat: row y, columns [x, x+n) is y*stride + x .. + n
-        self.sum, self.sum_x, self.sum_sq = sums
+        self.flat = out.reshape(-1, len(planes))  # row y, columns [x, x+n): y*stride + x .. + n
+
+
+class Statistics:
+    """Per-element sums over the element's pixels, from one pass over its spans.
+
+    Columns (E x width): the moments of u and v (GEO: 1, u, v, uu, uv, vv) and the sums
+    of the structure plane b (IMG: b, ub, vb, bb), for squared errors; for least
+    squares, the sums of every channel c of the fitted image (b_c, u b_c, v b_c); and
+    with a `mask`, the number of the element's pixels in it (MASK).
+
+    fit: None (no least squares), "structure" (fit the structure plane itself) or an
+    H x W x C image.
+    """
+
+    GEO = slice(0, 6)
+    IMG = slice(6, 10)
+
+    def __init__(self, structure: np.ndarray, fit=None, mask: np.ndarray | None = None):
+        h, w = structure.shape
+        xs = np.arange(w, dtype=np.float64)
+        b = structure.astype(np.float64)
+        planes = [b, b * xs, b * b]
+        self.own = fit is not None and not isinstance(fit, str)
+        channels = [] if not self.own else list(np.moveaxis(fit.reshape(h, w, -1), 2, 0))
+        for c in channels:
+            bc = c.astype(np.float64)
+            planes += [bc, bc * xs]
+        self.channels = 0 if fit is None else max(1, len(channels))
+        self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
+        width = 10 + 3 * len(channels)
+        self.MASK = None
+        if mask is not None:
+            planes.append(np.asarray(mask, dtype=np.float64))
+            self.MASK = width
+            width += 1
+        self.width = width
+        self.planes = Planes(planes)
+
+    def __call__(self, raster: Raster) -> np.ndarray:
+        """E x width: the statistics of every element of `raster`."""
+        d = raster.span_sums(self.planes)
+        e = raster.span_elem
+        ox = raster.origin[e, 0].astype(np.float64)
+        v = (raster.span_y - raster.origin[e, 1]).astype(np.float64)
+        cols = [raster.span_moments(), d[:, 0:1], (d[:, 1] - ox * d[:, 0])[:, None], (v * d[:, 0])[:, None], d[:, 2:3]]
+        k = 3
+        if self.own:
+            for _ in self._fit:
+                cols += [d[:, k : k + 1], (d[:, k + 1] - ox * d[:, k])[:, None], (v * d[:, k])[:, None]]
+                k += 2
+        if self.MASK is not None:
+            cols.append(d[:, k : k + 1])
+        return raster.reduce(np.concatenate(cols, axis=1))
+
+    def fit_part(self, stats: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(E x 6 moments, E x C x 3 image sums b, ub, vb) for least squares."""
+        return stats[:, self.GEO], np.stack([stats[:, f] for f in self._fit], axis=1)
+
+
+def squared_error(affine: np.ndarray, moments: np.ndarray, sums: np.ndarray) -> np.ndarray:
+    """E: sum over each element's pixels of (b - f)^2 for the affine f = a u + b v + c
+    of each element (E x 3), from its moments (E x 6: 1, u, v, uu, uv, vv) and image
+    sums (E x 4: b, ub, vb, bb): sum b^2 - 2 sum b f + sum f^2."""
+    m, mb = moments, sums
+    a, b, c = affine.T
+    ff = a * a * m[:, 3] + 2 * a * b * m[:, 4] + b * b * m[:, 5] + 2 * a * c * m[:, 1] + 2 * b * c * m[:, 2] + c * c * m[:, 0]
+    bf = a * mb[:, 1] + b * mb[:, 2] + c * mb[:, 0]
+    return np.maximum(mb[:, 3] - 2 * bf + ff, 0.0)
+
+
+def element_sse(raster: Raster, stats: np.ndarray, vertex_values: np.ndarray) -> np.ndarray:
+    """E: squared error of the (unrounded) mesh through `vertex_values` against the
+    structure plane, summed over each element's pixels (`stats` from Statistics)."""
+    return squared_error(raster.affine(vertex_values), stats[:, Statistics.GEO], stats[:, Statistics.IMG])
 
 
 def _triangle_spans(v: np.ndarray, t: np.ndarray):
@@ -154,7 +265,7 @@ def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, le
     coef[:k, 0, 2] = la
     coef[:k, 1, axis] = 1
     coef[k, 0, 2] = 1
-    corners = np.concatenate([corners, [[idx[-1]] * 3]]).astype(np.int64)
+    corners = np.concatenate([corners, [[idx[-1]] * 3]]).astype(np.int64).reshape(-1, 3)
     origin = v[np.concatenate([a, idx[-1:]])]
     den = np.concatenate([la, [1]]).astype(np.int64)
     starts = np.concatenate([pos[:-1], pos[-1:]])
@@ -171,47 +282,59 @@ def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, le
     return corners, origin, coef, den, elem[keep], span_y[keep], span_x[keep], span_n[keep]
 
 
-def rasterize(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int) -> Raster:
-    """Ownership spans and weights of a mesh covering the image. The bottom row and the
-    right column need a vertex at each of their ends (the image corners)."""
+def _triangle_coefficients(p: np.ndarray):
+    """Origin (first corner), weight coefficients and doubled area of triangles whose
+    corner coordinates are p (M x 3 x 2)."""
+    origin = p[:, 0]
+    coef = np.zeros((len(p), 3, 3), dtype=np.int64)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj), with x = u + x0, y = v + y0
+        ex = p[:, k, 0] - p[:, j, 0]
+        ey = p[:, k, 1] - p[:, j, 1]
+        coef[:, i, 0] = -ey
+        coef[:, i, 1] = ex
+        coef[:, i, 2] = ex * (origin[:, 1] - p[:, j, 1]) - ey * (origin[:, 0] - p[:, j, 0])
+    return origin, coef, coef[:, :, 2].sum(axis=1)
+
+
+def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int,
+                    *, spans: bool = True) -> Raster:
+    """The triangles' elements alone (no border lines): what they own of the image.
+    spans=False: their weights only (no spans, for statistics measured before)."""
     v = np.asarray(vertices, dtype=np.int64)
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    parts = []
-    if len(t):
-        p = v[t]  # M x 3 x 2
-        origin = p[:, 0]
-        coef = np.zeros((len(t), 3, 3), dtype=np.int64)
-        for i in range(3):
-            j, k = (i + 1) % 3, (i + 2) % 3
-            # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj), with x = u + x0, y = v + y0
-            ex = p[:, k, 0] - p[:, j, 0]
-            ey = p[:, k, 1] - p[:, j, 1]
-            coef[:, i, 0] = -ey
-            coef[:, i, 1] = ex
-            coef[:, i, 2] = ex * (origin[:, 1] - p[:, j, 1]) - ey * (origin[:, 0] - p[:, j, 0])
-        den = coef[:, :, 2].sum(axis=1)
-        tri, y, x, n = _triangle_spans(v, t)
-        parts.append((t, origin, coef, den, tri, y, x, n))
-    parts.append(_line_elements(v, v[:, 1] == height - 1, 0, height - 1, width))
+    origin, coef, den = _triangle_coefficients(v[t])
+    if spans and len(t):
+        return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
+    empty = np.zeros(0, np.int64)
+    return Raster(width, height, t, origin, coef, den, empty, empty, empty, empty)
+
+
+def line_raster(vertices: np.ndarray, width: int, height: int) -> Raster:
+    """The elements of the bottom row and the right column, which need a vertex at
+    each of their ends (the image corners)."""
+    v = np.asarray(vertices, dtype=np.int64)
+    parts = [_line_elements(v, v[:, 1] == height - 1, 0, height - 1, width)]
     if height > 1:
-        right = _line_elements(v, v[:, 0] == width - 1, 1, width - 1, height - 1)
-        parts.append(right)
-    offset = 0
-    cols = [[] for _ in range(8)]
-    for part in parts:
-        for i, a in enumerate(part):
-            cols[i].append(a + offset if i == 4 else a)
-        offset += len(part[3])
-    corners, origin, coef, den, elem, y, x, n = (np.concatenate(c) for c in cols)
-    return Raster(width, height, corners, origin, coef, den, elem, y, x, n)
+        parts.append(_line_elements(v, v[:, 0] == width - 1, 1, width - 1, height - 1))
+    return concat([Raster(width, height, *part) for part in parts])
 
 
-def element_sse(raster: Raster, prefix: RowPrefix, vertex_values: np.ndarray, moments=None) -> np.ndarray:
-    """E: squared error of the (unrounded) mesh against the plane of `prefix`, summed
-    over each element's pixels: sum b^2 - 2 sum b f + sum f^2 with f affine per element."""
-    m = raster.moments() if moments is None else moments  # 1, u, v, uu, uv, vv
-    mb = raster.image_moments(prefix)  # b, ub, vb, bb
-    a, b, c = raster.affine(vertex_values).T
-    ff = a * a * m[:, 3] + 2 * a * b * m[:, 4] + b * b * m[:, 5] + 2 * a * c * m[:, 1] + 2 * b * c * m[:, 2] + c * c * m[:, 0]
-    bf = a * mb[:, 1] + b * mb[:, 2] + c * mb[:, 0]
-    return np.maximum(mb[:, 3] - 2 * bf + ff, 0.0)
+def concat(rasters: list[Raster]) -> Raster:
+    """One raster of the elements of several, in their order."""
+    offsets = np.cumsum([0] + [len(r) for r in rasters[:-1]])
+    first = rasters[0]
+    return Raster(
+        first.width,
+        first.height,
+        *(np.concatenate([getattr(r, f) for r in rasters]) for f in ("corners", "origin", "coef", "den")),
+        np.concatenate([r.span_elem + o for r, o in zip(rasters, offsets)]),
+        *(np.concatenate([getattr(r, f) for r in rasters]) for f in ("span_y", "span_x", "span_n")),
+    )
+
+
+def rasterize(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int) -> Raster:
+    """Ownership spans and weights of a mesh covering the image: the triangles, then the
+    bottom row and the right column (which need a vertex at each of their ends)."""
+    return concat([triangle_raster(vertices, triangles, width, height), line_raster(vertices, width, height)])

@@ -8,6 +8,22 @@ from .errors import OptionError
 
 METHODS = ("sample", "lsq")
 
+#: Pull of every vertex towards its own pixel's value in least squares, in units of one
+#: pixel's squared weight: negligible next to a vertex's pixels, it decides the vertices
+#: whose pixels all have weight zero.
+RIDGE = 1e-3
+#: Conjugate gradients stop when the residual is this small relative to the right-hand
+#: side (values are rounded to integers afterwards), or after MAX_ITER steps.
+RTOL = 1e-6
+MAX_ITER = 300
+#: Distance from the mesh beyond which a pixel near an edge counts as a step pixel.
+OUTLIER = 4.0
+#: Mean squared error per pixel (gray levels squared) under which an element counts as
+#: exact: rounding the image to integers alone gives about 1/12.
+PLANAR = 0.25
+#: Pixels a vertex needs around it to be judged exact.
+EVIDENCE = 12
+
 
 def sample(image: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     """The pixel value under each vertex (the seed's choice)."""
@@ -19,59 +35,143 @@ def _to_dtype(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
     return np.clip(np.round(values), info.min, info.max).astype(dtype)
 
 
-def gram(raster) -> tuple[np.ndarray, np.ndarray]:
-    """Per element, the 3 x 3 sums over its pixels of w_i w_j; and the moments used."""
-    m = raster.moments()  # 1, u, v, uu, uv, vv
-    a, b, g = (raster.coef[:, :, k].astype(np.float64) for k in range(3))
-    out = np.empty((len(raster.den), 3, 3))
+def normal_equations(coef: np.ndarray, den: np.ndarray, moments: np.ndarray, image_sums: np.ndarray):
+    """Per element, its part of A^T W A (E x 3 x 3, corner by corner) and of A^T W b
+    (E x C x 3), from its weighted moments (E x 6: 1, u, v, uu, uv, vv) and image sums
+    (E x C x 3: b, ub, vb), where a pixel's row of A holds its corners' weights
+    w_i = (alpha_i u + beta_i v + gamma_i) / D."""
+    m = moments
+    c = coef.astype(np.float64)
+    d = den.astype(np.float64)
+    # M = sum over pixels of p p^T with p = (u, v, 1); gram = C M C^T / D^2, C's rows
+    # the corners' (alpha, beta, gamma)
+    rows = ((m[:, 3], m[:, 4], m[:, 1]), (m[:, 4], m[:, 5], m[:, 2]), (m[:, 1], m[:, 2], m[:, 0]))
+    cm = [[sum(c[:, i, k] * rows[k][l] for k in range(3)) for l in range(3)] for i in range(3)]
+    gram = np.empty((len(c), 3, 3))
     for i in range(3):
-        for j in range(3):
-            out[:, i, j] = (
-                a[:, i] * a[:, j] * m[:, 3]
-                + (a[:, i] * b[:, j] + b[:, i] * a[:, j]) * m[:, 4]
-                + b[:, i] * b[:, j] * m[:, 5]
-                + (a[:, i] * g[:, j] + g[:, i] * a[:, j]) * m[:, 1]
-                + (b[:, i] * g[:, j] + g[:, i] * b[:, j]) * m[:, 2]
-                + g[:, i] * g[:, j] * m[:, 0]
-            )
-    den = raster.den.astype(np.float64)
-    return out / (den * den)[:, None, None], m
+        for j in range(i, 3):
+            gram[:, i, j] = gram[:, j, i] = sum(cm[i][l] * c[:, j, l] for l in range(3))
+    gram /= (d * d)[:, None, None]
+    # (ub, vb, b) against (alpha, beta, gamma)
+    s = image_sums
+    rhs = (c[:, None, :, 0] * s[:, :, 1:2] + c[:, None, :, 1] * s[:, :, 2:3] + c[:, None, :, 2] * s[:, :, 0:1]) / d[:, None, None]
+    return gram, rhs
+
+
+def _diagonal(corners: np.ndarray, gram: np.ndarray, n: int) -> np.ndarray:
+    return np.bincount(corners.ravel(), weights=np.diagonal(gram, axis1=1, axis2=2).ravel(), minlength=n)
+
+
+def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndarray,
+          ridge: float | np.ndarray = RIDGE) -> np.ndarray:
+    """Minimise sum over elements of the squared error plus ridge * |z - start|^2 for
+    every channel: (A^T W A + ridge I) z = A^T W b + ridge * start, by conjugate
+    gradients with a diagonal preconditioner, matrix-free (element by element), from
+    `start` (n x C). Returns n x C float64."""
+    n = len(start)
+    flat = corners.ravel()
+
+    columns = np.ascontiguousarray(gram.transpose(2, 0, 1))
+
+    def apply(x: np.ndarray) -> np.ndarray:
+        xc = x[corners]
+        y = columns[0] * xc[:, 0:1] + columns[1] * xc[:, 1:2] + columns[2] * xc[:, 2:3]
+        return np.bincount(flat, weights=y.ravel(), minlength=n) + ridge * x
+
+    diag = _diagonal(corners, gram, n) + ridge
+    out = np.empty(start.shape)
+    for ch in range(start.shape[1]):
+        b = np.bincount(flat, weights=rhs[:, ch, :].ravel(), minlength=n) + ridge * start[:, ch]
+        x = start[:, ch].astype(np.float64)
+        r = b - apply(x)
+        limit = RTOL * np.linalg.norm(b)
+        z = r / diag
+        p = z
+        rz = r @ z
+        for _ in range(MAX_ITER):
+            if np.linalg.norm(r) <= limit:
+                break
+            q = apply(p)
+            alpha = rz / (p @ q)
+            x = x + alpha * p
+            r = r - alpha * q
+            z = r / diag
+            rz, previous = r @ z, rz
+            p = z + (rz / previous) * p
+        out[:, ch] = x
+    return out
+
+
+def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarray, values: np.ndarray,
+                  near: tuple[np.ndarray, np.ndarray, np.ndarray], bb: np.ndarray) -> np.ndarray:
+    """Least squares without the step pixels, kept where it makes the image exact.
+
+    A pixel on a step belongs to neither side: a wall cannot follow it to the pixel,
+    and left in the fit it pulls the values of the wall vertices on both sides, so
+    that even a piecewise-planar image is not reproduced away from its steps. The
+    pixels near edges (`near`: element, x, y) that the mesh misses by more than
+    OUTLIER are dropped and the fit solved again; the new values are taken at the
+    vertices around which every element's remaining pixels now fit to within rounding
+    (mean squared error at most PLANAR, over at least EVIDENCE pixels): the planar
+    parts of the image. Elsewhere (textures, photographs) the first fit, which is the
+    smaller squared error overall, stays.
+    """
+    from .raster import squared_error
+
+    e, x, y = near
+    b = image[y, x].astype(np.float64)
+    out = np.abs(b - raster.evaluate(raster.affine(values[:, 0]), e, x, y)) > OUTLIER
+    if not out.any():
+        return values
+    e, b = e[out], b[out]
+    u = (x[out] - raster.origin[e, 0]).astype(np.float64)
+    v = (y[out] - raster.origin[e, 1]).astype(np.float64)
+    m = len(raster)
+    drop = np.stack([np.bincount(e, w, m) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+    moments = moments - drop[:, :6]
+    sums = sums - drop[:, None, 6:9]
+    gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
+    refit = solve(raster.corners, gram, rhs, values)
+    count = moments[:, 0]
+    kept_sums = np.concatenate([sums[:, 0], (bb - drop[:, 9])[:, None]], axis=1)
+    sse = squared_error(raster.affine(refit[:, 0]), moments, kept_sums)
+    flat = raster.corners.ravel()
+    n = len(values)
+    rough = np.bincount(flat, weights=np.repeat(sse > PLANAR * count, 3), minlength=n) > 0
+    evidence = np.bincount(flat, weights=np.repeat(count, 3), minlength=n)
+    planar = ~rough & (evidence >= EVIDENCE)
+    return np.where(planar[:, None], refit, values)
+
+
+def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
+                    near: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Least-squares vertex values in the image's dtype from the elements of `raster`
+    and their statistics (`layout`: the codec.raster.Statistics that measured them).
+    near: (element, x, y) of the pixels on or next to edges, for single-channel images:
+    see _planar_refit."""
+    n = len(vertices)
+    moments, sums = layout.fit_part(stats)
+    gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
+    start = sample(image, vertices).reshape(n, -1).astype(np.float64)
+    out = solve(raster.corners, gram, rhs, start)
+    if near is not None and image.ndim == 2 and len(near[0]):
+        out = _planar_refit(image, raster, moments, sums, out, near, stats[:, layout.IMG][:, 3])
+    out = _to_dtype(out, image.dtype)
+    return out[:, 0] if image.ndim == 2 else out
 
 
 def least_squares(image: np.ndarray, vertices: np.ndarray, raster) -> np.ndarray:
     """Vertex values minimising the squared error over all pixels, for the decoder's
     pixel weights (`raster`: a codec.raster.Raster of the mesh), in the image's dtype.
 
-    The normal equations A^T A z = A^T b are assembled per element from closed-form
-    pixel sums and solved by conjugate gradients from the sampled values; A^T A is
-    positive definite because every vertex sits on a pixel where its own weight is 1.
+    The normal equations are assembled per element from closed-form and prefix sums
+    over its row spans and solved by conjugate gradients from the sampled values.
     """
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import cg
+    from .image import structure
+    from .raster import Statistics
 
-    from .raster import RowPrefix
-
-    n = len(vertices)
-    channels = 1 if image.ndim == 2 else image.shape[2]
-    planes = image.reshape(image.shape[0], image.shape[1], channels)
-    c = raster.corners
-    g, _ = gram(raster)
-    rows = np.repeat(c, 3, axis=1).ravel()
-    cols = np.tile(c, (1, 3)).ravel()
-    ata = sp.csr_matrix((g.ravel(), (rows, cols)), shape=(n, n))
-    den = raster.den.astype(np.float64)
-    coef = raster.coef.astype(np.float64)
-    start = sample(image, vertices).reshape(n, channels).astype(np.float64)
-    precond = sp.diags(1.0 / ata.diagonal())
-    out = np.empty((n, channels))
-    for ch in range(channels):
-        mb = raster.image_moments(RowPrefix(planes[:, :, ch]))  # b, ub, vb, bb
-        per_corner = (coef[:, :, 0] * mb[:, 1:2] + coef[:, :, 1] * mb[:, 2:3] + coef[:, :, 2] * mb[:, 0:1]) / den[:, None]
-        atb = np.bincount(c.ravel(), weights=per_corner.ravel(), minlength=n)
-        # values are rounded to integers afterwards, so a loose tolerance is enough
-        out[:, ch], _ = cg(ata, atb, x0=start[:, ch], rtol=1e-5, maxiter=200, M=precond)
-    out = _to_dtype(out, image.dtype)
-    return out[:, 0] if image.ndim == 2 else out
+    layout = Statistics(structure(image), "structure" if image.ndim == 2 else image)
+    return from_statistics(image, vertices, raster, layout(raster), layout)
 
 
 def fit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, method: str) -> np.ndarray:
