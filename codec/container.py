@@ -14,18 +14,16 @@ from dataclasses import dataclass
 from typing import BinaryIO, Iterator
 
 import numpy as np
-import zstandard
 from construct import ChecksumError, ConstructError
 
 from format_spec import schema
 
-from . import coding, limits, meshcode
+from . import coding, frames, limits, meshcode
 from .errors import CorruptError, FormatError, LimitError, OptionError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser
 
-ZSTD_LEVEL = 19
 
 
 @dataclass(frozen=True)
@@ -112,7 +110,6 @@ class Writer:
         self.header = header
         self._next_y0 = 0
         self._rows_done = 0
-        self._compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True)
         stream.write(schema.FileHeader.build(dict(version=schema.VERSION)))
         stream.write(_chunk(schema.HEADER, schema.Header.build(header._fields())))
         if header.quant is not None:
@@ -121,7 +118,7 @@ class Writer:
         if header.nodata is not None:
             stream.write(_chunk(schema.NODATA, schema.NoData.build(dict(value=header.nodata))))
         if header.metadata is not None:
-            stream.write(_chunk(schema.META, self._compressor.compress(encode_metadata(header.metadata))))
+            stream.write(_chunk(schema.META, frames.compress(encode_metadata(header.metadata))))
 
     @property
     def done(self) -> bool:
@@ -142,11 +139,12 @@ class Writer:
             mask = schema.MaskPayload.build(
                 dict(y0=y0, rows=mesh.height, run_count=len(runs), runs=coding.varints(runs))
             )
-            self._stream.write(_chunk(schema.MASK, self._compressor.compress(mask)))
+            self._stream.write(_chunk(schema.MASK, frames.compress(mask)))
         elif mesh.holes is not None and mesh.holes.any():
             raise ValueError("a band with holes needs a header with a nodata value")
-        raw = schema.MeshPayload.build(meshcode.encode_band(y0, mesh), **h._fields())
-        self._stream.write(_chunk(schema.MESH, self._compressor.compress(raw)))
+        fields = meshcode.encode_band(y0, mesh)
+        raw = schema.MeshPayload.build(fields, **h._fields())
+        self._stream.write(_chunk(schema.MESH, frames.compress_parts(meshcode.payload_parts(raw, fields))))
         _release_cycles(len(raw))
         self._next_y0 = y0 + mesh.height - 1
         self._rows_done = y0 + mesh.height
@@ -195,27 +193,6 @@ class _Counted:
             parts.append(part)
             left -= len(part)
         return b"".join(parts)
-
-
-def _decompress(payload: bytes, limit: int, name: str) -> bytes:
-    try:
-        size = zstandard.frame_content_size(payload)
-    except zstandard.ZstdError as exc:
-        raise CorruptError(f"chunk {name} is not a zstd frame: {exc}") from None
-    if size < 0:
-        raise CorruptError(f"chunk {name}'s zstd frame does not declare its size")
-    if size > min(limit, limits.MAX_PAYLOAD_BYTES):
-        raise LimitError(
-            f"chunk {name} would decompress to {size:,} bytes, more than its image can need "
-            "(a decompression bomb?)"
-        )
-    try:
-        data = zstandard.ZstdDecompressor().decompress(payload, max_output_size=max(size, 1))
-    except zstandard.ZstdError as exc:
-        raise CorruptError(f"chunk {name} does not decompress: {exc}") from None
-    if len(data) != size:
-        raise CorruptError(f"chunk {name} decompresses to {len(data)} bytes, not the {size} declared")
-    return data
 
 
 @dataclass(frozen=True)
@@ -359,7 +336,7 @@ class Reader:
         return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
 
     def _read_metadata(self, payload: bytes, offset: int) -> None:
-        raw = _decompress(payload, MAX_METADATA_BYTES, f"meta at byte {offset}")
+        raw = frames.decompress(payload, MAX_METADATA_BYTES, f"meta chunk at byte {offset}")
         try:
             meta = json.loads(raw.decode("utf-8"))
         except (UnicodeDecodeError, ValueError):
@@ -386,7 +363,7 @@ class Reader:
     def _parse_mask(self, payload: bytes, offset: int, y0: int) -> np.ndarray:
         h = self.header
         where = f"MASK chunk at byte {offset}"
-        raw = _decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where)
+        raw = frames.decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where)
         stream = io.BytesIO(raw)
         try:
             m = schema.MaskPayload.parse_stream(stream)
@@ -415,7 +392,7 @@ class Reader:
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
         h = self.header
-        raw = _decompress(payload, self._payload_limit(), f"MESH at byte {offset}")
+        raw = frames.decompress(payload, self._payload_limit(), f"MESH chunk at byte {offset}")
         stream = io.BytesIO(raw)
         fields = h._fields()
         try:

@@ -29,6 +29,18 @@ from .mesh import Mesh, segments
 from .triangulate import triangulate
 
 
+#: The MESH payload's variable-length fields, in payload order (format_spec/schema.py).
+FIELDS = ("polyline_lengths", "polyline_starts", "polyline_steps", "positions", "samples", "triangles")
+
+
+def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
+    """A built MESH payload cut before each variable-length field: its fixed fields,
+    then each number stream (with its length prefix), for compress_parts."""
+    sizes = [len(fields[k]) + (0 if k == "samples" else 4) for k in FIELDS]
+    ends = np.cumsum([len(raw) - sum(sizes)] + sizes).tolist()
+    return [raw[a:b] for a, b in zip([0] + ends[:-1], ends)]
+
+
 def _segments(constraints: list[np.ndarray]) -> np.ndarray | None:
     return segments(constraints) if constraints else None
 

@@ -1,0 +1,60 @@
+"""Zstandard frames as .atm stores them (format_spec/ATM.md §4.2 and §4.6-4.7): every
+frame declares its decompressed size, which is checked against a limit before any
+memory is allocated for it."""
+
+from __future__ import annotations
+
+import zstandard
+
+from . import limits
+from .errors import CorruptError, LimitError
+
+#: Compression level of every frame the encoder writes.
+ZSTD_LEVEL = 19
+
+_compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True)
+
+
+def compress(data: bytes) -> bytes:
+    """One zstd frame holding `data`, its size declared."""
+    return _compressor.compress(data)
+
+
+def compress_parts(parts: list[bytes]) -> bytes:
+    """One zstd frame holding the parts one after another: the smaller of a plain
+    frame and one that ends a block after each part. Each block has its own entropy
+    tables, which suits parts whose numbers have different statistics (5-7 % smaller
+    for a large mesh); a small mesh does better with shared tables."""
+    plain = _compressor.compress(b"".join(parts))
+    if len(parts) < 2:
+        return plain
+    co = _compressor.compressobj(size=sum(len(p) for p in parts))
+    out = []
+    for part in parts:
+        out.append(co.compress(part))
+        out.append(co.flush(zstandard.COMPRESSOBJ_FLUSH_BLOCK))
+    out.append(co.flush())
+    blocks = b"".join(out)
+    return blocks if len(blocks) < len(plain) else plain
+
+
+def decompress(frame: bytes, limit: int, what: str) -> bytes:
+    """The data of one zstd frame that declares a size of at most `limit` bytes."""
+    try:
+        size = zstandard.frame_content_size(frame)
+    except zstandard.ZstdError as exc:
+        raise CorruptError(f"{what} is not a zstd frame: {exc}") from None
+    if size < 0:
+        raise CorruptError(f"{what}'s zstd frame does not declare its size")
+    if size > min(limit, limits.MAX_PAYLOAD_BYTES):
+        raise LimitError(
+            f"{what} would decompress to {size:,} bytes, more than its image can need "
+            "(a decompression bomb?)"
+        )
+    try:
+        data = zstandard.ZstdDecompressor().decompress(frame, max_output_size=max(size, 1))
+    except zstandard.ZstdError as exc:
+        raise CorruptError(f"{what} does not decompress: {exc}") from None
+    if len(data) != size:
+        raise CorruptError(f"{what} decompresses to {len(data)} bytes, not the {size} declared")
+    return data
