@@ -142,9 +142,9 @@ def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
     return (t[:, 0] * base + t[:, 1]) * base + t[:, 2]
 
 
-class _Elements:
-    """The statistics of the triangles met so far, by triangle, so that a triangle that
-    survives a round is not measured again."""
+class _Cache:
+    """Statistics of the triangles of the last triangulation, by triangle, so that a
+    triangle that survives a round is not measured again."""
 
     def __init__(self, layout: Statistics, base: int):
         self.layout = layout
@@ -152,21 +152,35 @@ class _Elements:
         self.keys = np.zeros(0, np.int64)  # sorted
         self.stats = np.zeros((0, layout.width))
 
-    def measure(self, vertices: np.ndarray, triangles: np.ndarray, width: int, height: int) -> np.ndarray:
-        """Statistics of every triangle (canonical), measuring only the new ones."""
+    def measure(self, vertices: np.ndarray, triangles: np.ndarray, width: int, height: int):
+        """(statistics of every triangle (canonical), indices of the new ones, a raster
+        of the new ones)."""
         keys = _keys(triangles, self.base)
-        if keys is None:
-            return self.layout(triangle_raster(vertices, triangles, width, height))
-        pos = np.minimum(np.searchsorted(self.keys, keys), max(len(self.keys) - 1, 0))
-        known = (self.keys[pos] == keys) if len(self.keys) else np.zeros(len(keys), bool)
-        stats = np.empty((len(keys), self.layout.width))
-        stats[known] = self.stats[pos[known]]
-        fresh = ~known
-        if fresh.any():
-            stats[fresh] = self.layout(triangle_raster(vertices, triangles[fresh], width, height))
-        order = np.argsort(keys)
-        self.keys, self.stats = keys[order], stats[order]
-        return stats
+        known = np.zeros(len(triangles), bool)
+        if keys is not None and len(self.keys):
+            pos = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+            known = self.keys[pos] == keys
+        fresh = np.flatnonzero(~known)
+        raster = triangle_raster(vertices, triangles[fresh], width, height)
+        stats = np.empty((len(triangles), self.layout.width))
+        stats[fresh] = self.layout(raster)
+        if known.any():
+            stats[known] = self.stats[pos[known]]
+        if keys is not None:
+            order = np.argsort(keys)
+            self.keys, self.stats = keys[order], stats[order]
+        return stats, fresh, raster
+
+
+def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, height):
+    """(triangle, x, y, |error|) of the worst pixel of each candidate triangle (sorted),
+    from the raster of the new triangles where the candidate is one of them."""
+    where = np.searchsorted(fresh, cand)
+    is_new = (where < len(fresh)) & (fresh[np.minimum(where, len(fresh) - 1)] == cand) if len(fresh) else np.zeros(len(cand), bool)
+    e1, x1, y1, err1 = fresh_raster.worst_pixels(gray, z, where[is_new])
+    old = cand[~is_new]
+    e2, x2, y2, err2 = triangle_raster(vertices, tris[old], width, height).worst_pixels(gray, z, np.arange(len(old)))
+    return np.r_[fresh[e1], old[e2]], np.r_[x1, x2], np.r_[y1, y2], np.r_[err1, err2]
 
 
 def refine(
@@ -188,11 +202,12 @@ def refine(
     (`layout`, which must have `gray` as its structure plane).
     """
     height, width = gray.shape
-    cache = _Elements(layout, target + len(vertices) + 1)
+    cache = _Cache(layout, target + len(vertices) + 1)
+    z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
     for r in range(rounds + 1):
         tris = triangulate(vertices, segments)
         tris = _canonical(tris) if len(tris) else tris
-        tri_stats = cache.measure(vertices, tris, width, height) if len(tris) else np.zeros((0, layout.width))
+        tri_stats, fresh, fresh_raster = cache.measure(vertices, tris, width, height)
         lines = line_raster(vertices, width, height)
         elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
         stats = np.concatenate([tri_stats, layout(lines)])
@@ -200,21 +215,25 @@ def refine(
         if r == rounds or missing <= 0:
             break
         batch = math.ceil(missing / (rounds - r))
-        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         sse = element_sse(elements, stats, z)
-        cand = np.argsort(-sse, kind="stable")[:batch]
+        if batch < len(sse):
+            # the batch largest, ties to the lower index (as a stable sort would)
+            cut = -np.partition(-sse, batch - 1)[batch - 1]
+            above = np.flatnonzero(sse > cut)
+            cand = np.r_[above, np.flatnonzero(sse == cut)[: batch - len(above)]]
+        else:
+            cand = np.arange(len(sse))
         cand = np.sort(cand[sse[cand] > 0])
         on_tri = cand[cand < len(tris)]
-        found = [
-            triangle_raster(vertices, tris[on_tri], width, height).worst_pixels(gray, z, np.arange(len(on_tri))),
-            lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris)),
-        ]
-        x = np.concatenate([f[1] for f in found])
-        y = np.concatenate([f[2] for f in found])
-        big = np.concatenate([f[3] for f in found]) > 0.5
+        t, x, y, err = _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, on_tri, width, height)
+        _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
+        order = np.argsort(t, kind="stable")
+        x, y, err = np.r_[x[order], lx], np.r_[y[order], ly], np.r_[err[order], lerr]
+        big = err > 0.5
         if not big.any():
             break
         vertices = _merge(width, vertices, np.stack([x[big], y[big]], axis=1))
+        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
     return vertices, tris, elements, stats
 
 
@@ -280,7 +299,9 @@ def build(
     layout = Statistics(gray, fit, near if values == "lsq" and image.ndim == 2 else None)
     vertices, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
     if values == "lsq":
-        steps = None if layout.MASK is None else _pixels_near(vertices, triangles, elements, stats[:, layout.MASK], near)
+        def steps():
+            return _pixels_near(vertices, triangles, elements, stats[:, layout.MASK], near)
+
         vals = vertex_values.from_statistics(image, vertices, elements, stats, layout, steps)
     else:
         vals = vertex_values.sample(image, vertices)

@@ -57,7 +57,11 @@ class Raster:
 
     def pixels(self, elements: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(element, x, y) of every pixel owned by `elements` (default: all)."""
-        sel = slice(None) if elements is None else np.isin(self.span_elem, elements)
+        if elements is None:
+            sel = slice(None)
+        else:
+            bounds = np.searchsorted(self.span_elem, np.arange(len(self.den) + 1))
+            sel = _segments(bounds[elements], bounds[np.asarray(elements) + 1] - bounds[elements])
         e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
 
@@ -74,34 +78,19 @@ class Raster:
         return e[hit], x[hit], y[hit]
 
     def reduce(self, per_span: np.ndarray) -> np.ndarray:
-        """Sum the rows of an S x K array over each element's spans (E x K)."""
-        m = len(self.den)
-        out = np.zeros((m, per_span.shape[1]))
-        if len(per_span):
-            first = np.searchsorted(self.span_elem, np.arange(m))
-            has = first < np.r_[first[1:], len(per_span)]
-            out[has] = np.add.reduceat(per_span, first[has], axis=0)
-        return out
+        """Sum the columns of a K x S array over each element's spans (E x K)."""
+        import scipy.sparse as sp
 
-    def span_moments(self) -> np.ndarray:
-        """S x 6 sums over each span's pixels of 1, u, v, uu, uv, vv (u, v relative to
-        the span's element's origin)."""
-        e, n = self.span_elem, self.span_n.astype(np.float64)
-        u0 = (self.span_x - self.origin[e, 0]).astype(np.float64)
-        v = (self.span_y - self.origin[e, 1]).astype(np.float64)
-        u1 = u0 + n - 1
-        su = (u0 + u1) * n / 2
-        suu = (u1 * (u1 + 1) * (2 * u1 + 1) - (u0 - 1) * u0 * (2 * u0 - 1)) / 6
-        return np.stack([n, su, v * n, suu, v * su, v * v * n], axis=1)
-
-    def moments(self) -> np.ndarray:
-        """E x 6 sums over each element's pixels of 1, u, v, uu, uv, vv."""
-        return self.reduce(self.span_moments())
+        m, n = len(self.den), len(self.span_elem)
+        bounds = np.searchsorted(self.span_elem, np.arange(m + 1))
+        summing = sp.csr_matrix((np.ones(n), np.arange(n), bounds), shape=(m, n))
+        return np.asarray(summing @ per_span.T)
 
     def span_sums(self, planes: "Planes") -> np.ndarray:
-        """S x K sums over each span's pixels of the K planes of `planes`."""
+        """K x S sums over each span's pixels of the K planes of `planes`."""
         lo = self.span_y * planes.stride + self.span_x
-        return planes.flat[lo + self.span_n] - planes.flat[lo]
+        hi = lo + self.span_n
+        return np.stack([np.take(f, hi) - np.take(f, lo) for f in planes.flat])
 
     def affine(self, vertex_values: np.ndarray) -> np.ndarray:
         """E x 3: the mesh value in each element as (a, b, c) with f = a u + b v + c."""
@@ -118,30 +107,42 @@ class Raster:
         """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
         from the mesh through `vertex_values`, the first in raster order of those
         tied. Returns (element, x, y, |error|)."""
-        elem, x, y = self.pixels(elements)
-        if len(elem) == 0:
-            return elem, x, y, np.zeros(0)
-        err = np.abs(plane[y, x] - self.evaluate(self.affine(vertex_values), elem, x, y))
-        cut = np.r_[True, elem[1:] != elem[:-1]]
-        group = np.cumsum(cut) - 1
-        peak = np.maximum.reduceat(err, np.flatnonzero(cut))
-        at_peak = np.flatnonzero(err == peak[group])
-        best = at_peak[np.r_[True, group[at_peak][1:] != group[at_peak][:-1]]]
-        return elem[best], x[best], y[best], err[best]
+        bounds = np.searchsorted(self.span_elem, np.arange(len(self.den) + 1))
+        spans = _segments(bounds[elements], bounds[np.asarray(elements) + 1] - bounds[elements])
+        e, y, x0, n = self.span_elem[spans], self.span_y[spans], self.span_x[spans], self.span_n[spans]
+        if len(e) == 0:
+            return e, x0, y, np.zeros(0)
+        f = self.affine(vertex_values)[e]
+        u = _segments(x0 - self.origin[e, 0], n)
+        index = np.repeat(y * plane.shape[1] + x0, n) + u - np.repeat(u[np.r_[0, np.cumsum(n)[:-1]]], n)
+        mesh = np.repeat(f[:, 0], n) * u
+        mesh += np.repeat(f[:, 1] * (y - self.origin[e, 1]), n)
+        mesh += np.repeat(f[:, 2], n)
+        err = np.abs(np.take(plane, index) - mesh)
+        # each element's first pixel at its maximum: spans of an element are contiguous
+        span_first = np.r_[0, np.cumsum(n)[:-1]]
+        elem_first = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
+        starts = span_first[elem_first]
+        peak = np.maximum.reduceat(err, starts)
+        owner = np.repeat(np.cumsum(np.r_[True, e[1:] != e[:-1]]) - 1, n)
+        at_peak = np.flatnonzero(err == peak[owner])
+        best = at_peak[np.r_[True, owner[at_peak][1:] != owner[at_peak][:-1]]]
+        w = plane.shape[1]
+        return e[elem_first], index[best] % w, index[best] // w, err[best]
 
 
 class Planes:
-    """Prefix sums along the rows of K planes, stacked, so that the sums over any row
-    span of all K cost two look-ups."""
+    """Prefix sums along the rows of K planes, so that the sums over any row span of
+    all of them cost two look-ups per plane."""
 
     def __init__(self, planes: list[np.ndarray]):
         h, w = planes[0].shape
-        out = np.empty((h, w + 1, len(planes)))
-        out[:, 0] = 0.0
-        for k, plane in enumerate(planes):
-            np.cumsum(plane, axis=1, out=out[:, 1:, k])
         self.stride = w + 1
-        self.flat = out.reshape(-1, len(planes))  # row y, columns [x, x+n): y*stride + x .. + n
+        # plane k, row y, columns [x, x+n): flat[k, y*stride + x .. + n]
+        self.flat = np.zeros((len(planes), h, w + 1))
+        for k, plane in enumerate(planes):
+            np.cumsum(plane, axis=1, out=self.flat[k, :, 1:])
+        self.flat = self.flat.reshape(len(planes), -1)
 
 
 class Statistics:
@@ -183,18 +184,41 @@ class Statistics:
     def __call__(self, raster: Raster) -> np.ndarray:
         """E x width: the statistics of every element of `raster`."""
         d = raster.span_sums(self.planes)
-        e = raster.span_elem
-        ox = raster.origin[e, 0].astype(np.float64)
-        v = (raster.span_y - raster.origin[e, 1]).astype(np.float64)
-        cols = [raster.span_moments(), d[:, 0:1], (d[:, 1] - ox * d[:, 0])[:, None], (v * d[:, 0])[:, None], d[:, 2:3]]
-        k = 3
-        if self.own:
-            for _ in self._fit:
-                cols += [d[:, k : k + 1], (d[:, k + 1] - ox * d[:, k])[:, None], (v * d[:, k])[:, None]]
-                k += 2
+        n = raster.span_n.astype(np.float64)
+        x0 = raster.span_x.astype(np.float64)
+        y = raster.span_y.astype(np.float64)
+        x1 = x0 + n - 1
+        # per span, in image coordinates: 1, x, y, xx, xy, yy, then b, xb, yb (and bb)
+        fit = len(self._fit) if self.own else 0
+        cols = np.empty((self.width, len(n)))
+        cols[0] = n
+        cols[1] = (x0 + x1) * n / 2
+        np.multiply(y, n, out=cols[2])
+        cols[3] = (x1 * (x1 + 1) * (2 * x1 + 1) - (x0 - 1) * x0 * (2 * x0 - 1)) / 6
+        np.multiply(y, cols[1], out=cols[4])
+        np.multiply(y, cols[2], out=cols[5])
+        cols[6:8] = d[0:2]
+        np.multiply(y, d[0], out=cols[8])
+        cols[9] = d[2]
+        for c in range(fit):
+            cols[10 + 3 * c : 12 + 3 * c] = d[3 + 2 * c : 5 + 2 * c]
+            np.multiply(y, d[3 + 2 * c], out=cols[12 + 3 * c])
         if self.MASK is not None:
-            cols.append(d[:, k : k + 1])
-        return raster.reduce(np.concatenate(cols, axis=1))
+            cols[self.MASK] = d[-1]
+        out = raster.reduce(cols)
+        # to coordinates relative to each element's origin: u = x - ox, v = y - oy
+        ox, oy = (raster.origin[:, k].astype(np.float64) for k in (0, 1))
+        sn, sx, sy, sxx, sxy, syy = out[:, :6].T.copy()
+        out[:, 1] = sx - ox * sn
+        out[:, 2] = sy - oy * sn
+        out[:, 3] = sxx - 2 * ox * sx + ox * ox * sn
+        out[:, 4] = sxy - ox * sy - oy * sx + ox * oy * sn
+        out[:, 5] = syy - 2 * oy * sy + oy * oy * sn
+        for first in [6] + [10 + 3 * c for c in range(fit)]:
+            sb = out[:, first].copy()
+            out[:, first + 1] -= ox * sb
+            out[:, first + 2] -= oy * sb
+        return out
 
     def fit_part(self, stats: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(E x 6 moments, E x C x 3 image sums b, ub, vb) for least squares."""
@@ -218,35 +242,51 @@ def element_sse(raster: Raster, stats: np.ndarray, vertex_values: np.ndarray) ->
     return squared_error(raster.affine(vertex_values), stats[:, Statistics.GEO], stats[:, Statistics.IMG])
 
 
+def _sort3(keys, *values):
+    """Sort three columns by `keys` (a network of three compare-and-swaps); `values`
+    follow. Returns the sorted keys and values as lists of three arrays."""
+    cols = [list(keys)] + [list(v) for v in values]
+    for i, j in ((0, 1), (1, 2), (0, 1)):
+        swap = cols[0][j] < cols[0][i]
+        for c in cols:
+            c[i], c[j] = np.where(swap, c[j], c[i]), np.where(swap, c[i], c[j])
+    return cols
+
+
 def _triangle_spans(v: np.ndarray, t: np.ndarray):
-    """Row spans of the pixels each triangle owns in [0, W-1) x [0, H-1)."""
-    xs, ys = v[t, 0], v[t, 1]
-    order = np.argsort(ys, axis=1, kind="stable")
-    xs = np.take_along_axis(xs, order, axis=1)
-    ys = np.take_along_axis(ys, order, axis=1)
-    xa, xb, xc = xs.T
-    ya, yb, yc = ys.T
-    rows = yc - ya  # the bottom row is never owned: half-open in y
+    """Row spans of the pixels each triangle owns in [0, W-1) x [0, H-1).
+
+    The edge crossings are ceil(num / den) of integers below 2**41 (coordinates below
+    2**20, limits.MAX_DIMENSION), computed in float64: the quotient is correctly
+    rounded and at least 1/den away from any integer it is not, so its ceiling is exact.
+    """
+    f = v.astype(np.float64)
+    (ya, yb, yc), (xa, xb, xc) = _sort3(f[t, 1].T, f[t, 0].T)
+    rows = (yc - ya).astype(np.int64)  # the bottom row is never owned: half-open in y
     tri = np.repeat(np.arange(len(t)), rows)
-    y = _segments(ya, rows)
-    xa, xb, xc, ya, yb, yc = (a[tri] for a in (xa, xb, xc, ya, yb, yc))
-    dy = y - ya
+    y = _segments(ya.astype(np.int64), rows)
+    yf = y.astype(np.float64)
+    # per triangle: the long edge a-c, the upper short edge a-b (flat: x = xb), the lower b-c
     long_den = yc - ya
-    long_num = xa * long_den + (xc - xa) * dy
-    upper = y <= yb
-    flat = upper & (yb == ya)
-    short_den = np.where(flat, 1, np.where(upper, yb - ya, yc - yb))
-    short_num = np.where(
-        upper, xa * (yb - ya) + (xb - xa) * dy, xb * (yc - yb) + (xc - xb) * (y - yb)
+    upper_flat = yb == ya
+    upper_den = np.where(upper_flat, 1.0, yb - ya)
+    lower_den = np.maximum(yc - yb, 1.0)
+    ya, yb, xa, xb, xc = ya[tri], yb[tri], xa[tri], xb[tri], xc[tri]
+    long_den, upper_flat, upper_den, lower_den = long_den[tri], upper_flat[tri], upper_den[tri], lower_den[tri]
+    dy = yf - ya
+    c_long = np.ceil((xa * long_den + (xc - xa) * dy) / long_den)
+    upper = yf <= yb
+    short = np.where(
+        upper,
+        np.where(upper_flat, xb, (xa * upper_den + (xb - xa) * dy) / upper_den),
+        (xb * lower_den + (xc - xb) * (yf - yb)) / lower_den,
     )
-    short_num = np.where(flat, xb, short_num)
+    c_short = np.ceil(short)
     # columns with xl <= x < xr: left edges inclusive, right edges exclusive
-    c_long = _ceil_div(long_num, long_den)
-    c_short = _ceil_div(short_num, short_den)
     left = np.minimum(c_long, c_short)
-    n = np.maximum(c_long, c_short) - left
+    n = (np.maximum(c_long, c_short) - left).astype(np.int64)
     keep = n > 0
-    return tri[keep], y[keep], left[keep], n[keep]
+    return tri[keep], y[keep], left[keep].astype(np.int64), n[keep]
 
 
 def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, length: int):
