@@ -94,16 +94,13 @@ def _near(edges: np.ndarray) -> np.ndarray:
     return cv2.dilate(edges.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
 
 
-def _pixels_near(vertices, triangles, elements, counts, near) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(element, x, y) of the pixels in `near`, elements as in `elements` (the
-    triangles, whose spans are measured again where they have such pixels, then the
-    border lines)."""
+def _pixels_near(vertices: np.ndarray, triangles: np.ndarray, near: np.ndarray):
+    """(element, x, y) of the pixels in `near`, elements numbered as the triangles then
+    the border lines (line_raster)."""
     height, width = near.shape
-    tri = np.flatnonzero(counts[: len(triangles)] > 0)
-    e, x, y = triangle_raster(vertices, triangles[tri], width, height).pixels_in(near)
-    lines = line_raster(vertices, width, height)
-    le, lx, ly = lines.pixels_in(near)
-    return np.concatenate([tri[e], le + len(triangles)]), np.concatenate([x, lx]), np.concatenate([y, ly])
+    e, x, y = triangle_raster(vertices, triangles, width, height).pixels_in(near)
+    le, lx, ly = line_raster(vertices, width, height).pixels_in(near)
+    return np.r_[e, le + len(triangles)], np.r_[x, lx], np.r_[y, ly]
 
 
 def _corners(width: int, height: int) -> np.ndarray:
@@ -296,12 +293,10 @@ def build(
     samples = sampling.sample(dens, tiles, per_tile) if region > 0 else np.zeros((0, 2), np.int64)
     vertices = _merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
-    layout = Statistics(gray, fit, near if values == "lsq" and image.ndim == 2 else None)
+    layout = Statistics(gray, fit)
     vertices, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
     if values == "lsq":
-        def steps():
-            return _pixels_near(vertices, triangles, elements, stats[:, layout.MASK], near)
-
+        steps = None if near is None else lambda: _pixels_near(vertices, triangles, near)
         vals = vertex_values.from_statistics(image, vertices, elements, stats, layout, steps)
     else:
         vals = vertex_values.sample(image, vertices)

@@ -50,18 +50,26 @@ class Raster:
     span_elem: np.ndarray  # S: element owning the span
     span_y: np.ndarray  # S: row
     span_x: np.ndarray  # S: first column
-    span_n: np.ndarray  # S: pixel count (> 0)
+    span_n: np.ndarray  # S: pixel count (>= 0)
+    span_bounds: np.ndarray | None = None  # E + 1: element e's spans are [b[e], b[e+1])
 
     def __len__(self) -> int:
         return len(self.den)
 
+    @property
+    def bounds(self) -> np.ndarray:
+        if self.span_bounds is None:
+            self.span_bounds = np.searchsorted(self.span_elem, np.arange(len(self.den) + 1))
+        return self.span_bounds
+
+    def _spans_of(self, elements) -> np.ndarray:
+        b = self.bounds
+        elements = np.asarray(elements, dtype=np.int64)
+        return _segments(b[elements], b[elements + 1] - b[elements])
+
     def pixels(self, elements: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(element, x, y) of every pixel owned by `elements` (default: all)."""
-        if elements is None:
-            sel = slice(None)
-        else:
-            bounds = np.searchsorted(self.span_elem, np.arange(len(self.den) + 1))
-            sel = _segments(bounds[elements], bounds[np.asarray(elements) + 1] - bounds[elements])
+        sel = slice(None) if elements is None else self._spans_of(elements)
         e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
 
@@ -82,8 +90,7 @@ class Raster:
         import scipy.sparse as sp
 
         m, n = len(self.den), len(self.span_elem)
-        bounds = np.searchsorted(self.span_elem, np.arange(m + 1))
-        summing = sp.csr_matrix((np.ones(n), np.arange(n), bounds), shape=(m, n))
+        summing = sp.csr_matrix((np.ones(n), np.arange(n), self.bounds), shape=(m, n))
         return np.asarray(summing @ per_span.T)
 
     def span_sums(self, planes: "Planes") -> np.ndarray:
@@ -107,8 +114,8 @@ class Raster:
         """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
         from the mesh through `vertex_values`, the first in raster order of those
         tied. Returns (element, x, y, |error|)."""
-        bounds = np.searchsorted(self.span_elem, np.arange(len(self.den) + 1))
-        spans = _segments(bounds[elements], bounds[np.asarray(elements) + 1] - bounds[elements])
+        spans = self._spans_of(elements)
+        spans = spans[self.span_n[spans] > 0]
         e, y, x0, n = self.span_elem[spans], self.span_y[spans], self.span_x[spans], self.span_n[spans]
         if len(e) == 0:
             return e, x0, y, np.zeros(0)
@@ -150,8 +157,7 @@ class Statistics:
 
     Columns (E x width): the moments of u and v (GEO: 1, u, v, uu, uv, vv) and the sums
     of the structure plane b (IMG: b, ub, vb, bb), for squared errors; for least
-    squares, the sums of every channel c of the fitted image (b_c, u b_c, v b_c); and
-    with a `mask`, the number of the element's pixels in it (MASK).
+    squares, the sums of every channel c of the fitted image (b_c, u b_c, v b_c).
 
     fit: None (no least squares), "structure" (fit the structure plane itself) or an
     H x W x C image.
@@ -160,7 +166,7 @@ class Statistics:
     GEO = slice(0, 6)
     IMG = slice(6, 10)
 
-    def __init__(self, structure: np.ndarray, fit=None, mask: np.ndarray | None = None):
+    def __init__(self, structure: np.ndarray, fit=None):
         h, w = structure.shape
         xs = np.arange(w, dtype=np.float64)
         b = structure.astype(np.float64)
@@ -173,11 +179,6 @@ class Statistics:
         self.channels = 0 if fit is None else max(1, len(channels))
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
-        self.MASK = None
-        if mask is not None:
-            planes.append(np.asarray(mask, dtype=np.float64))
-            self.MASK = width
-            width += 1
         self.width = width
         self.planes = Planes(planes)
 
@@ -203,8 +204,6 @@ class Statistics:
         for c in range(fit):
             cols[10 + 3 * c : 12 + 3 * c] = d[3 + 2 * c : 5 + 2 * c]
             np.multiply(y, d[3 + 2 * c], out=cols[12 + 3 * c])
-        if self.MASK is not None:
-            cols[self.MASK] = d[-1]
         out = raster.reduce(cols)
         # to coordinates relative to each element's origin: u = x - ox, v = y - oy
         ox, oy = (raster.origin[:, k].astype(np.float64) for k in (0, 1))
@@ -254,39 +253,39 @@ def _sort3(keys, *values):
 
 
 def _triangle_spans(v: np.ndarray, t: np.ndarray):
-    """Row spans of the pixels each triangle owns in [0, W-1) x [0, H-1).
+    """Row spans of the pixels each triangle owns in [0, W-1) x [0, H-1), one per row
+    it crosses (possibly empty), and each triangle's first span.
 
-    The edge crossings are ceil(num / den) of integers below 2**41 (coordinates below
-    2**20, limits.MAX_DIMENSION), computed in float64: the quotient is correctly
-    rounded and at least 1/den away from any integer it is not, so its ceiling is exact.
+    A row's span lies between the long edge (top to bottom corner) and the upper or
+    the lower short edge; each edge crossing is ceil(num / den) of integers below 2**41
+    (coordinates below 2**20, limits.MAX_DIMENSION), computed in float64: the quotient
+    is correctly rounded and at least 1/den away from any integer it is not, so its
+    ceiling is exact.
     """
-    f = v.astype(np.float64)
-    (ya, yb, yc), (xa, xb, xc) = _sort3(f[t, 1].T, f[t, 0].T)
-    rows = (yc - ya).astype(np.int64)  # the bottom row is never owned: half-open in y
-    tri = np.repeat(np.arange(len(t)), rows)
-    y = _segments(ya.astype(np.int64), rows)
-    yf = y.astype(np.float64)
-    # per triangle: the long edge a-c, the upper short edge a-b (flat: x = xb), the lower b-c
-    long_den = yc - ya
-    upper_flat = yb == ya
-    upper_den = np.where(upper_flat, 1.0, yb - ya)
-    lower_den = np.maximum(yc - yb, 1.0)
-    ya, yb, xa, xb, xc = ya[tri], yb[tri], xa[tri], xb[tri], xc[tri]
-    long_den, upper_flat, upper_den, lower_den = long_den[tri], upper_flat[tri], upper_den[tri], lower_den[tri]
-    dy = yf - ya
-    c_long = np.ceil((xa * long_den + (xc - xa) * dy) / long_den)
-    upper = yf <= yb
-    short = np.where(
-        upper,
-        np.where(upper_flat, xb, (xa * upper_den + (xb - xa) * dy) / upper_den),
-        (xb * lower_den + (xc - xb) * (yf - yb)) / lower_den,
-    )
-    c_short = np.ceil(short)
-    # columns with xl <= x < xr: left edges inclusive, right edges exclusive
+    tt = t.T
+    (ya, yb, yc), (xa, xb, xc) = _sort3(v[:, 1].astype(np.float64)[tt], v[:, 0].astype(np.float64)[tt])
+    tall, upper, lower = yc - ya, yb - ya, yc - yb
+    rows = tall.astype(np.int64)  # the bottom row is never owned: half-open in y
+    up = np.minimum(upper + 1, tall).astype(np.int64)
+    # pieces: the rows of each triangle down to its middle corner, then the rest; a
+    # short edge is x = (x0 + slope * dy) / den with dy = y - ya (flat top: x = xb)
+    flat = upper == 0
+    short_x = np.stack([np.where(flat, xb, xa * upper), xb * np.maximum(lower, 1) - (xc - xb) * upper], axis=1).ravel()
+    short_slope = np.stack([np.where(flat, 0.0, xb - xa), xc - xb], axis=1).ravel()
+    short_den = np.stack([np.where(flat, 1.0, upper), np.maximum(lower, 1.0)], axis=1).ravel()
+    counts = np.stack([up, rows - up], axis=1).ravel()
+    piece = np.repeat(np.arange(len(counts)), counts)
+    dy = _segments(np.stack([np.zeros_like(up), up], axis=1).ravel(), counts)
+    tri = piece >> 1
+    dyf = dy.astype(np.float64)
+    c_long = np.ceil((np.take(xa * tall, tri) + np.take(xc - xa, tri) * dyf) / np.take(tall, tri))
+    c_short = np.ceil((np.take(short_x, piece) + np.take(short_slope, piece) * dyf) / np.take(short_den, piece))
+    # columns with xl <= x < xr: left edges inclusive, right edges exclusive (rows a
+    # triangle crosses between two pixel centres stay, as empty spans)
     left = np.minimum(c_long, c_short)
     n = (np.maximum(c_long, c_short) - left).astype(np.int64)
-    keep = n > 0
-    return tri[keep], y[keep], left[keep].astype(np.int64), n[keep]
+    y = np.take(ya.astype(np.int64), tri) + dy
+    return tri, y, left.astype(np.int64), n, np.r_[0, np.cumsum(rows)]
 
 
 def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, length: int):

@@ -146,15 +146,14 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
 
 
 def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.ndarray, affine) -> float:
-    """Share of the pixels of the elements clear of the mask that the mesh through
-    `values` already reproduces to within rounding (mean squared error at most PLANAR):
-    about 1 on piecewise-planar images, near 0 on photographs."""
+    """Share of the pixels that the mesh through `values` reproduces to within rounding
+    (elements with a mean squared error of at most PLANAR): most of a piecewise-planar
+    image, hardly any of a photograph."""
     from .raster import squared_error
 
     count = moments[:, 0]
-    clear = stats[:, layout.MASK] == 0
     exact = squared_error(affine(values[:, 0]), moments, stats[:, layout.IMG]) <= PLANAR * count
-    return float(count[clear & exact].sum() / max(count[clear].sum(), 1.0))
+    return float(count[exact].sum() / max(count.sum(), 1.0))
 
 
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
@@ -162,17 +161,15 @@ def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.n
     """Least-squares vertex values in the image's dtype from the elements of `raster`
     and their statistics (`layout`: the codec.raster.Statistics that measured them).
 
-    near: for single-channel images whose layout has a mask (the pixels on and next to
-    edges), a function giving (element, x, y) of those pixels; on an image that is
-    mostly planar (PLANAR_SHARE) they are refitted without the step pixels among them
-    (_planar_refit)."""
+    near: for single-channel images, a function giving (element, x, y) of the pixels on
+    and next to edges; on an image that is mostly planar (PLANAR_SHARE) they are
+    refitted without the step pixels among them (_planar_refit)."""
     n = len(vertices)
     moments, sums = layout.fit_part(stats)
     gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
     start = sample(image, vertices).reshape(n, -1).astype(np.float64)
     out = solve(raster.corners, gram, rhs, start)
-    if (near is not None and image.ndim == 2 and layout.MASK is not None
-            and _planar_share(stats, layout, moments, out, raster.affine) >= PLANAR_SHARE):
+    if near is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster.affine) >= PLANAR_SHARE:
         pixels = near()
         if len(pixels[0]):
             out = _planar_refit(image, raster, moments, sums, out, pixels, stats[:, layout.IMG][:, 3])
