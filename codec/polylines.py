@@ -211,7 +211,7 @@ def _starts_of_runs(labels: np.ndarray) -> np.ndarray:
 
 
 #: Reference points tried at once per chain in each lockstep round of the segment rule.
-_LOOKAHEAD = 8
+_LOOKAHEAD = 6
 
 
 def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int, d: float):
@@ -222,50 +222,48 @@ def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int,
     together; the outcome is the one the one-at-a-time rule reaches (the first C whose
     segment has an offending pixel decides), in fewer rounds.
     """
-    emitted = [first]
-    active = np.flatnonzero(last > first)
-    a, c, end = first[active], np.minimum(first[active] + k, last[active]), last[active]
+    xs, ys = xy[:, 0].copy(), xy[:, 1].copy()
     d2 = d * d
-    j = np.arange(_LOOKAHEAD)
-    while len(active):
-        # candidate reference points per chain, up to the chain's end
-        cands = np.minimum(c[:, None] + k * j[None, :], end[:, None])
-        valid = np.ones_like(cands, dtype=bool)
-        valid[:, 1:] = cands[:, :-1] < end[:, None]
-        slot_chain, slot_j = np.nonzero(valid)
-        slot_c = cands[slot_chain, slot_j]
-        counts = np.maximum(slot_c - a[slot_chain] - 1, 0)
-        slot = np.repeat(np.arange(len(slot_c)), counts)
-        idx = np.repeat(a[slot_chain] + 1, counts) + (
-            np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-        )
-        pa, pc, pp = xy[a[slot_chain[slot]]], xy[slot_c[slot]], xy[idx]
-        seg = pc - pa
-        rel = pp - pa
-        length2 = (seg * seg).sum(axis=1)
-        t = np.clip((rel * seg).sum(axis=1) / np.maximum(length2, 1e-12), 0.0, 1.0)
-        off = rel - t[:, None] * seg
-        bad = (off * off).sum(axis=1) > d2
-        # first offending pixel of each slot, then the first failing slot of each chain
-        bad_slot = slot[bad]
-        lead = _starts_of_runs(bad_slot)
-        slot_offender = np.full(len(slot_c), -1, dtype=np.int64)
-        slot_offender[bad_slot[lead]] = idx[bad][lead]
-        failing = np.flatnonzero(slot_offender >= 0)
-        fchain = slot_chain[failing]
-        firstf = _starts_of_runs(fchain)
-        offender = np.full(len(active), -1, dtype=np.int64)
-        offender[fchain[firstf]] = slot_offender[failing[firstf]]
+    emitted = [first]
+    active = last > first
+    a, c, end = first[active], np.minimum(first[active] + k, last[active]), last[active]
+    while len(a):
+        # the reference points tried: c, c + k, ... up to the end, at most _LOOKAHEAD
+        tried = np.minimum((end - c + k - 1) // k + 1, _LOOKAHEAD)
+        slot_of = np.repeat(np.arange(len(a)), tried)
+        slot_c = np.minimum(np.repeat(c, tried) + k * _segments(np.zeros(len(a), np.int64), tried), np.repeat(end, tried))
+        slot_a = np.repeat(a, tried)
+        # every pixel strictly between a slot's start and its reference point
+        counts = np.maximum(slot_c - slot_a - 1, 0)
+        idx = _segments(slot_a + 1, counts)
+        ax, ay = np.repeat(xs[slot_a], counts), np.repeat(ys[slot_a], counts)
+        sx, sy = np.repeat(xs[slot_c], counts) - ax, np.repeat(ys[slot_c], counts) - ay
+        rx, ry = xs[idx] - ax, ys[idx] - ay
+        t = np.clip((rx * sx + ry * sy) / np.maximum(sx * sx + sy * sy, 1e-12), 0.0, 1.0)
+        ox, oy = rx - t * sx, ry - t * sy
+        bad = np.flatnonzero(ox * ox + oy * oy > d2)
+        # pixels are in (chain, slot, pixel) order: a chain's first offending pixel
+        # belongs to its first failing reference point
+        chain_of_bad = np.repeat(slot_of, counts)[bad]
+        lead = _starts_of_runs(chain_of_bad)
+        offender = np.full(len(a), -1, dtype=np.int64)
+        offender[chain_of_bad[lead]] = idx[bad[lead]]
         restart = offender >= 0
-        last_cand = cands[:, -1]
-        done = ~restart & (last_cand == end)
+        last_c = np.minimum(c + k * (tried - 1), end)
+        done = ~restart & (last_c == end)
         emitted.append(offender[restart])
         emitted.append(end[done])
+        c = np.where(restart, np.minimum(offender + k, end), np.minimum(last_c + k, end))
         a = np.where(restart, offender, a)
-        c = np.where(restart, np.minimum(offender + k, end), np.minimum(last_cand + k, end))
         keep = ~done
-        active, a, c, end = active[keep], a[keep], c[keep], end[keep]
+        a, c, end = a[keep], c[keep], end[keep]
     return np.sort(np.concatenate(emitted))
+
+
+def _segments(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Concatenated aranges: starts[k] + 0 .. counts[k]-1."""
+    offs = np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
+    return np.repeat(starts, counts) + offs
 
 
 def trace(

@@ -14,7 +14,7 @@ METHODS = ("sample", "lsq")
 RIDGE = 1e-3
 #: Conjugate gradients stop when the residual is this small relative to the right-hand
 #: side (values are rounded to integers afterwards), or after MAX_ITER steps.
-RTOL = 1e-6
+RTOL = 1e-5
 MAX_ITER = 300
 #: Distance from the mesh beyond which a pixel near an edge counts as a step pixel.
 OUTLIER = 4.0
