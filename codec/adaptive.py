@@ -140,18 +140,20 @@ def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
 
 
 class _Cache:
-    """Statistics of the triangles of the last triangulation, by triangle, so that a
-    triangle that survives a round is not measured again."""
+    """Statistics and squared errors (against the mesh through the sampled values) of
+    the triangles of the last triangulation, by triangle, so that a triangle that
+    survives a round is not measured again."""
 
     def __init__(self, layout: Statistics, base: int):
         self.layout = layout
         self.base = base
         self.keys = np.zeros(0, np.int64)  # sorted
         self.stats = np.zeros((0, layout.width))
+        self.sse = np.zeros(0)
 
-    def measure(self, vertices: np.ndarray, triangles: np.ndarray, width: int, height: int):
-        """(statistics of every triangle (canonical), indices of the new ones, a raster
-        of the new ones)."""
+    def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int):
+        """(statistics and squared error of every triangle (canonical), indices of the
+        new ones, a raster of the new ones)."""
         keys = _keys(triangles, self.base)
         known = np.zeros(len(triangles), bool)
         if keys is not None and len(self.keys):
@@ -160,13 +162,16 @@ class _Cache:
         fresh = np.flatnonzero(~known)
         raster = triangle_raster(vertices, triangles[fresh], width, height)
         stats = np.empty((len(triangles), self.layout.width))
+        sse = np.empty(len(triangles))
         stats[fresh] = self.layout(raster)
+        sse[fresh] = element_sse(raster, stats[fresh], z)
         if known.any():
             stats[known] = self.stats[pos[known]]
+            sse[known] = self.sse[pos[known]]
         if keys is not None:
             order = np.argsort(keys)
-            self.keys, self.stats = keys[order], stats[order]
-        return stats, fresh, raster
+            self.keys, self.stats, self.sse = keys[order], stats[order], sse[order]
+        return stats, sse, fresh, raster
 
 
 def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, height):
@@ -204,15 +209,13 @@ def refine(
     for r in range(rounds + 1):
         tris = triangulate(vertices, segments)
         tris = _canonical(tris) if len(tris) else tris
-        tri_stats, fresh, fresh_raster = cache.measure(vertices, tris, width, height)
-        lines = line_raster(vertices, width, height)
-        elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-        stats = np.concatenate([tri_stats, layout(lines)])
+        tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height)
         missing = target - len(vertices)
         if r == rounds or missing <= 0:
             break
         batch = math.ceil(missing / (rounds - r))
-        sse = element_sse(elements, stats, z)
+        lines = line_raster(vertices, width, height)
+        sse = np.r_[tri_sse, element_sse(lines, layout(lines), z)]
         if batch < len(sse):
             # the batch largest, ties to the lower index (as a stable sort would)
             cut = -np.partition(-sse, batch - 1)[batch - 1]
@@ -231,7 +234,9 @@ def refine(
             break
         vertices = _merge(width, vertices, np.stack([x[big], y[big]], axis=1))
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-    return vertices, tris, elements, stats
+    lines = line_raster(vertices, width, height)
+    elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
+    return vertices, tris, elements, np.concatenate([tri_stats, layout(lines)])
 
 
 def build(
