@@ -14,6 +14,7 @@ vertex values (codec.values).
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -35,8 +36,15 @@ EDGE_SHARE = 0.3
 REGION_SHARE = 0.3
 #: Side of a tile in pixels when tiles are chosen automatically.
 TILE = 80
-#: Refinement rounds: each inserts about an equal part of what is left.
+#: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
+#: from round to round (later rounds see the effect of the earlier ones).
 ROUNDS = 4
+DECAY = 0.7
+#: When the elements that would get a quarter of the refinement budget hold at least
+#: this share of the squared error (steps in a piecewise-smooth image rather than
+#: texture), insertions crowd each other and the budget goes in FOCUSED_ROUNDS rounds.
+CONCENTRATED = 0.7
+FOCUSED_ROUNDS = 6
 
 
 def _check_share(value, name: str) -> float:
@@ -86,20 +94,11 @@ def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, i
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
 
-def _near(edges: np.ndarray) -> np.ndarray:
-    """Pixels on or next to edge pixels: those a step may leave between two walls,
-    which least squares leaves out where the image is planar around them."""
-    import cv2
-
-    return cv2.dilate(edges.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-
-
-def _pixels_near(vertices: np.ndarray, triangles: np.ndarray, near: np.ndarray):
-    """(element, x, y) of the pixels in `near`, elements numbered as the triangles then
-    the border lines (line_raster)."""
-    height, width = near.shape
-    e, x, y = triangle_raster(vertices, triangles, width, height).pixels_in(near)
-    le, lx, ly = line_raster(vertices, width, height).pixels_in(near)
+def _pixels(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int):
+    """(element, x, y) of every pixel, elements numbered as the triangles then the
+    border lines (line_raster)."""
+    e, x, y = triangle_raster(vertices, triangles, width, height).pixels()
+    le, lx, ly = line_raster(vertices, width, height).pixels()
     return np.r_[e, le + len(triangles)], np.r_[x, lx], np.r_[y, ly]
 
 
@@ -197,6 +196,7 @@ def refine(
     largest squared error (against the mesh through the sampled pixel values) each get
     a vertex at their worst pixel. Pixels beside walls may get one: where a wall's
     straight segments cut a corner of the true edge, that is where the error is.
+    Rounds: `rounds`, or FOCUSED_ROUNDS where the error is CONCENTRATED.
 
     Returns (vertices, triangles, raster, stats): the final vertices and their
     triangulation (canonical rotation), a raster of its elements (triangles then border
@@ -206,16 +206,21 @@ def refine(
     height, width = gray.shape
     cache = _Cache(layout, target + len(vertices) + 1)
     z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-    for r in range(rounds + 1):
+    for r in itertools.count():
         tris = triangulate(vertices, segments)
         tris = _canonical(tris) if len(tris) else tris
         tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height)
         missing = target - len(vertices)
         if r == rounds or missing <= 0:
             break
-        batch = math.ceil(missing / (rounds - r))
         lines = line_raster(vertices, width, height)
         sse = np.r_[tri_sse, element_sse(lines, layout(lines), z)]
+        if r == 0:
+            quarter = min(len(sse), math.ceil(missing / 4))
+            if np.partition(sse, len(sse) - quarter)[len(sse) - quarter :].sum() >= CONCENTRATED * sse.sum():
+                rounds = max(rounds, FOCUSED_ROUNDS)
+        weights = DECAY ** np.arange(rounds - r)
+        batch = math.ceil(missing * weights[0] / weights.sum())
         if batch < len(sse):
             # the batch largest, ties to the lower index (as a stable sort would)
             cut = -np.partition(-sse, batch - 1)[batch - 1]
@@ -276,7 +281,6 @@ def build(
     wall_pts = np.zeros((0, 2), np.int64)
     segments = np.zeros((0, 2), np.int64)
     excluded = np.zeros((height, width), dtype=bool)
-    near = None
     if width > 2 and height > 2:
         found, magnitude, _ = edge_stage.detect(gray, peak, thresholds)
         lines = polyline_stage.trace(
@@ -286,7 +290,6 @@ def build(
         walls = unfold(lines, gray * np.float32(255.0 / peak))
         wall_pts, segments = walls.points, walls.segments
         excluded = _excluded(lines, walls, (height, width))
-        near = _near(found)
     region = max(0, int(region_share * points))
     if tiles is None:
         tiles = (max(1, round(width / TILE)), max(1, round(height / TILE)))
@@ -301,8 +304,9 @@ def build(
     layout = Statistics(gray, fit)
     vertices, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
     if values == "lsq":
-        steps = None if near is None else lambda: _pixels_near(vertices, triangles, near)
-        vals = vertex_values.from_statistics(image, vertices, elements, stats, layout, steps)
+        vals = vertex_values.from_statistics(
+            image, vertices, elements, stats, layout, lambda: _pixels(vertices, triangles, width, height)
+        )
     else:
         vals = vertex_values.sample(image, vertices)
     # vertices that landed on a wall split it, as the triangulation did

@@ -17,6 +17,9 @@ from .errors import OptionError
 SIGMA = 1.0
 #: Lowest automatic high threshold: steps fainter than this are not worth a wall.
 MIN_HIGH = 12.0
+#: Highest automatic high threshold: a sharp step of about 2.5 times this many gray
+#: levels always gets a wall, however strong the image's other edges are.
+MAX_HIGH = 20.0
 #: Fixed-point scale of the int16 derivatives handed to cv2.Canny.
 _SCALE = 16.0
 
@@ -43,7 +46,7 @@ def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
         return MIN_HIGH / 2, MIN_HIGH
     levels = np.clip(magnitude * (255.0 / top), 0, 255).astype(np.uint8)
     otsu, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-    high = max(MIN_HIGH, float(otsu) * top / 255.0)
+    high = min(max(MIN_HIGH, float(otsu) * top / 255.0), MAX_HIGH)
     return high / 2, high
 
 

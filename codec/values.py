@@ -9,22 +9,24 @@ from .errors import OptionError
 METHODS = ("sample", "lsq")
 
 #: Pull of every vertex towards its own pixel's value in least squares, in units of one
-#: pixel's squared weight: negligible next to a vertex's pixels, it decides the vertices
-#: whose pixels all have weight zero.
+#: pixel's squared weight: negligible next to a vertex's pixels, it keeps the system
+#: positive definite when a refit drops all of a vertex's pixels.
 RIDGE = 1e-3
 #: Conjugate gradients stop when the residual is this small relative to the right-hand
 #: side (values are rounded to integers afterwards), or after MAX_ITER steps.
 RTOL = 1e-5
 MAX_ITER = 300
-#: Distance from the mesh beyond which a pixel near an edge counts as a step pixel.
-OUTLIER = 4.0
-#: Mean squared error per pixel (gray levels squared) under which an element counts as
-#: exact: rounding the image to integers alone gives about 1/12.
+#: Distance from the mesh beyond which a pixel counts as one it cannot follow.
+OUTLIER = 2.0
+#: Mean squared error per pixel (gray levels squared) under which pixels count as
+#: reproduced exactly: rounding the image to integers alone gives about 1/12.
 PLANAR = 0.25
 #: Pixels a vertex needs around it to be judged exact.
-EVIDENCE = 12
+EVIDENCE = 4
 #: Share of exactly reproduced pixels from which an image counts as piecewise planar.
-PLANAR_SHARE = 0.25
+PLANAR_SHARE = 0.5
+#: Pull towards its own pixel's value per unit of pixel weight a vertex loses.
+LOST = 1.0
 
 
 def sample(image: np.ndarray, vertices: np.ndarray) -> np.ndarray:
@@ -65,11 +67,12 @@ def _diagonal(corners: np.ndarray, gram: np.ndarray, n: int) -> np.ndarray:
 
 
 def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndarray,
-          ridge: float | np.ndarray = RIDGE) -> np.ndarray:
-    """Minimise sum over elements of the squared error plus ridge * |z - start|^2 for
-    every channel: (A^T W A + ridge I) z = A^T W b + ridge * start, by conjugate
+          ridge: float | np.ndarray = RIDGE, anchor: np.ndarray | None = None) -> np.ndarray:
+    """Minimise sum over elements of the squared error plus ridge * |z - anchor|^2 for
+    every channel: (A^T W A + ridge I) z = A^T W b + ridge * anchor, by conjugate
     gradients with a diagonal preconditioner, matrix-free (element by element), from
-    `start` (n x C). Returns n x C float64."""
+    `start` (n x C; also the default anchor). Returns n x C float64."""
+    anchor = start if anchor is None else anchor
     n = len(start)
     flat = corners.ravel()
 
@@ -83,7 +86,7 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
     diag = _diagonal(corners, gram, n) + ridge
     out = np.empty(start.shape)
     for ch in range(start.shape[1]):
-        b = np.bincount(flat, weights=rhs[:, ch, :].ravel(), minlength=n) + ridge * start[:, ch]
+        b = np.bincount(flat, weights=rhs[:, ch, :].ravel(), minlength=n) + ridge * anchor[:, ch]
         x = start[:, ch].astype(np.float64)
         r = b - apply(x)
         limit = RTOL * np.linalg.norm(b)
@@ -105,43 +108,50 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
 
 
 def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarray, values: np.ndarray,
-                  near: tuple[np.ndarray, np.ndarray, np.ndarray], bb: np.ndarray) -> np.ndarray:
-    """Least squares without the step pixels, kept where it makes the image exact.
+                  samples: np.ndarray, pixels: tuple[np.ndarray, np.ndarray, np.ndarray], bb: np.ndarray) -> np.ndarray:
+    """Least squares without the pixels the mesh cannot follow, kept where that makes
+    the image exact.
 
     A pixel on a step belongs to neither side: a wall cannot follow it to the pixel,
     and left in the fit it pulls the values of the wall vertices on both sides, so
-    that even a piecewise-planar image is not reproduced away from its steps. The
-    pixels near edges (`near`: element, x, y) that the mesh misses by more than
-    OUTLIER are dropped and the fit solved again; the new values are taken at the
-    vertices around which every element's remaining pixels now fit to within rounding
-    (mean squared error at most PLANAR, over at least EVIDENCE pixels): the planar
-    parts of the image. Elsewhere (textures, photographs) the first fit, which is the
-    smaller squared error overall, stays.
+    that even a piecewise-planar image is not reproduced away from its steps. So the
+    pixels (`pixels`: element, x, y of all) that the mesh misses by more than OUTLIER
+    are dropped and the fit solved again, then once more with the pixels the new fit
+    misses; what a vertex loses in dropped pixels it keeps as a pull (LOST) to its own
+    pixel's value (`samples`), so that a vertex left with few pixels stays put. The
+    new values are taken at the vertices around which the remaining pixels fit to
+    within rounding (mean squared error at most PLANAR over at least EVIDENCE pixels):
+    the planar parts of the image. Elsewhere the first fit, the smaller squared error
+    overall, stays.
     """
     from .raster import squared_error
 
-    e, x, y = near
-    b = image[y, x].astype(np.float64)
-    out = np.abs(b - raster.evaluate(raster.affine(values[:, 0]), e, x, y)) > OUTLIER
-    if not out.any():
-        return values
-    e, b = e[out], b[out]
-    u = (x[out] - raster.origin[e, 0]).astype(np.float64)
-    v = (y[out] - raster.origin[e, 1]).astype(np.float64)
-    m = len(raster)
-    drop = np.stack([np.bincount(e, w, m) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
-    moments = moments - drop[:, :6]
-    sums = sums - drop[:, None, 6:9]
-    gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
-    refit = solve(raster.corners, gram, rhs, values)
-    count = moments[:, 0]
-    kept_sums = np.concatenate([sums[:, 0], (bb - drop[:, 9])[:, None]], axis=1)
-    sse = squared_error(raster.affine(refit[:, 0]), moments, kept_sums)
+    e0, x0, y0 = pixels
+    b0 = image[y0, x0].astype(np.float64)
+    m, n = len(raster), len(values)
+    full = _diagonal(raster.corners, normal_equations(raster.coef, raster.den, moments, sums)[0], n)
+    out = np.zeros(len(e0), bool)
+    refit = values
+    for _ in range(2):
+        out = np.abs(b0 - raster.evaluate(raster.affine(refit[:, 0]), e0, x0, y0)) > OUTLIER
+        if not out.any():
+            return values
+        e, b = e0[out], b0[out]
+        u = (x0[out] - raster.origin[e, 0]).astype(np.float64)
+        v = (y0[out] - raster.origin[e, 1]).astype(np.float64)
+        drop = np.stack([np.bincount(e, w, m) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        kept_moments = moments - drop[:, :6]
+        kept = sums - drop[:, None, 6:9]
+        gram, rhs = normal_equations(raster.coef, raster.den, kept_moments, kept)
+        # what a vertex loses in dropped pixels it keeps as a pull to its own pixel
+        lost = np.maximum(full - _diagonal(raster.corners, gram, n), 0.0) * LOST
+        refit = solve(raster.corners, gram, rhs, refit, RIDGE + lost, samples)
+    count = kept_moments[:, 0]
+    sse = squared_error(raster.affine(refit[:, 0]), kept_moments, np.concatenate([kept[:, 0], (bb - drop[:, 9])[:, None]], 1))
     flat = raster.corners.ravel()
-    n = len(values)
-    rough = np.bincount(flat, weights=np.repeat(sse > PLANAR * count, 3), minlength=n) > 0
+    error = np.bincount(flat, weights=np.repeat(sse, 3), minlength=n)
     evidence = np.bincount(flat, weights=np.repeat(count, 3), minlength=n)
-    planar = ~rough & (evidence >= EVIDENCE)
+    planar = (error <= PLANAR * evidence) & (evidence >= EVIDENCE)
     return np.where(planar[:, None], refit, values)
 
 
@@ -157,22 +167,20 @@ def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.nda
 
 
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
-                    near=None) -> np.ndarray:
+                    pixels=None) -> np.ndarray:
     """Least-squares vertex values in the image's dtype from the elements of `raster`
     and their statistics (`layout`: the codec.raster.Statistics that measured them).
 
-    near: for single-channel images, a function giving (element, x, y) of the pixels on
-    and next to edges; on an image that is mostly planar (PLANAR_SHARE) they are
-    refitted without the step pixels among them (_planar_refit)."""
+    pixels: for single-channel images, a function giving (element, x, y) of every pixel;
+    on an image that is mostly planar (PLANAR_SHARE) the values are fitted again
+    without the pixels the mesh cannot follow (_planar_refit)."""
     n = len(vertices)
     moments, sums = layout.fit_part(stats)
     gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
     start = sample(image, vertices).reshape(n, -1).astype(np.float64)
     out = solve(raster.corners, gram, rhs, start)
-    if near is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster.affine) >= PLANAR_SHARE:
-        pixels = near()
-        if len(pixels[0]):
-            out = _planar_refit(image, raster, moments, sums, out, pixels, stats[:, layout.IMG][:, 3])
+    if pixels is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster.affine) >= PLANAR_SHARE:
+        out = _planar_refit(image, raster, moments, sums, out, start, pixels(), stats[:, layout.IMG][:, 3])
     out = _to_dtype(out, image.dtype)
     return out[:, 0] if image.ndim == 2 else out
 
