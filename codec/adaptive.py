@@ -123,19 +123,14 @@ def _chains(segments: np.ndarray) -> list[np.ndarray]:
     return [np.append(segments[r, 0], segments[r[-1], 1]) for r in np.split(np.arange(len(segments)), breaks)]
 
 
-def _canonical(triangles: np.ndarray) -> np.ndarray:
-    """Triangles rotated to start at their smallest vertex index (orientation kept), so
-    that the same triangle always has the same corners in the same order."""
-    first = np.argmin(triangles, axis=1)
-    return np.take_along_axis(triangles, (first[:, None] + np.arange(3)) % 3, axis=1)
-
-
 def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
-    """One integer per canonical triangle, or None when they would overflow int64."""
+    """One integer per triangle, whichever corner it is listed from, or None when they
+    would overflow int64."""
     if base**3 >= 2**62:
         return None
     t = triangles.astype(np.int64)
-    return (t[:, 0] * base + t[:, 1]) * base + t[:, 2]
+    low, high = t.min(axis=1), t.max(axis=1)
+    return (low * base + (t.sum(axis=1) - low - high)) * base + high
 
 
 class _Cache:
@@ -151,10 +146,11 @@ class _Cache:
         self.sse = np.zeros(0)
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int):
-        """(statistics and squared error of every triangle (canonical), indices of the
-        new ones, a raster of the new ones)."""
+        """(statistics and squared error of every triangle, indices of the new ones, a
+        raster of the new ones)."""
         keys = _keys(triangles, self.base)
         known = np.zeros(len(triangles), bool)
+        pos = np.zeros(len(triangles), np.int64)
         if keys is not None and len(self.keys):
             pos = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
             known = self.keys[pos] == keys
@@ -168,8 +164,15 @@ class _Cache:
             stats[known] = self.stats[pos[known]]
             sse[known] = self.sse[pos[known]]
         if keys is not None:
-            order = np.argsort(keys)
-            self.keys, self.stats, self.sse = keys[order], stats[order], sse[order]
+            # the cache for the next round: the surviving entries (still in key order)
+            # with the new ones merged in
+            alive = np.zeros(len(self.keys), bool)
+            alive[pos[known]] = True
+            order = fresh[np.argsort(keys[fresh])]
+            at = np.searchsorted(self.keys[alive], keys[order])
+            self.keys = np.insert(self.keys[alive], at, keys[order])
+            self.stats = np.insert(self.stats[alive], at, stats[order], axis=0)
+            self.sse = np.insert(self.sse[alive], at, sse[order])
         return stats, sse, fresh, raster
 
 
@@ -199,7 +202,7 @@ def refine(
     Rounds: `rounds`, or FOCUSED_ROUNDS where the error is CONCENTRATED.
 
     Returns (vertices, triangles, raster, stats): the final vertices and their
-    triangulation (canonical rotation), a raster of its elements (triangles then border
+    triangulation, a raster of its elements (triangles then border
     lines; the triangles' spans are not kept) and every element's statistics
     (`layout`, which must have `gray` as its structure plane).
     """
@@ -208,7 +211,6 @@ def refine(
     z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
     for r in itertools.count():
         tris = triangulate(vertices, segments)
-        tris = _canonical(tris) if len(tris) else tris
         tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height)
         missing = target - len(vertices)
         if r == rounds or missing <= 0:

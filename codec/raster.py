@@ -321,10 +321,9 @@ def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, le
     return corners, origin, coef, den, elem[keep], span_y[keep], span_x[keep], span_n[keep]
 
 
-def _triangle_coefficients(p: np.ndarray):
-    """Origin (first corner), weight coefficients and doubled area of triangles whose
-    corner coordinates are p (M x 3 x 2)."""
-    origin = p[:, 0]
+def _triangle_coefficients(p: np.ndarray, origin: np.ndarray):
+    """Weight coefficients and doubled area of triangles whose corner coordinates are
+    p (M x 3 x 2), relative to `origin` (M x 2)."""
     coef = np.zeros((len(p), 3, 3), dtype=np.int64)
     for i in range(3):
         j, k = (i + 1) % 3, (i + 2) % 3
@@ -334,16 +333,19 @@ def _triangle_coefficients(p: np.ndarray):
         coef[:, i, 0] = -ey
         coef[:, i, 1] = ex
         coef[:, i, 2] = ex * (origin[:, 1] - p[:, j, 1]) - ey * (origin[:, 0] - p[:, j, 0])
-    return origin, coef, coef[:, :, 2].sum(axis=1)
+    return coef, coef[:, :, 2].sum(axis=1)
 
 
 def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int,
                     *, spans: bool = True) -> Raster:
     """The triangles' elements alone (no border lines): what they own of the image.
-    spans=False: their weights only (no spans, for statistics measured before)."""
+    Each element's origin is its corner of lowest vertex index, so that a triangle has
+    the same statistics whichever corner it is listed from. spans=False: the weights
+    only (no spans, for statistics measured before)."""
     v = np.asarray(vertices, dtype=np.int64)
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    origin, coef, den = _triangle_coefficients(v[t])
+    origin = v[t.min(axis=1)]
+    coef, den = _triangle_coefficients(v[t], origin)
     if spans and len(t):
         return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
     empty = np.zeros(0, np.int64)
