@@ -128,9 +128,9 @@ def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
     would overflow int64."""
     if base**3 >= 2**62:
         return None
-    t = triangles.astype(np.int64)
-    low, high = t.min(axis=1), t.max(axis=1)
-    return (low * base + (t.sum(axis=1) - low - high)) * base + high
+    a, b, c = triangles.astype(np.int64).T
+    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    return (low * base + (a + b + c - low - high)) * base + high
 
 
 class _Cache:
@@ -158,8 +158,9 @@ class _Cache:
         raster = triangle_raster(vertices, triangles[fresh], width, height)
         stats = np.empty((len(triangles), self.layout.width))
         sse = np.empty(len(triangles))
-        stats[fresh] = self.layout(raster)
-        sse[fresh] = element_sse(raster, stats[fresh], z)
+        measured = self.layout(raster)
+        stats[fresh] = measured
+        sse[fresh] = element_sse(raster, measured, z)
         if known.any():
             stats[known] = self.stats[pos[known]]
             sse[known] = self.sse[pos[known]]
