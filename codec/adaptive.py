@@ -38,7 +38,7 @@ REGION_SHARE = 0.3
 TILE = 80
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
 #: from round to round (later rounds see the effect of the earlier ones).
-ROUNDS = 4
+ROUNDS = 3
 DECAY = 0.7
 #: When the elements that would get a quarter of the refinement budget hold at least
 #: this share of the squared error (steps in a piecewise-smooth image rather than
