@@ -26,33 +26,49 @@ For a mesh that tiles the image (what mesh.validate checks, plus no overlaps) ev
 pixel is thus written exactly once. The decoder checks that the spans tile each band of
 rows exactly and raises CorruptError otherwise (a pixel uncovered, or covered twice).
 
-Implementation: each triangle is cut at its middle corner's row into two trapezoids;
-the image is processed in bands of rows whose pixel count bounds the temporary memory.
-In a band, every (trapezoid, row) pair gets its span [xs, xe) from exact ceil
-divisions; the spans are put into raster order with a counting sort, which also proves
-that they tile the band; then every pixel's 2*sum(w_i v_i) + D is evaluated from its
-span's plane as ga*x + (gb*y + gc) and divided by 2D, all vectorised; no Python loop
-runs per triangle or per pixel. The integers are held in float64, which is exact for
-them (see _Trapezoids) and much faster than numpy's int64 division.
+Implementation, all vectorised (no Python loop runs per triangle, span or pixel):
+
+* per triangle (_Triangles): the corners sorted by row, the rows it owns, its three
+  edges as lines and the plane 2*sum(w_i v_i) + D = ga*x + gb*y + gc of each channel;
+* the image is processed in bands of rows whose pixel count bounds the temporary
+  memory (one band for images up to BATCH_PIXELS). In a band every (triangle, row)
+  pair gets its span [xs, xe) from its left and right edge: each edge is a float64 line
+  in the band's pixel numbering whose ceiling is provably the exact one, so the line
+  gives the span's first pixel and its end directly, with no division;
+* a counting sort puts the spans into raster order: a marker at each span's first
+  pixel, and OpenCV's integral (an exact prefix count) of the markers gives every
+  pixel the rank of its span. The same markers prove that the spans tile the band;
+* each pixel's value is its span's a*x + b, truncated, where a = ga/2D and
+  b = (gb*y + gc)/2D + 1/(4|D|), which float64 evaluates with an error too small to change
+  the floor (see _Triangles; images too large for that bound use the integer
+  numerator ga*x + gb*y + gc and an exact float64 division instead).
+
+The arrays the size of a band (its pixels, pairs and spans) and, for meshes of up to
+_KEEP_TRIANGLES triangles, those the size of the mesh are per-thread scratch reused
+from call to call, since fresh pages cost more than the arithmetic on them.
 """
 
 from __future__ import annotations
 
 import threading
 
+import cv2
 import numpy as np
 
 from .errors import CorruptError, UnsupportedError
 from .mesh import Mesh
 
-#: Pixels per band of rows; bounds the decoder's temporary memory (about 60 bytes each,
-#: 40 of them kept per thread as reusable scratch).
-BATCH_PIXELS = 1 << 16
-
-# float64 holds every integer below 2**53 exactly; the fast path evaluates the exact
-# integer numerators in float64 when they provably stay below this bound, and the
-# division is then exact too (see _divide_floor).
-_FLOAT_EXACT = float(2**52)
+#: Pixels per band of rows; bounds the decoder's temporary memory, which is kept per
+#: thread as reusable scratch (about 70 bytes per band pixel for typical meshes).
+BATCH_PIXELS = 1 << 18
+#: Pixels per chunk of the last, per-pixel stage (its arrays then stay in cache).
+_CHUNK = 1 << 15
+#: The divided plane is exact while W*H*(69*(vmax + 1) + 2**19) stays below this (see
+#: _Triangles): for every 8-bit image, and 16-bit ones up to about 890 megapixels.
+_DIVIDED_PLANE_LIMIT = 1 << 52
+#: Largest mesh whose per-triangle arrays (about 250 bytes per triangle) are kept as
+#: per-thread scratch between calls; larger meshes allocate them afresh.
+_KEEP_TRIANGLES = 1 << 17
 
 
 def _round_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
@@ -63,11 +79,6 @@ def _round_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 def _finish(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
     info = np.iinfo(dtype)
     return np.clip(values, info.min, info.max).astype(dtype)
-
-
-def _ceil_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
-    """ceil(num / den) for integer arrays with den > 0."""
-    return -((-num) // den)
 
 
 def render_line(mesh: Mesh) -> np.ndarray:
@@ -90,187 +101,357 @@ def render_line(mesh: Mesh) -> np.ndarray:
     return _finish(out, mesh.dtype).reshape(shape)
 
 
-class _Trapezoids:
-    """Each triangle cut at its middle vertex's row into two trapezoids (empty ones
-    dropped), each bounded by one left and one right edge, plus the plane of the
-    triangle it comes from.
-
-    Everything is float64 holding integers: for images of at most 2**32 pixels every
-    number here and in _render_band stays below 2**53 (bounds in the comments), so the
-    float arithmetic is exact integer arithmetic.
+class _Triangles:
+    """Per triangle, with its corners top T, middle M and bottom B in raster order:
+    the rows it owns (`first`, `count`), its edges T -> B, T -> M and M -> B as lines
+    and its plane. float64 throughout: integers below 2**53 are exact, and the
+    rounding of the rest is bounded where it is used.
     """
 
     def __init__(self, mesh: Mesh) -> None:
-        h, c = mesh.height, mesh.channels
-        t0, t1, t2 = np.asarray(mesh.triangles, dtype=np.int64).T
-        vx = mesh.vertices[:, 0].astype(np.float64)
-        vy = mesh.vertices[:, 1].astype(np.float64)
-        y0, y1, y2 = vy[t0], vy[t1], vy[t2]
-        # rotate each corner triple so the top corner A comes first; the orientation
-        # (clockwise on screen) then puts P1 on the right chain and P2 on the left
-        # (1-D arrays throughout: numpy is slow along short axes)
-        top0 = (y0 <= y1) & (y0 <= y2)
-        top1 = ~top0 & (y1 <= y2)
-        a = np.where(top0, t0, np.where(top1, t1, t2))
-        p1 = np.where(top0, t1, np.where(top1, t2, t0))
-        p2 = np.where(top0, t2, np.where(top1, t0, t1))
-        ax, ay, p1x, p1y, p2x, p2y = vx[a], vy[a], vx[p1], vy[p1], vx[p2], vy[p2]
-        ymid = np.minimum(p1y, p2y)
-        ybot = np.maximum(p1y, p2y)
-        # owned rows: ay <= y < ybot, plus ybot itself on the image's last row
-        yend = ybot + (ybot == h - 1)
-        flat_bottom = ymid == ybot
-        m = len(a)
-        # trapezoid rows: upper [ay, ymid) (to yend if the bottom is flat), lower [ymid, yend)
-        first = np.concatenate([ay, ymid])
-        count = np.concatenate([np.where(flat_bottom, yend, ymid) - ay,
-                                np.where(flat_bottom, 0, yend - ymid)])
-        keep = np.flatnonzero(count > 0)
-        tri = np.concatenate([np.arange(m), np.arange(m)])[keep]
-        self.first = first[keep]
-        self.count = count[keep].astype(np.int64)
-        # bounding edges P -> Q: upper A->P2 | A->P1; lower A->P2 | P1->P2 when P1 is
-        # the middle corner, else P2->P1 | A->P1
-        p1_mid = p1y < p2y
+        w, h, c = mesh.width, mesh.height, mesh.channels
+        nv, m = len(mesh.vertices), len(mesh.triangles)
+        keep = m <= _KEEP_TRIANGLES
+        f8, i8, b1 = np.float64, np.int64, np.bool_
 
-        def pick(upper: np.ndarray, if_p1_mid: np.ndarray, otherwise: np.ndarray) -> np.ndarray:
-            return np.concatenate([upper, np.where(p1_mid, if_p1_mid, otherwise)])[keep]
+        def buf(name: str, dtype=f8, n: int = m) -> np.ndarray:
+            return _scratch("t_" + name, n, dtype) if keep else np.empty(n, dtype)
 
-        def edge(px, py, qx, qy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            den = np.maximum(qy - py, 1.0)  # a flat edge never bounds a non-empty row range
-            dx = qx - px
-            # x on row y is (px*den + dx*(y - py)) / den: |numerator| <= W*H
-            return px * den + dx * (self.first - py), dx, den
+        def copy(name: str, a: np.ndarray, dtype=f8) -> np.ndarray:
+            out = buf(name, dtype, len(a))
+            np.copyto(out, a, casting="unsafe")
+            return out
 
-        self.lnum, self.ldx, self.lden = edge(
-            pick(ax, ax, p2x), pick(ay, ay, p2y), pick(p2x, p2x, p1x), pick(p2y, p2y, p1y)
-        )
-        self.rnum, self.rdx, self.rden = edge(
-            pick(ax, p1x, ax), pick(ay, p1y, ay), pick(p1x, p2x, p1x), pick(p1y, p2y, p1y)
-        )
-        # the plane 2*sum(w_i v_i) + D = ga*x + gb*y + gc per channel; at corner A the
-        # weights are (D, 0, 0), which gives gc. |ga|, |gb| < 2**18 max(W, H) and
-        # |ga*x|, |gb*y|, |gc| < 2**52 (channel-major so each channel is contiguous)
-        vals = mesh.values.astype(np.float64).reshape(len(vx), c).T  # C x N
-        va, v1, v2 = vals[:, a], vals[:, p1], vals[:, p2]
-        ga = 2 * ((p1y - p2y) * va + (p2y - ay) * v1 + (ay - p1y) * v2)
-        gb = 2 * ((p2x - p1x) * va + (ax - p2x) * v1 + (p1x - ax) * v2)
-        d = (p1x - ax) * (p2y - ay) - (p2x - ax) * (p1y - ay)
-        gc = (2 * va + 1) * d - ga * ax - gb * ay
-        self.ga, self.gb, self.gc = ga[:, tri], gb[:, tri], gc[:, tri]
-        self.d2 = 2 * d[tri]
+        vx, vy = copy("vx", mesh.vertices[:, 0]), copy("vy", mesh.vertices[:, 1])
+        vals = mesh.values.reshape(nv, c)
+        t = mesh.triangles
+        key = np.multiply(vy, w, out=buf("key", f8, nv))
+        key += vx
+        if not np.less(key[:-1], key[1:], out=buf("sorted", b1, nv)[:nv - 1]).all():
+            # number the vertices in raster order (decoded meshes come that way)
+            order = np.argsort(key, kind="stable")
+            rank = np.empty_like(order)
+            rank[order] = np.arange(nv)
+            t = rank[t]
+            vx, vy, vals = vx[order], vy[order], vals[order]
+        # T, M and B: the smallest, middle and largest vertex number
+        t0, t1, t2 = t[:, 0], t[:, 1], t[:, 2]
+        it = np.minimum(np.minimum(t0, t1, out=buf("it", i8)), t2, out=buf("it", i8))
+        ib = np.maximum(np.maximum(t0, t1, out=buf("ib", i8)), t2, out=buf("ib", i8))
+        im = np.add(t0, t1, out=buf("im", i8))
+        im += t2
+        im -= it
+        im -= ib
+        tx, ty, mx, my, bx, by = (
+            np.take(v, i, out=buf(name), mode="clip")
+            for v, i, name in ((vx, it, "tx"), (vy, it, "ty"), (vx, im, "mx"),
+                               (vy, im, "my"), (vx, ib, "bx"), (vy, ib, "by")))
+        dxm, dym, dxb, dyb, dxl, dyl = (
+            np.subtract(p, q, out=buf(name))
+            for p, q, name in ((mx, tx, "dxm"), (my, ty, "dym"), (bx, tx, "dxb"),
+                               (by, ty, "dyb"), (bx, mx, "dxl"), (by, my, "dyl")))
+        tmp = buf("tmp")
+        # The plane 2*sum(w_i v_i) + D = ga*x + gb*y + gc of each channel, with the
+        # weights and D of the corner order (T, M, B): of either orientation, since
+        # negating all of them leaves (2*sum(w_i v_i) + D) / 2D unchanged. At T the
+        # weights are (D, 0, 0), which gives gc. |ga| <= 4 H vmax, |gb| <= 4 W vmax,
+        # |gc| < 14 W H (vmax + 1): below 2**52 (as W*H <= 2**32), like every partial
+        # sum here, so all of it is exact integer arithmetic.
+        d = np.multiply(dxm, dyb, out=buf("d"))
+        d -= np.multiply(dxb, dym, out=tmp)
+        self.d2 = np.multiply(d, 2, out=buf("d2"))
+        self.ga = buf("ga", f8, c * m).reshape(c, m)  # channel-major: each contiguous
+        self.gb = buf("gb", f8, c * m).reshape(c, m)
+        self.gc = buf("gc", f8, c * m).reshape(c, m)
+        vt, vm, vb = buf("vt"), buf("vm"), buf("vb")
+        for ch in range(c):  # a loop over channels
+            v = copy("v", vals[:, ch])
+            np.take(v, it, out=vt, mode="clip")
+            np.take(v, im, out=vm, mode="clip")
+            np.take(v, ib, out=vb, mode="clip")
+            ga, gb, gc = self.ga[ch], self.gb[ch], self.gc[ch]
+            np.multiply(dyb, vm, out=ga)
+            ga -= np.multiply(dyl, vt, out=tmp)
+            ga -= np.multiply(dym, vb, out=tmp)
+            ga *= 2
+            np.multiply(dxl, vt, out=gb)
+            gb -= np.multiply(dxb, vm, out=tmp)
+            gb += np.multiply(dxm, vb, out=tmp)
+            gb *= 2
+            np.multiply(vt, 2, out=gc)
+            gc += 1
+            gc *= d
+            gc -= np.multiply(ga, tx, out=tmp)
+            gc -= np.multiply(gb, ty, out=tmp)
+        # Unless the image is huge, divide the plane by 2D now: a pixel's value is then
+        # the truncation of the float64 sum a*x + b of a = ga/2D and b = (gb/2D)*y +
+        # (gc/2D + 1/4|D|). That sum is (2 sum w_i v_i + D)/2D + 1/4|D| with an error
+        # below 3u G/|2D| + 2**17 u (u = 2**-53, a few roundings), where G = |ga| W +
+        # |gb| H + |gc| < 22 W H (vmax + 1). If W H (69 (vmax + 1) + 2**19) < 2**52 (and
+        # |2D| < 4 W H), the error is below 1/4|D|: the sum lies strictly between the
+        # exact quotient q, a multiple of 1/|2D|, and q + 1/|2D|, so has q's floor.
+        vmax = int(np.iinfo(mesh.dtype).max)
+        self.exact = w * h * (69 * (vmax + 1) + (1 << 19)) >= _DIVIDED_PLANE_LIMIT
+        if not self.exact:
+            with np.errstate(divide="ignore", invalid="ignore"):  # degenerate: no pixels
+                self.ga /= self.d2
+                self.gb /= self.d2
+                self.gc /= self.d2
+                self.gc += np.divide(0.5, np.abs(self.d2, out=d), out=d)
+        # Owned rows: ty <= y < by, plus by on the image's last row. A pointed top's
+        # first row is empty (just T), and so is a pointed bottom's last: rows ty+1 (ty
+        # if the top is flat) to by-1 (by on the last row if the bottom is flat). The
+        # edges bounding a row are T -> B and T -> M before row `switch`, M -> B from
+        # it on. A triangle left without rows (height 1, flat bottom) gets one whose
+        # edges coincide, so that every triangle has rows.
+        flat_bottom = np.equal(dyl, 0, out=buf("flat_bottom", b1))
+        self.first = np.add(ty, 1, out=buf("first"))
+        self.first -= np.equal(dym, 0, out=buf("flat_top", b1))
+        count = np.subtract(by, self.first, out=buf("rows"))
+        if by.max() == h - 1:
+            count += flat_bottom & np.equal(by, h - 1, out=buf("last", b1))
+        none = np.equal(count, 0, out=buf("none", b1))
+        self.count = copy("count", np.maximum(count, 1, out=count), i8)
+        self.switch = np.add(my, flat_bottom, out=buf("switch"))
+        # Each edge P -> Q as the line x(y) - delta = c + s*(y - py) (s = (qx - px) /
+        # (qy - py), c = px - delta). The exact x(y) is a fraction with denominator
+        # qy - py < H, so at least 1/H from any integer unless it is one; with delta
+        # = 2**-(bits of H + 2), in (1/8H, 1/4H], and an evaluation error below
+        # 1/16H (see _render_band), the ceiling of the computed line is exactly that
+        # of x(y).
+        delta = 2.0 ** -(int(h).bit_length() + 2)
+        self.border = (w - 1) - 2 * delta  # x(y) is W - 1 iff the line is above this
+        self.touch = np.equal(np.maximum(bx, mx, out=tmp), w - 1, out=buf("touch", b1))
+        self.touch |= np.equal(tx, w - 1, out=buf("touch_t", b1))
+        self.ty, self.my = ty, my
+        self.s_long = np.divide(dxb, np.maximum(dyb, 1, out=tmp), out=dxb)
+        self.s_up = np.divide(dxm, np.maximum(dym, 1, out=tmp), out=dxm)  # (flat: unused)
+        np.copyto(self.s_up, self.s_long, where=none)
+        self.s_low = np.divide(dxl, np.maximum(dyl, 1, out=tmp), out=dxl)
+        self.c_top = np.subtract(tx, delta, out=tx)
+        self.c_mid = np.subtract(mx, delta, out=mx)
 
 
-def _render_band(tz: _Trapezoids, sel: np.ndarray | None, r0: int, r1: int, width: int,
+#: The per-triangle arrays a band uses, in _render_band's order.
+_BAND_FIELDS = ("first", "count", "switch", "ty", "my", "s_long", "s_up", "s_low", "c_top",
+                "c_mid", "touch", "d2")
+
+
+def _render_band(tri: _Triangles, sel: np.ndarray | None, r0: int, r1: int, width: int,
                  out: np.ndarray) -> None:
-    """Write rows r0..r1-1 of `out` (H*W x C) from trapezoids `sel` (None: all of them,
-    when the band is the whole image)."""
+    """Write rows r0..r1-1 of `out` (H*W x C) from the triangles `sel` (each with rows
+    in the band; None: all of them)."""
     npix = (r1 - r0) * width
+    f8, i8 = np.float64, np.int64
     if sel is None:
-        n = tz.count
-        seg = np.repeat(np.arange(len(n)), n)  # trapezoid of each (trapezoid, row) pair
-        g = seg
-        base = (np.cumsum(n) - n).astype(np.float64)
+        first, n, switch, ty, my, s_long, s_up, s_low, c_top, c_mid, touch, d2 = (
+            getattr(tri, name) for name in _BAND_FIELDS)
+        ga, gb, gc = tri.ga, tri.gb, tri.gc
+        start = first
     else:
-        # clip the trapezoids' row ranges to the band
-        first = tz.first[sel]
-        start = np.maximum(first, r0)
-        n = (np.minimum(first + tz.count[sel], r1) - start).astype(np.int64)
-        keep = n > 0
-        live, n = sel[keep], n[keep]
-        base = np.cumsum(n) - n - (start - first)[keep]
-        seg = np.repeat(np.arange(len(n)), n)
-        g = np.take(live, seg)
-    # k: the pair's row offset in its trapezoid
-    k = np.arange(len(seg), dtype=np.float64)
-    k -= np.take(base, seg)
-    # exact span ends: ceil of (integer numerator <= W*H) / (denominator <= H)
-    lnum = np.take(tz.ldx, g)
-    lnum *= k
-    lnum += np.take(tz.lnum, g)
-    rnum = np.take(tz.rdx, g)
-    rnum *= k
-    rnum += np.take(tz.rnum, g)
-    xs = lnum / np.take(tz.lden, g)
-    np.ceil(xs, out=xs)
-    rden = np.take(tz.rden, g)
-    xe = rnum / rden
-    np.ceil(xe, out=xe)
-    # the last column belongs to a span that reaches it with positive length
-    cand = np.flatnonzero(xe == width - 1)
-    if len(cand):
-        cand = cand[rnum[cand] == (width - 1) * rden[cand]]
-        cand = cand[lnum[cand] < (width - 1) * np.take(tz.lden, np.take(g, cand))]
-        xe[cand] = width
-    xe -= xs  # span lengths
-    keep = np.flatnonzero(xe > 0)
-    # the band row of each pair, and the band pixel where each non-empty span starts
-    y = np.take(tz.first, g)
-    y += k
-    g = np.take(g, keep)
-    y = np.take(y, keep)
-    xs = np.take(xs, keep)
-    length = np.take(xe, keep)
-    key = (y - r0) * width
-    key += xs
-    key = key.astype(np.int64)
-    spans = len(key)
-    # counting sort of the spans into raster order; a repeated start means an overlap
-    marker = _scratch("marker", npix, bool)
-    marker.fill(False)
-    marker[key] = True
-    slot = _scratch("slot", npix, np.int64)
-    slot[key] = np.arange(spans)
-    where = np.flatnonzero(marker)
-    if len(where) != spans:
-        _fail(int(np.flatnonzero(np.bincount(key) > 1)[0]), r0, width, "covers it twice")
-    order = np.take(slot, where)
-    length = np.take(length, order).astype(np.int64)
-    ends = np.cumsum(length)
-    # tiling check: each span starts where the previous one ended, the last ends the band
-    if spans == 0 or where[0] != 0 or ends[-1] != npix or (where[1:] != ends[:-1]).any():
-        _tiling_error(where, ends, npix, r0, width)
-    # per span in raster order: its trapezoid, row and the plane's row constant
-    g = np.take(g, order)
-    y = np.take(y, order)
-    d2 = np.take(tz.d2, g)
-    # per band pixel: its span (the number of span starts up to it, minus one) and its
-    # column; the per-pixel arrays are reused scratch, since fresh pages cost more
-    # than the arithmetic on them
-    pseg = np.cumsum(marker, dtype=np.int64, out=_scratch("pseg", npix, np.int64))
-    pseg -= 1
-    col = _columns(width, r1 - r0)
-    dr = np.take(d2, pseg, out=_scratch("dr", npix, np.float64), mode="clip")
-    num = _scratch("num", npix, np.float64)
-    tmp = _scratch("tmp", npix, np.float64)
+        def pick(name: str) -> np.ndarray:  # the band's triangles of a field, in scratch
+            a = getattr(tri, name)
+            shape = a.shape[:-1] + (len(sel),)
+            return np.take(a, sel, axis=-1, mode="clip",
+                           out=_scratch("b_" + name, int(np.prod(shape)), a.dtype).reshape(shape))
+
+        first, n, switch, ty, my, s_long, s_up, s_low, c_top, c_mid, touch, d2 = (
+            pick(name) for name in _BAND_FIELDS)
+        ga, gb, gc = pick("ga"), pick("gb"), pick("gc")
+        start = np.maximum(first, r0, out=_scratch("b_start", len(sel), f8))
+        n = np.minimum(np.add(first, n, out=_scratch("b_end", len(sel), f8)), r1,
+                       out=_scratch("b_end", len(sel), f8))
+        n -= start
+        n = _copy("b_n", n, i8)
+    nt = len(n)
+    # Each edge as the line t = c + s*p in the band's pixel numbering p = W*(row - r0)
+    # + x: c its value on row r0, s = slope/W + 1, so that ceil(t) = ceil(x(row)) +
+    # W*(row - r0) is the band pixel where a span starts or ends. The line is used on
+    # rows where |c|, |s*p| <= 2 npix (npix = the band's pixel count), so the few
+    # roundings here and in _line err by less than 2**5 u npix <= 2**-48 npix <= 1/16H
+    # as render keeps npix*H <= 2**44. The short edges are interleaved: T -> M at
+    # 2j, M -> B at 2j + 1.
+    back = np.subtract(r0, ty, out=_scratch("back", nt, f8))
+    ca = np.multiply(s_long, back, out=_scratch("ca", nt, f8))
+    ca += c_top
+    sa = np.divide(s_long, width, out=_scratch("sa", nt, f8))
+    sa += 1
+    cb = _scratch("cb", 2 * nt, f8)
+    sb = _scratch("sb", 2 * nt, f8)
+    np.multiply(s_up, back, out=cb[0::2])
+    cb[0::2] += c_top
+    np.subtract(r0, my, out=back)
+    np.multiply(s_low, back, out=cb[1::2])
+    cb[1::2] += c_mid
+    np.divide(s_up, width, out=sb[0::2])
+    np.divide(s_low, width, out=sb[1::2])
+    sb += 1
+    # one (triangle, row) pair per row of each triangle: `seg` its triangle (a prefix
+    # count of the triangles' first pairs), yw = W*(row - r0), and `half` its short
+    # edge: 2*seg, plus 1 from row `switch` on
+    base = np.cumsum(n, out=_scratch("base", nt, i8))
+    base -= n
+    pairs = int(base[-1] + n[-1]) if nt else 0
+    if pairs == 0:
+        _fail(0, r0, width, "leaves it uncovered")
+    seg = _prefix_count(base[1:], pairs)
+    rowpix = np.subtract(start, r0, out=_scratch("rowpix", nt, f8))
+    rowpix -= base
+    rowpix *= width
+    tmp = _scratch("tmp_p", pairs, f8)
+    yw = np.add(_wramp(pairs, width), np.take(rowpix, seg, out=tmp, mode="clip"),
+                out=_scratch("yw", pairs, f8))
+    np.subtract(switch, r0, out=back)
+    back *= width
+    half = np.multiply(seg, 2, out=_scratch("half", pairs, i8))
+    half += np.greater_equal(yw, np.take(back, seg, out=tmp, mode="clip"),
+                             out=_scratch("flag", pairs, np.bool_))
+    ta = _line(sa, ca, seg, yw, _scratch("ta", pairs, f8), tmp)
+    tb = _line(sb, cb, half, yw, _scratch("tb", pairs, f8), tmp)
+    # the left end is the one further left: ceil is monotonic, and exact on both
+    lo = np.minimum(ta, tb, out=tmp)
+    hi = np.maximum(ta, tb, out=ta)
+    touch = np.flatnonzero(touch)
+    if len(touch):
+        # the last column belongs to a span that reaches it with positive length: where
+        # its right end is exactly W - 1 and its left end is not
+        tc = n[touch]
+        cand = np.repeat(base[touch] - (np.cumsum(tc) - tc), tc)
+        cand += np.arange(len(cand))
+        row = yw[cand]
+        cand = cand[(hi[cand] - row > tri.border) & (lo[cand] - row <= tri.border)]
+    key = np.ceil(lo, out=_scratch("key", pairs, i8), casting="unsafe")
+    end = np.ceil(hi, out=_scratch("end", pairs, i8), casting="unsafe")
+    if len(touch):
+        end[cand] += 1
+    total = int(end.sum()) - int(key.sum())
+    # the empty spans' starts move to npix and beyond, out of the markers' way
+    empty = np.equal(key, end, out=_scratch("flag", pairs, np.bool_))
+    key += np.multiply(empty, npix, out=half)
+    spans = pairs - int(np.count_nonzero(empty))
+    # The spans tile the band iff their starts are distinct, the first is pixel 0,
+    # every end is a start (or the band's end) and their lengths sum to the band:
+    # sorted, each start is then at least the previous end, with equality throughout.
+    marker = _scratch("marker", 2 * npix + 1, np.uint8)
+    marker.fill(0)
+    marker[key] = 1
+    marker[npix] = 1
+    # sums[1, p + 1]: the number of span starts at or before band pixel p (OpenCV's
+    # exact integer prefix sum): for a span start its rank in raster order (from 1),
+    # and spans + 1 for the moved empty spans
+    sums = _scratch("sums", 2 * (npix + 2), np.int32).reshape(2, npix + 2)
+    cv2.integral(marker[:npix + 1].reshape(1, npix + 1), sums)
+    at_end = np.take(marker, end, out=_scratch("at_end", pairs, np.uint8), mode="clip")
+    at_end |= empty
+    if (spans == 0 or marker[0] != 1 or sums[1, npix] != spans or total != npix
+            or not at_end.all()):
+        live = np.flatnonzero(~empty)
+        _tiling_error(key[live], end[live], npix, r0, width)
+    # per span in raster order (rank r, from 1): its pair, triangle and row
+    rank = np.take(sums[1, 1:], key, out=_scratch("rank", pairs, np.int32), mode="clip")
+    np.copyto(end, rank)
+    inv = _scratch("inv", spans + 2, i8)
+    inv[end] = _iramp(pairs)
+    inv = inv[:spans + 1]
+    inv[0] = 0
+    seg_r = np.take(seg, inv, out=_scratch("seg_r", spans + 1, i8), mode="clip")
+    y_r = np.take(yw, inv, out=_scratch("y_r", spans + 1, f8), mode="clip")
+    y_r /= width  # exact: a multiple of W over W
+    if r0:
+        y_r += r0
+    channels = out.shape[1]
+    a_r = _scratch("a_r", channels * (spans + 1), f8).reshape(channels, spans + 1)
+    b_r = _scratch("b_r", channels * (spans + 1), f8).reshape(channels, spans + 1)
+    tmp = _scratch("tmp_r", spans + 1, f8)
+    for ch in range(channels):  # a loop over channels
+        # a = ga and b = gb*y + gc, or their divided forms (see _Triangles); undivided,
+        # integers below 2**53 whose partial sums are too
+        np.take(ga[ch], seg_r, out=a_r[ch], mode="clip")
+        np.take(gb[ch], seg_r, out=b_r[ch], mode="clip")
+        b_r[ch] *= y_r
+        b_r[ch] += np.take(gc[ch], seg_r, out=tmp, mode="clip")
+    if tri.exact:
+        d2_r = np.take(d2, seg_r, out=_scratch("d2_r", spans + 1, f8), mode="clip")
+    # per band pixel, in chunks that stay in cache: its span's rank and its column
+    cols = _columns(width, r1 - r0)
     band = out[r0 * width:r1 * width]
-    for ch in range(out.shape[1]):  # a loop over channels
-        # numerator ga*x + (gb*y + gc): every term and partial sum below 2**52
-        row_const = np.take(tz.gb[ch], g)
-        row_const *= y
-        row_const += np.take(tz.gc[ch], g)
-        np.take(np.take(tz.ga[ch], g), pseg, out=num, mode="clip")  # indices are valid
-        num *= col
-        num += np.take(row_const, pseg, out=tmp, mode="clip")
-        # num and dr are integers below 2**53 and dr < 2**36: the correctly rounded
-        # quotient is exact when integral, and otherwise more than its rounding error
-        # (< 2**-36 for quotients below 2**17) away from the next integer, so floor()
-        # of it is the exact floor((2 sum w_i v_i + D) / 2D); values are >= 0, so the
-        # truncating cast below is that floor
-        num /= dr
-        np.copyto(band[:, ch], num, casting="unsafe")
+    for p0 in range(0, npix, _CHUNK):  # a loop over chunks of pixels
+        p1 = min(npix, p0 + _CHUNK)
+        pseg = _scratch("pseg", p1 - p0, i8)
+        np.copyto(pseg, sums[1, p0 + 1:p1 + 1])
+        num = _scratch("num", p1 - p0, f8)
+        tmp = _scratch("tmp", p1 - p0, f8)
+        if tri.exact:
+            den = np.take(d2_r, pseg, out=_scratch("den", p1 - p0, f8), mode="clip")
+        for ch in range(channels):  # a loop over channels
+            np.take(a_r[ch], pseg, out=num, mode="clip")
+            num *= cols[p0:p1]
+            np.take(b_r[ch], pseg, out=tmp, mode="clip")
+            if tri.exact:
+                # num and den are integers below 2**53 and |den| < 2**35: the correctly
+                # rounded quotient is exact when integral, and otherwise more than its
+                # rounding error (< 2**-36 for quotients below 2**17) away from the next
+                # integer, so its floor is the exact one; and the quotient is >= 0, so
+                # the truncating cast is that floor
+                num += tmp
+                np.divide(num, den, out=band[p0:p1, ch], casting="unsafe")
+            else:
+                # the divided plane: the truncating cast of the positive sum
+                np.add(num, tmp, out=band[p0:p1, ch], casting="unsafe")
+
+
+def _copy(name: str, a: np.ndarray, dtype) -> np.ndarray:
+    """`a` converted to dtype, in scratch."""
+    out = _scratch(name, len(a), dtype)
+    np.copyto(out, a, casting="unsafe")
+    return out
+
+
+def _line(s: np.ndarray, c: np.ndarray, seg: np.ndarray, p: np.ndarray, out: np.ndarray,
+          tmp: np.ndarray) -> np.ndarray:
+    """c + s*p per pair, from the lines c[seg], s[seg]."""
+    np.take(s, seg, out=out, mode="clip")
+    out *= p
+    out += np.take(c, seg, out=tmp, mode="clip")
+    return out
+
+
+def _prefix_count(marks: np.ndarray, n: int) -> np.ndarray:
+    """For each i < n, how many of the distinct positions `marks` are <= i (int64)."""
+    marker = _scratch("seg_marker", n, np.uint8)
+    marker.fill(0)
+    marker[marks] = 1
+    sums = _scratch("seg_sums", 2 * (n + 1), np.int32).reshape(2, n + 1)
+    cv2.integral(marker.reshape(1, n), sums)
+    return _copy("seg", sums[1, 1:], np.int64)
 
 
 _local = threading.local()
 
 
 def _scratch(name: str, n: int, dtype) -> np.ndarray:
-    """A reusable per-thread array of n items (contents undefined), at most a band."""
+    """A reusable per-thread array of n items (contents undefined)."""
     bufs = _local.__dict__.setdefault("bufs", {})
     buf = bufs.get(name)
-    if buf is None or len(buf) < n:
+    if buf is None or len(buf) < n or buf.dtype != dtype:
         buf = bufs[name] = np.empty(n, dtype)
     return buf[:n]
+
+
+def _iramp(n: int) -> np.ndarray:
+    """0, 1, ..., n - 1 as int64 (a prefix of a cached ramp)."""
+    ramp = _local.__dict__.get("iramp")
+    if ramp is None or len(ramp) < n:
+        ramp = _local.iramp = np.arange(max(n, 1 << 16), dtype=np.int64)
+    return ramp[:n]
+
+
+def _wramp(n: int, width: int) -> np.ndarray:
+    """0, W, 2W, ..., (n - 1) W as float64 (a prefix of a cached ramp)."""
+    ramp = _local.__dict__.get("wramp")
+    if ramp is None or ramp[0] != width or len(ramp[1]) < n:
+        ramp = _local.wramp = (width, np.arange(max(n, 1 << 16), dtype=np.float64) * width)
+    return ramp[1][:n]
 
 
 def _columns(width: int, rows: int) -> np.ndarray:
@@ -283,8 +464,12 @@ def _columns(width: int, rows: int) -> np.ndarray:
     return cols[1][:rows * width]
 
 
-def _tiling_error(where: np.ndarray, ends: np.ndarray, npix: int, r0: int, width: int) -> None:
-    """Raise CorruptError naming the first pixel the sorted spans miss or repeat."""
+def _tiling_error(key: np.ndarray, end: np.ndarray, npix: int, r0: int, width: int) -> None:
+    """Raise CorruptError naming the first pixel the spans [key, end) repeat or miss."""
+    if len(key) and len(np.unique(key)) < len(key):
+        _fail(int(np.flatnonzero(np.bincount(key) > 1)[0]), r0, width, "covers it twice")
+    order = np.argsort(key)
+    where, ends = key[order], end[order]
     expected = np.concatenate([[0], ends[:-1]]).astype(np.int64)
     bad = np.flatnonzero(where != expected)
     if len(bad):
@@ -292,17 +477,10 @@ def _tiling_error(where: np.ndarray, ends: np.ndarray, npix: int, r0: int, width
         if where[i] > expected[i]:
             _fail(int(expected[i]), r0, width, "leaves it uncovered")
         _fail(int(where[i]), r0, width, "covers it twice")
-    end = int(ends[-1]) if len(ends) else 0
-    if end < npix:
-        _fail(end, r0, width, "leaves it uncovered")
+    last = int(ends[-1]) if len(ends) else 0
+    if last < npix:
+        _fail(last, r0, width, "leaves it uncovered")
     _fail(npix - 1, r0, width, "covers it twice")
-
-
-def _segments(lengths: np.ndarray, total: int) -> np.ndarray:
-    """Index of the run each of `total` items falls in, for runs of `lengths` (> 0)."""
-    marks = np.zeros(total, dtype=np.int32)
-    marks[np.cumsum(lengths[:-1])] = 1
-    return np.cumsum(marks, out=marks)
 
 
 def _fail(pixel: int, r0: int, width: int, what: str) -> None:
@@ -319,19 +497,19 @@ def render(mesh: Mesh) -> np.ndarray:
     if w * h > 1 << 32:
         # keeps every intermediate below the float64-exact bounds stated above
         raise UnsupportedError(f"a {w}x{h} image is too large for the CPU decoder")
-    tz = _Trapezoids(mesh)
+    tri = _Triangles(mesh)
     out = np.empty((h * w, c), dtype=mesh.dtype)
-    band_rows = max(1, BATCH_PIXELS // w)
+    # bands of at most BATCH_PIXELS pixels (or one row), with pixels * H <= 2**44
+    band_rows = max(1, min(BATCH_PIXELS // w, (1 << 44) // (w * h)))
     if band_rows >= h:
-        _render_band(tz, None, 0, h, w, out)
+        _render_band(tri, None, 0, h, w, out)
     else:
-        # bucket trapezoids by band: each joins every band its rows touch
-        first = tz.first.astype(np.int64)
+        # bucket triangles by band: each joins every band its rows touch
+        first = tri.first.astype(np.int64)
         b0 = first // band_rows
-        b1 = (first + tz.count - 1) // band_rows
-        per = b1 - b0 + 1
-        trap = np.repeat(np.arange(len(b0)), per)
-        band = b0[trap] + np.arange(len(trap)) - np.repeat(np.cumsum(per) - per, per)
+        per = (first + tri.count - 1) // band_rows - b0 + 1
+        trap = np.repeat(np.arange(len(first)), per)
+        band = np.repeat(b0 - (np.cumsum(per) - per), per) + np.arange(len(trap))
         nb = (h + band_rows - 1) // band_rows
         # a stable radix sort when the band numbers fit 16 bits
         order = np.argsort(band.astype(np.int16 if nb < 1 << 15 else np.int64), kind="stable")
@@ -339,7 +517,7 @@ def render(mesh: Mesh) -> np.ndarray:
         cuts = np.searchsorted(band, np.arange(nb + 1))
         for b in range(nb):  # a loop over memory-bounding bands
             r0, r1 = b * band_rows, min(h, (b + 1) * band_rows)
-            _render_band(tz, trap[cuts[b]:cuts[b + 1]], r0, r1, w, out)
+            _render_band(tri, trap[cuts[b]:cuts[b + 1]], r0, r1, w, out)
     # no clipping needed: in a triangle every value is a convex combination of values of
     # the dtype, and round-half-up of such a mean stays within the dtype
     shape = (h, w) if c == 1 else (h, w, c)

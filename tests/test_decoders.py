@@ -153,6 +153,50 @@ def test_cpu_bands_do_not_change_pixels(mesh: Mesh, batch: int) -> None:
         decoder_cpu.BATCH_PIXELS = saved
 
 
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(meshes())
+def test_cpu_divided_plane_matches_exact_division(mesh: Mesh) -> None:
+    """The float plane divided by 2D (every 8-bit image, 16-bit up to ~890 Mpx) and the
+    integer numerator with a division per pixel (larger 16-bit images) agree."""
+    fast = decoder_cpu.render(mesh)
+    saved = decoder_cpu._DIVIDED_PLANE_LIMIT
+    decoder_cpu._DIVIDED_PLANE_LIMIT = 0
+    try:
+        assert np.array_equal(decoder_cpu.render(mesh), fast)
+    finally:
+        decoder_cpu._DIVIDED_PLANE_LIMIT = saved
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(meshes(), st.integers(0, 2**32 - 1))
+def test_cpu_vertex_order_does_not_matter(mesh: Mesh, seed: int) -> None:
+    """Decoded meshes number their vertices in raster order; others are renumbered."""
+    if len(mesh.triangles) == 0:
+        return
+    perm = np.random.default_rng(seed).permutation(len(mesh.vertices))
+    inverse = np.argsort(perm)
+    shuffled = Mesh(mesh.vertices[perm], mesh.values[perm], inverse[mesh.triangles],
+                    mesh.width, mesh.height)
+    assert np.array_equal(decoder_cpu.render(shuffled), decoder_cpu.render(mesh))
+
+
+def test_cpu_large_meshes_and_threads(monkeypatch) -> None:
+    """Per-triangle arrays allocated afresh (large meshes) or kept as per-thread scratch
+    give the same pixels, also with renders of different meshes in parallel threads."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(11)
+    imgs = [rng.integers(0, 256, (h, w)).astype(np.uint8) for h, w in ((37, 61), (80, 23), (16, 300))]
+    meshes = [codec.mesh(img) for img in imgs] + [codec.mesh(imgs[0].astype(np.uint16) * 257)]
+    expected = [reference(m) for m in meshes]
+    with ThreadPoolExecutor(4) as pool:
+        got = list(pool.map(decoder_cpu.render, meshes * 6))
+    assert all(np.array_equal(g, e) for g, e in zip(got, expected * 6))
+    monkeypatch.setattr(decoder_cpu, "_KEEP_TRIANGLES", 0)
+    monkeypatch.setattr(decoder_cpu, "BATCH_PIXELS", 500)
+    assert all(np.array_equal(decoder_cpu.render(m), e) for m, e in zip(meshes, expected))
+
+
 def _holed(mesh: Mesh) -> Mesh:
     """The mesh without its first triangle (a hole)."""
     return Mesh(mesh.vertices, mesh.values, mesh.triangles[1:], mesh.width, mesh.height)
