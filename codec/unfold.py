@@ -136,14 +136,18 @@ def drop_conflicts(points: np.ndarray, segments: np.ndarray, cell: int = 8) -> n
     count = nx * ny
     seg = np.repeat(np.arange(len(segments)), count)
     k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    key = (lo[seg, 1] + k // nx[seg]) * (int(hi[:, 0].max()) + 2) + lo[seg, 0] + k % nx[seg]
+    stride = int(hi[:, 0].max()) + 2
+    key = (lo[seg, 1] + k // nx[seg]) * stride + lo[seg, 0] + k % nx[seg]
     order = np.lexsort((seg, key))
     key, seg = key[order], seg[order]
     after = np.searchsorted(key, key, side="right") - np.arange(len(key)) - 1
     first = np.repeat(np.arange(len(key)), after)
     second = first + 1 + np.arange(int(after.sum())) - np.repeat(np.cumsum(after) - after, after)
-    pair = np.unique(seg[first] * len(segments) + seg[second])
-    i, j = pair // len(segments), pair % len(segments)
+    i, j = seg[first], seg[second]
+    # a pair sharing several cells is kept in one: the first cell of the boxes' overlap
+    corner = np.maximum(lo[i], lo[j])
+    once = key[first] == corner[:, 1] * stride + corner[:, 0]
+    i, j = i[once], j[once]
     bad = conflicts(points, segments, i, j)
     keep[np.maximum(i[bad], j[bad])] = False
     return keep
