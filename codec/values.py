@@ -13,9 +13,12 @@ METHODS = ("sample", "lsq")
 #: positive definite when a refit drops all of a vertex's pixels.
 RIDGE = 1e-3
 #: Conjugate gradients stop when the residual is this small relative to the right-hand
-#: side (values are rounded to integers afterwards), or after MAX_ITER steps.
-RTOL = 1e-5
+#: side (values are rounded to integers afterwards; about 0.1 % of a vertex's value),
+#: or after MAX_ITER steps.
+RTOL = 1e-4
 MAX_ITER = 300
+#: The same for a refit meant to reproduce planes exactly.
+EXACT_RTOL = 1e-6
 #: Distance from the mesh beyond which a pixel counts as one it cannot follow.
 OUTLIER = 2.0
 #: Mean squared error per pixel (gray levels squared) under which pixels count as
@@ -67,7 +70,7 @@ def _diagonal(corners: np.ndarray, gram: np.ndarray, n: int) -> np.ndarray:
 
 
 def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndarray,
-          ridge: float | np.ndarray = RIDGE, anchor: np.ndarray | None = None) -> np.ndarray:
+          ridge: float | np.ndarray = RIDGE, anchor: np.ndarray | None = None, rtol: float = RTOL) -> np.ndarray:
     """Minimise sum over elements of the squared error plus ridge * |z - anchor|^2 for
     every channel: (A^T W A + ridge I) z = A^T W b + ridge * anchor, by conjugate
     gradients with a diagonal preconditioner, matrix-free (element by element), from
@@ -89,7 +92,7 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
         b = np.bincount(flat, weights=rhs[:, ch, :].ravel(), minlength=n) + ridge * anchor[:, ch]
         x = start[:, ch].astype(np.float64)
         r = b - apply(x)
-        limit = RTOL * np.linalg.norm(b)
+        limit = rtol * np.linalg.norm(b)
         z = r / diag
         p = z
         rz = r @ z
@@ -145,7 +148,7 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
         gram, rhs = normal_equations(raster.coef, raster.den, kept_moments, kept)
         # what a vertex loses in dropped pixels it keeps as a pull to its own pixel
         lost = np.maximum(full - _diagonal(raster.corners, gram, n), 0.0) * LOST
-        refit = solve(raster.corners, gram, rhs, refit, RIDGE + lost, samples)
+        refit = solve(raster.corners, gram, rhs, refit, RIDGE + lost, samples, EXACT_RTOL)
     count = kept_moments[:, 0]
     sse = squared_error(raster.affine(refit[:, 0]), kept_moments, np.concatenate([kept[:, 0], (bb - drop[:, 9])[:, None]], 1))
     flat = raster.corners.ravel()
