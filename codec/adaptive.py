@@ -34,6 +34,9 @@ from .unfold import Walls, unfold
 #: curvature sampling; refinement takes the rest.
 EDGE_SHARE = 0.3
 REGION_SHARE = 0.3
+#: Edge pixels traced per wall foot of the budget: a polyline's control points are a few
+#: pixels apart and give two feet each, so this leaves the selection a wide choice.
+TRACED = 8
 #: Side of a tile in pixels when tiles are chosen automatically.
 TILE = 80
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
@@ -286,10 +289,12 @@ def build(
     excluded = np.zeros((height, width), dtype=bool)
     if width > 2 and height > 2:
         found, magnitude, _ = edge_stage.detect(gray, peak, thresholds)
+        budget = int(edge_share * points)
         lines = polyline_stage.trace(
-            found, magnitude, segment_length=segment_length, segment_error=segment_error
+            found, magnitude, segment_length=segment_length, segment_error=segment_error,
+            max_pixels=TRACED * budget,
         )
-        lines = _select_lines(lines, int(edge_share * points))
+        lines = _select_lines(lines, budget)
         walls = unfold(lines, gray * np.float32(255.0 / peak))
         wall_pts, segments = walls.points, walls.segments
         excluded = _excluded(lines, walls, (height, width))

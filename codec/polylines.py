@@ -273,8 +273,13 @@ def trace(
     segment_length: int = 4,
     segment_error: float = 1.0,
     min_pixels: int = 3,
+    max_pixels: int | None = None,
 ) -> Polylines:
-    """Polylines approximating the edges of a boolean edge map (see the module doc)."""
+    """Polylines approximating the edges of a boolean edge map (see the module doc).
+
+    max_pixels: trace only the chains of the largest mean squared gradient, as many as
+    fit in this many pixels (all chains stay in scan-line order): the others would not
+    be worth their walls."""
     if isinstance(segment_length, bool) or not isinstance(segment_length, (int, np.integer)) or segment_length < 1:
         raise OptionError(f"segment_length must be a whole number >= 1, not {segment_length!r}")
     if not isinstance(segment_error, (int, float, np.number)) or not segment_error >= 0:
@@ -291,9 +296,15 @@ def trace(
     pix, ch = _attach(flat_order, chain, closed, junction, grid.offsets)
     if len(pix):
         sizes = np.bincount(ch)
-        long_enough = sizes >= max(2, min_pixels)
-        keep = long_enough[ch]
-        pix, ch = pix[keep], (np.cumsum(long_enough) - 1)[ch[keep]]
+        wanted = sizes >= max(2, min_pixels)
+        if max_pixels is not None and sizes[wanted].sum() > max_pixels:
+            mean = np.bincount(ch, weights=magnitude.ravel()[grid.unpad(pix)].astype(np.float64) ** 2) / sizes
+            order = np.argsort(-np.where(wanted, mean, -1.0), kind="stable")
+            fits = np.cumsum(np.where(wanted, sizes, 0)[order]) <= max_pixels
+            wanted = np.zeros_like(wanted)
+            wanted[order[fits]] = True
+        keep = wanted[ch]
+        pix, ch = pix[keep], (np.cumsum(wanted) - 1)[ch[keep]]
     xy = np.stack([pix % grid.stride - 1, pix // grid.stride - 1], axis=1).astype(np.int64)
     nchains = int(ch.max()) + 1 if len(ch) else 0
     first = np.searchsorted(ch, np.arange(nchains), side="left")
