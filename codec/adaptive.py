@@ -309,7 +309,7 @@ def build(
     samples = sampling.sample(dens, tiles, per_tile) if region > 0 else np.zeros((0, 2), np.int64)
     vertices = _merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
-    layout = Statistics(gray, fit)
+    layout = Statistics(image if image.ndim == 2 else gray, fit)
     vertices, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
     if values == "lsq":
         vals = vertex_values.from_statistics(

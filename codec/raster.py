@@ -146,7 +146,7 @@ class Planes:
         h, w = planes[0].shape
         self.stride = w + 1
         # plane k, row y, columns [x, x+n): flat[k, y*stride + x .. + n]
-        self.flat = np.zeros((len(planes), h, w + 1))
+        self.flat = np.zeros((len(planes), h, w + 1), dtype=planes[0].dtype)
         for k, plane in enumerate(planes):
             np.cumsum(plane, axis=1, out=self.flat[k, :, 1:])
         self.flat = self.flat.reshape(len(planes), -1)
@@ -168,13 +168,15 @@ class Statistics:
 
     def __init__(self, structure: np.ndarray, fit=None):
         h, w = structure.shape
-        xs = np.arange(w, dtype=np.float64)
-        b = structure.astype(np.float64)
+        # integer images keep exact integer prefix sums (and are faster to sum)
+        kind = np.int64 if structure.dtype.kind in "ui" else np.float64
+        xs = np.arange(w, dtype=kind)
+        b = structure.astype(kind)
         planes = [b, b * xs, b * b]
         self.own = fit is not None and not isinstance(fit, str)
         channels = [] if not self.own else list(np.moveaxis(fit.reshape(h, w, -1), 2, 0))
         for c in channels:
-            bc = c.astype(np.float64)
+            bc = c.astype(kind)
             planes += [bc, bc * xs]
         self.channels = 0 if fit is None else max(1, len(channels))
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]

@@ -198,7 +198,7 @@ def least_squares(image: np.ndarray, vertices: np.ndarray, raster) -> np.ndarray
     from .image import structure
     from .raster import Statistics
 
-    layout = Statistics(structure(image), "structure" if image.ndim == 2 else image)
+    layout = Statistics(image, "structure") if image.ndim == 2 else Statistics(structure(image), image)
     return from_statistics(image, vertices, raster, layout(raster), layout)
 
 
