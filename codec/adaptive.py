@@ -122,8 +122,10 @@ def _chains(segments: np.ndarray) -> list[np.ndarray]:
     """Constraint polylines: the runs of segments that continue each other."""
     if len(segments) == 0:
         return []
-    breaks = np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1
-    return [np.append(segments[r, 0], segments[r[-1], 1]) for r in np.split(np.arange(len(segments)), breaks)]
+    ends = np.r_[np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1, len(segments)]
+    # each run's first vertices, then its last segment's end
+    flat = np.insert(segments[:, 0], ends, segments[ends - 1, 1])
+    return np.split(flat, ends[:-1] + np.arange(1, len(ends)))
 
 
 def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
