@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import OptionError
+from .raster import _segments
 
 # 8-neighbour offsets (dy, dx) in a fixed order; bit k of a pixel's code is neighbour k
 _OFFSETS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1)])
@@ -258,12 +259,6 @@ def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int,
         keep = ~done
         a, c, end = a[keep], c[keep], end[keep]
     return np.sort(np.concatenate(emitted))
-
-
-def _segments(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """Concatenated aranges: starts[k] + 0 .. counts[k]-1."""
-    offs = np.arange(int(counts.sum()), dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
-    return np.repeat(starts, counts) + offs
 
 
 def trace(

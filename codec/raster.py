@@ -3,7 +3,8 @@
 Every pixel is owned by exactly one *element*, and inside it the mesh value is
 sum_i w_i z_i with the decoder's own barycentric weights (format_spec/ATM.md,
 "Decoding"): w_i = (alpha_i u + beta_i v + gamma_i) / D in coordinates (u, v) relative to
-the element's first corner, with integer alpha, beta, gamma and D. Elements are
+the element's origin (a triangle's corner of lowest vertex index), with integer alpha,
+beta, gamma and D. Elements are
 
 * the triangles, owning the pixel centres of the half-open rectangle
   [0, W-1) x [0, H-1) by the rule "a point belongs to the triangle that contains it
@@ -13,8 +14,8 @@ the element's first corner, with integer alpha, beta, gamma and D. Elements are
   them (the mesh is linear there), which own the pixels that rule leaves out.
 
 So the sums over all pixels that least squares and error estimates need (moments of u,
-v and of the image, optionally weighted per pixel) reduce to closed forms or prefix-sum
-look-ups per span, with no per-pixel work. Elements can be rasterised in parts (a subset
+v and of the image) reduce to closed forms and prefix-sum look-ups per span, with no
+per-pixel work. Elements can be rasterised in parts (a subset
 of the triangles, the border lines) and their statistics kept per element, so that a
 mesh that changes in places only needs its new triangles measured.
 """
@@ -24,10 +25,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-
-def _ceil_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
-    return -((-num) // den)
 
 
 def _segments(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -72,18 +69,6 @@ class Raster:
         sel = slice(None) if elements is None else self._spans_of(elements)
         e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
-
-    def pixels_in(self, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(element, x, y) of every pixel of the elements that is True in `mask`."""
-        rows = np.zeros((mask.shape[0], mask.shape[1] + 1), np.int64)
-        np.cumsum(mask, axis=1, out=rows[:, 1:])
-        flat = rows.ravel()
-        lo = self.span_y * (mask.shape[1] + 1) + self.span_x
-        sel = flat[lo + self.span_n] > flat[lo]
-        e, y, x, n = self.span_elem[sel], self.span_y[sel], self.span_x[sel], self.span_n[sel]
-        e, x, y = np.repeat(e, n), _segments(x, n), np.repeat(y, n)
-        hit = mask[y, x]
-        return e[hit], x[hit], y[hit]
 
     def reduce(self, per_span: np.ndarray) -> np.ndarray:
         """Sum the columns of a K x S array over each element's spans (E x K)."""
