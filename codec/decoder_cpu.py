@@ -28,24 +28,27 @@ rows exactly and raises CorruptError otherwise (a pixel uncovered, or covered tw
 
 Implementation, all vectorised (no Python loop runs per triangle, span or pixel):
 
-* per triangle (_Triangles): the corners sorted by row, the rows it owns, its three
-  edges as lines and the plane 2*sum(w_i v_i) + D = ga*x + gb*y + gc of each channel;
+* the vertices are numbered in raster order (decoded meshes come that way) and each
+  triangle's corners sorted into top T, middle M and bottom B (_Corners);
 * the image is processed in bands of rows whose pixel count bounds the temporary
-  memory (one band for images up to BATCH_PIXELS). In a band every (triangle, row)
-  pair gets its span [xs, xe) from its left and right edge: each edge is a float64 line
-  in the band's pixel numbering whose ceiling is provably the exact one, so the line
-  gives the span's first pixel and its end directly, with no division;
+  memory (one band for images up to BATCH_PIXELS), each with the triangles that have
+  rows in it. Per triangle of a band (_Triangles): the rows it owns, its three edges
+  as lines and the plane 2*sum(w_i v_i) + D = ga*x + gb*y + gc of each channel;
+* every (triangle, row) pair gets its span [xs, xe) from its left and right edge:
+  each edge is a float64 line in the band's pixel numbering whose ceiling is provably
+  the exact one, so it gives the pixel where the span starts or ends directly, with
+  no division;
 * a counting sort puts the spans into raster order: a marker at each span's first
   pixel, and OpenCV's integral (an exact prefix count) of the markers gives every
   pixel the rank of its span. The same markers prove that the spans tile the band;
 * each pixel's value is its span's a*x + b, truncated, where a = ga/2D and
-  b = (gb*y + gc)/2D + 1/(4|D|), which float64 evaluates with an error too small to change
-  the floor (see _Triangles; images too large for that bound use the integer
-  numerator ga*x + gb*y + gc and an exact float64 division instead).
+  b = (gb*y + gc)/2D + 1/(4|D|), which float64 evaluates with an error too small to
+  change the floor (see _Triangles; images too large for that bound use the integer
+  numerator ga*x + gb*y + gc and an exact float64 division per pixel instead).
 
-The arrays the size of a band (its pixels, pairs and spans) and, for meshes of up to
-_KEEP_TRIANGLES triangles, those the size of the mesh are per-thread scratch reused
-from call to call, since fresh pages cost more than the arithmetic on them.
+The arrays the size of a band (its pixels, pairs, spans and triangles) and, for meshes
+of up to _KEEP_TRIANGLES triangles, those the size of the mesh are per-thread scratch
+reused from call to call, since fresh pages cost more than the arithmetic on them.
 """
 
 from __future__ import annotations
@@ -59,14 +62,15 @@ from .errors import CorruptError, UnsupportedError
 from .mesh import Mesh
 
 #: Pixels per band of rows; bounds the decoder's temporary memory, which is kept per
-#: thread as reusable scratch (about 70 bytes per band pixel for typical meshes).
+#: thread as reusable scratch (about 80 bytes per band pixel for typical meshes, some
+#: 20 MB).
 BATCH_PIXELS = 1 << 18
 #: Pixels per chunk of the last, per-pixel stage (its arrays then stay in cache).
 _CHUNK = 1 << 15
 #: The divided plane is exact while W*H*(69*(vmax + 1) + 2**19) stays below this (see
 #: _Triangles): for every 8-bit image, and 16-bit ones up to about 890 megapixels.
 _DIVIDED_PLANE_LIMIT = 1 << 52
-#: Largest mesh whose per-triangle arrays (about 250 bytes per triangle) are kept as
+#: Largest mesh whose mesh-wide arrays (about 80 bytes per triangle) are kept as
 #: per-thread scratch between calls; larger meshes allocate them afresh.
 _KEEP_TRIANGLES = 1 << 17
 
@@ -101,47 +105,88 @@ def render_line(mesh: Mesh) -> np.ndarray:
     return _finish(out, mesh.dtype).reshape(shape)
 
 
-class _Triangles:
-    """Per triangle, with its corners top T, middle M and bottom B in raster order:
-    the rows it owns (`first`, `count`), its edges T -> B, T -> M and M -> B as lines
-    and its plane. float64 throughout: integers below 2**53 are exact, and the
-    rounding of the rest is bounded where it is used.
-    """
+class _Corners:
+    """The mesh's vertices numbered in raster order (as decoded meshes come), and each
+    triangle's corners T, M, B in raster order: its smallest, middle and largest vertex
+    number `it`, `im`, `ib`. Per-thread scratch for meshes of up to _KEEP_TRIANGLES
+    triangles."""
 
     def __init__(self, mesh: Mesh) -> None:
-        w, h, c = mesh.width, mesh.height, mesh.channels
+        w = mesh.width
         nv, m = len(mesh.vertices), len(mesh.triangles)
         keep = m <= _KEEP_TRIANGLES
-        f8, i8, b1 = np.float64, np.int64, np.bool_
 
-        def buf(name: str, dtype=f8, n: int = m) -> np.ndarray:
-            return _scratch("t_" + name, n, dtype) if keep else np.empty(n, dtype)
+        def buf(name: str, dtype, n: int = m) -> np.ndarray:
+            return _scratch("c_" + name, n, dtype) if keep else np.empty(n, dtype)
 
-        def copy(name: str, a: np.ndarray, dtype=f8) -> np.ndarray:
-            out = buf(name, dtype, len(a))
-            np.copyto(out, a, casting="unsafe")
-            return out
-
-        vx, vy = copy("vx", mesh.vertices[:, 0]), copy("vy", mesh.vertices[:, 1])
-        vals = mesh.values.reshape(nv, c)
+        self.vx = buf("vx", np.float64, nv)
+        self.vy = buf("vy", np.float64, nv)
+        np.copyto(self.vx, mesh.vertices[:, 0], casting="unsafe")
+        np.copyto(self.vy, mesh.vertices[:, 1], casting="unsafe")
+        vals = mesh.values.reshape(nv, mesh.channels)
         t = mesh.triangles
-        key = np.multiply(vy, w, out=buf("key", f8, nv))
-        key += vx
-        if not np.less(key[:-1], key[1:], out=buf("sorted", b1, nv)[:nv - 1]).all():
-            # number the vertices in raster order (decoded meshes come that way)
+        key = np.multiply(self.vy, w, out=buf("key", np.float64, nv))
+        key += self.vx
+        if not np.less(key[:-1], key[1:], out=buf("sorted", np.bool_, nv)[:nv - 1]).all():
             order = np.argsort(key, kind="stable")
             rank = np.empty_like(order)
             rank[order] = np.arange(nv)
             t = rank[t]
-            vx, vy, vals = vx[order], vy[order], vals[order]
-        # T, M and B: the smallest, middle and largest vertex number
+            self.vx, self.vy, vals = self.vx[order], self.vy[order], vals[order]
+        # the samples as float64, channel-major (each channel contiguous)
+        self.vals = buf("vals", np.float64, vals.size).reshape(vals.shape[::-1])
+        np.copyto(self.vals, vals.T, casting="unsafe")
         t0, t1, t2 = t[:, 0], t[:, 1], t[:, 2]
-        it = np.minimum(np.minimum(t0, t1, out=buf("it", i8)), t2, out=buf("it", i8))
-        ib = np.maximum(np.maximum(t0, t1, out=buf("ib", i8)), t2, out=buf("ib", i8))
-        im = np.add(t0, t1, out=buf("im", i8))
-        im += t2
-        im -= it
-        im -= ib
+        self.it = np.minimum(t0, t1, out=buf("it", np.int64))
+        np.minimum(self.it, t2, out=self.it)
+        self.ib = np.maximum(t0, t1, out=buf("ib", np.int64))
+        np.maximum(self.ib, t2, out=self.ib)
+        self.im = np.add(t0, t1, out=buf("im", np.int64))
+        self.im += t2
+        self.im -= self.it
+        self.im -= self.ib
+
+
+def _owned_rows(ty: np.ndarray, my: np.ndarray, by: np.ndarray, h: int, buf) -> tuple:
+    """(first, count, none, flat_bottom): the rows of each triangle, from the rows of T,
+    M and B. Owned rows: ty <= y < by, plus by on the image's last row. A pointed top's
+    first row is empty (just T), and so is a pointed bottom's last: rows ty+1 (ty if
+    the top is flat) to by-1 (by on the last row if the bottom is flat). A triangle
+    left without rows (height 1, flat bottom) gets one (`none`), kept empty."""
+    b1 = np.bool_
+    flat_bottom = np.equal(by, my, out=buf("flat_bottom", b1))
+    first = np.add(ty, 1, out=buf("first", np.float64))
+    first -= np.equal(my, ty, out=buf("flat_top", b1))
+    count = np.subtract(by, first, out=buf("rows", np.float64))
+    if by.max() == h - 1:
+        count += flat_bottom & np.equal(by, h - 1, out=buf("last", b1))
+    none = np.equal(count, 0, out=buf("none", b1))
+    count = np.maximum(count, 1, out=count)
+    return first, count, none, flat_bottom
+
+
+class _Triangles:
+    """Per triangle (of `sel`, or all), with its corners T, M and B: the rows it owns
+    (`first`, `count`), its edges T -> B, T -> M and M -> B as lines and its plane, in
+    per-thread scratch. float64 throughout: integers below 2**53 are exact, and the
+    rounding of the rest is bounded where it is used.
+    """
+
+    def __init__(self, mesh: Mesh, corners: _Corners, sel: np.ndarray | None) -> None:
+        w, h, c = mesh.width, mesh.height, mesh.channels
+        f8, i8, b1 = np.float64, np.int64, np.bool_
+
+        def buf(name: str, dtype=f8, n: int | None = None) -> np.ndarray:
+            return _scratch("t_" + name, m if n is None else n, dtype)
+
+        if sel is None:
+            it, im, ib = corners.it, corners.im, corners.ib
+        else:
+            it, im, ib = (
+                np.take(i, sel, out=_scratch("t_" + name, len(sel), i8), mode="clip")
+                for i, name in ((corners.it, "it"), (corners.im, "im"), (corners.ib, "ib")))
+        m = len(it)
+        vx, vy = corners.vx, corners.vy
         tx, ty, mx, my, bx, by = (
             np.take(v, i, out=buf(name), mode="clip")
             for v, i, name in ((vx, it, "tx"), (vy, it, "ty"), (vx, im, "mx"),
@@ -165,7 +210,7 @@ class _Triangles:
         self.gc = buf("gc", f8, c * m).reshape(c, m)
         vt, vm, vb = buf("vt"), buf("vm"), buf("vb")
         for ch in range(c):  # a loop over channels
-            v = copy("v", vals[:, ch])
+            v = corners.vals[ch]
             np.take(v, it, out=vt, mode="clip")
             np.take(v, im, out=vm, mode="clip")
             np.take(v, ib, out=vb, mode="clip")
@@ -198,20 +243,10 @@ class _Triangles:
                 self.gb /= self.d2
                 self.gc /= self.d2
                 self.gc += np.divide(0.5, np.abs(self.d2, out=d), out=d)
-        # Owned rows: ty <= y < by, plus by on the image's last row. A pointed top's
-        # first row is empty (just T), and so is a pointed bottom's last: rows ty+1 (ty
-        # if the top is flat) to by-1 (by on the last row if the bottom is flat). The
-        # edges bounding a row are T -> B and T -> M before row `switch`, M -> B from
-        # it on. A triangle left without rows (height 1, flat bottom) gets one whose
-        # edges coincide, so that every triangle has rows.
-        flat_bottom = np.equal(dyl, 0, out=buf("flat_bottom", b1))
-        self.first = np.add(ty, 1, out=buf("first"))
-        self.first -= np.equal(dym, 0, out=buf("flat_top", b1))
-        count = np.subtract(by, self.first, out=buf("rows"))
-        if by.max() == h - 1:
-            count += flat_bottom & np.equal(by, h - 1, out=buf("last", b1))
-        none = np.equal(count, 0, out=buf("none", b1))
-        self.count = copy("count", np.maximum(count, 1, out=count), i8)
+        # the rows (see _owned_rows); the edges bounding a row are T -> B and T -> M
+        # before row `switch`, M -> B from it on
+        self.first, count, none, flat_bottom = _owned_rows(ty, my, by, h, buf)
+        self.count = _copy("t_count", count, i8)
         self.switch = np.add(my, flat_bottom, out=buf("switch"))
         # Each edge P -> Q as the line x(y) - delta = c + s*(y - py) (s = (qx - px) /
         # (qy - py), c = px - delta). The exact x(y) is a fraction with denominator
@@ -232,37 +267,23 @@ class _Triangles:
         self.c_mid = np.subtract(mx, delta, out=mx)
 
 
-#: The per-triangle arrays a band uses, in _render_band's order.
-_BAND_FIELDS = ("first", "count", "switch", "ty", "my", "s_long", "s_up", "s_low", "c_top",
-                "c_mid", "touch", "d2")
-
-
-def _render_band(tri: _Triangles, sel: np.ndarray | None, r0: int, r1: int, width: int,
-                 out: np.ndarray) -> None:
-    """Write rows r0..r1-1 of `out` (H*W x C) from the triangles `sel` (each with rows
-    in the band; None: all of them)."""
+def _render_band(tri: _Triangles, r0: int, r1: int, width: int, out: np.ndarray) -> None:
+    """Write rows r0..r1-1 of `out` (H*W x C) from the triangles `tri` (each with rows
+    in the band)."""
     npix = (r1 - r0) * width
     f8, i8 = np.float64, np.int64
-    if sel is None:
-        first, n, switch, ty, my, s_long, s_up, s_low, c_top, c_mid, touch, d2 = (
-            getattr(tri, name) for name in _BAND_FIELDS)
-        ga, gb, gc = tri.ga, tri.gb, tri.gc
-        start = first
-    else:
-        def pick(name: str) -> np.ndarray:  # the band's triangles of a field, in scratch
-            a = getattr(tri, name)
-            shape = a.shape[:-1] + (len(sel),)
-            return np.take(a, sel, axis=-1, mode="clip",
-                           out=_scratch("b_" + name, int(np.prod(shape)), a.dtype).reshape(shape))
-
-        first, n, switch, ty, my, s_long, s_up, s_low, c_top, c_mid, touch, d2 = (
-            pick(name) for name in _BAND_FIELDS)
-        ga, gb, gc = pick("ga"), pick("gb"), pick("gc")
-        start = np.maximum(first, r0, out=_scratch("b_start", len(sel), f8))
-        n = np.minimum(np.add(first, n, out=_scratch("b_end", len(sel), f8)), r1,
-                       out=_scratch("b_end", len(sel), f8))
-        n -= start
-        n = _copy("b_n", n, i8)
+    first, n, switch, ty, my = tri.first, tri.count, tri.switch, tri.ty, tri.my
+    s_long, s_up, s_low, c_top, c_mid = tri.s_long, tri.s_up, tri.s_low, tri.c_top, tri.c_mid
+    touch, d2, ga, gb, gc = tri.touch, tri.d2, tri.ga, tri.gb, tri.gc
+    start = first
+    if r0 > first.min() or r1 < (first + n).max():
+        # clip the rows to the band
+        nt = len(n)
+        start = np.maximum(first, r0, out=_scratch("b_start", nt, f8))
+        end = np.add(first, n, out=_scratch("b_end", nt, f8))
+        np.minimum(end, r1, out=end)
+        end -= start
+        n = _copy("b_n", end, i8)
     nt = len(n)
     # Each edge as the line t = c + s*p in the band's pixel numbering p = W*(row - r0)
     # + x: c its value on row r0, s = slope/W + 1, so that ceil(t) = ceil(x(row)) +
@@ -489,6 +510,39 @@ def _fail(pixel: int, r0: int, width: int, what: str) -> None:
     )
 
 
+def _bands(corners: _Corners, h: int, band_rows: int):
+    """(first row, triangles) of each band of `band_rows` rows: every triangle joins
+    each band its rows touch."""
+    m = len(corners.it)
+    keep = m <= _KEEP_TRIANGLES
+
+    def buf(name: str, dtype=np.float64, n: int = m) -> np.ndarray:
+        return _scratch("r_" + name, n, dtype) if keep else np.empty(n, dtype)
+
+    ty, my, by = (np.take(corners.vy, i, out=buf(name), mode="clip")
+                  for i, name in ((corners.it, "ty"), (corners.im, "my"), (corners.ib, "by")))
+    first, count, _, _ = _owned_rows(ty, my, by, h, buf)
+    # bands of the first and last row (exact: integers over an integer, then floor)
+    b0 = np.floor(np.divide(first, band_rows, out=ty), out=ty)
+    last = np.add(first, count, out=my)
+    last -= 1
+    extra = np.floor(np.divide(last, band_rows, out=by), out=by)
+    extra -= b0
+    # each triangle in its first band, and those that straddle bands in the others
+    over = np.flatnonzero(extra)
+    more = extra[over].astype(np.int64)
+    tris = np.concatenate([np.arange(m), np.repeat(over, more)])
+    step = np.arange(len(tris) - m) - np.repeat(np.cumsum(more) - more, more) + 1
+    nb = (h + band_rows - 1) // band_rows
+    band = np.concatenate([b0, np.repeat(b0[over], more) + step]).astype(
+        np.int16 if nb < 1 << 15 else np.int64)  # a stable radix sort for 16 bits
+    order = np.argsort(band, kind="stable")
+    tris = tris[order]
+    cuts = np.concatenate([[0], np.cumsum(np.bincount(band, minlength=nb))])
+    for b in range(nb):
+        yield b * band_rows, tris[cuts[b]:cuts[b + 1]]
+
+
 def render(mesh: Mesh) -> np.ndarray:
     """Decode a validated mesh to an image of its dtype and channel count."""
     if len(mesh.triangles) == 0:
@@ -497,27 +551,17 @@ def render(mesh: Mesh) -> np.ndarray:
     if w * h > 1 << 32:
         # keeps every intermediate below the float64-exact bounds stated above
         raise UnsupportedError(f"a {w}x{h} image is too large for the CPU decoder")
-    tri = _Triangles(mesh)
+    corners = _Corners(mesh)
     out = np.empty((h * w, c), dtype=mesh.dtype)
     # bands of at most BATCH_PIXELS pixels (or one row), with pixels * H <= 2**44
     band_rows = max(1, min(BATCH_PIXELS // w, (1 << 44) // (w * h)))
     if band_rows >= h:
-        _render_band(tri, None, 0, h, w, out)
+        _render_band(_Triangles(mesh, corners, None), 0, h, w, out)
     else:
-        # bucket triangles by band: each joins every band its rows touch
-        first = tri.first.astype(np.int64)
-        b0 = first // band_rows
-        per = (first + tri.count - 1) // band_rows - b0 + 1
-        trap = np.repeat(np.arange(len(first)), per)
-        band = np.repeat(b0 - (np.cumsum(per) - per), per) + np.arange(len(trap))
-        nb = (h + band_rows - 1) // band_rows
-        # a stable radix sort when the band numbers fit 16 bits
-        order = np.argsort(band.astype(np.int16 if nb < 1 << 15 else np.int64), kind="stable")
-        trap, band = trap[order], band[order]
-        cuts = np.searchsorted(band, np.arange(nb + 1))
-        for b in range(nb):  # a loop over memory-bounding bands
-            r0, r1 = b * band_rows, min(h, (b + 1) * band_rows)
-            _render_band(tri, trap[cuts[b]:cuts[b + 1]], r0, r1, w, out)
+        for r0, sel in _bands(corners, h, band_rows):  # a loop over memory-bounding bands
+            if len(sel) == 0:
+                _fail(0, r0, w, "leaves it uncovered")
+            _render_band(_Triangles(mesh, corners, sel), r0, min(h, r0 + band_rows), w, out)
     # no clipping needed: in a triangle every value is a convex combination of values of
     # the dtype, and round-half-up of such a mean stays within the dtype
     shape = (h, w) if c == 1 else (h, w, c)

@@ -186,7 +186,8 @@ def test_cpu_large_meshes_and_threads(monkeypatch) -> None:
     from concurrent.futures import ThreadPoolExecutor
 
     rng = np.random.default_rng(11)
-    imgs = [rng.integers(0, 256, (h, w)).astype(np.uint8) for h, w in ((37, 61), (80, 23), (16, 300))]
+    sizes = ((37, 61), (80, 23), (16, 300))
+    imgs = [rng.integers(0, 256, (h, w)).astype(np.uint8) for h, w in sizes]
     meshes = [codec.mesh(img) for img in imgs] + [codec.mesh(imgs[0].astype(np.uint16) * 257)]
     expected = [reference(m) for m in meshes]
     with ThreadPoolExecutor(4) as pool:
