@@ -320,5 +320,5 @@ def build(
     else:
         vals = vertex_values.sample(image, vertices)
     # vertices that landed on a wall split it, as the triangulation did
-    segments = split_at_vertices(vertices, segments, width, height)
+    segments = split_at_vertices(vertices, segments, width)
     return Mesh(vertices, vals, triangles, width, height, _chains(segments))

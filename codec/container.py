@@ -25,7 +25,6 @@ from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser
 
 
-
 @dataclass(frozen=True)
 class Header:
     """What the AHDR (and QUNT) chunks say about the image. `dtype` is what decoding

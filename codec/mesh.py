@@ -138,11 +138,16 @@ def segments(polylines: list[np.ndarray]) -> np.ndarray:
     """The (i, j) vertex pairs of every step of every polyline, as one K x 2 array."""
     if not polylines:
         return np.zeros((0, 2), np.int64)
-    flat = np.concatenate(polylines).astype(np.int64)
-    # a step joins consecutive indices of one polyline, not the last of one to the next
-    inner = np.ones(len(flat) - 1, bool)
-    ends = np.cumsum([len(c) for c in polylines])[:-1]
-    inner[ends - 1] = False
+    lengths = np.fromiter((len(c) for c in polylines), np.int64, len(polylines))
+    return chain_steps(np.concatenate(polylines).astype(np.int64), lengths)
+
+
+def chain_steps(flat: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The consecutive pairs of `flat` (polylines one after another, of `lengths`)
+    that lie within one polyline: a step does not join one polyline's last entry to
+    the next one's first. Works on vertex indices and on K x 2 points alike."""
+    inner = np.ones(max(len(flat) - 1, 0), bool)
+    inner[np.cumsum(lengths)[:-1] - 1] = False
     return np.stack([flat[:-1][inner], flat[1:][inner]], axis=1)
 
 

@@ -25,12 +25,13 @@ from .coding import (
     zigzag,
 )
 from .errors import ATMError, CorruptError, LimitError
-from .mesh import Mesh, segments
-from .triangulate import triangulate
+from .mesh import Mesh, chain_steps, segments
+from .triangulate import split_at_vertices, triangulate
 
 
-#: The MESH payload's variable-length fields, in payload order (format_spec/schema.py).
-FIELDS = ("polyline_lengths", "polyline_starts", "polyline_steps", "positions", "samples", "triangles")
+#: The MESH payload's variable-length fields, in payload order: all after sample_step.
+_NAMES = [sub.name for sub in schema.MeshPayload.subcons]
+FIELDS = tuple(_NAMES[_NAMES.index("sample_step") + 1 :])
 
 
 def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
@@ -61,8 +62,8 @@ def _from_planes(planes: np.ndarray, dtype: np.dtype, count: int) -> np.ndarray:
 
 
 def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """(key, x, y) rows of every polyline point, polyline after polyline: each
-    polyline's start plus the running sum of its steps (vectorised over all of them)."""
+    """(x, y) of every polyline point, polyline after polyline: each polyline's
+    start plus the running sum of its steps (vectorised over all of them)."""
     firsts = np.cumsum(lengths) - lengths
     inc = np.empty((int(lengths.sum()), 2), dtype=np.int64)
     rest = np.ones(len(inc), dtype=bool)
@@ -72,30 +73,6 @@ def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) ->
     run = np.cumsum(inc, axis=0)
     before = run[firsts] - starts  # the running sum up to each polyline's start
     return run - np.repeat(before, lengths, axis=0)
-
-
-def _check_clear(keys: np.ndarray, points: np.ndarray, lengths: np.ndarray, width: int,
-                 where: str) -> None:
-    """CorruptError if a vertex lies inside a polyline step. Then the triangulation,
-    which adds no vertex, has every step as an edge, which mesh.validate need not
-    check again."""
-    step_of = np.ones(len(points) - 1, dtype=bool) if len(points) else np.zeros(0, bool)
-    step_of[(np.cumsum(lengths) - 1)[:-1]] = False
-    d = (points[1:] - points[:-1])[step_of]
-    g = np.gcd(d[:, 0], d[:, 1])
-    long = np.flatnonzero(g > 1)  # only these steps pass over lattice points
-    if len(long) == 0:
-        return
-    origin = points[:-1][step_of][long]
-    unit = d[long] // g[long, None]
-    inside = g[long] - 1
-    seg = np.repeat(np.arange(len(long)), inside)
-    t = np.arange(int(inside.sum())) - np.repeat(np.cumsum(inside) - inside, inside) + 1
-    p = origin[seg] + t[:, None] * unit[seg]
-    k = p[:, 1] * width + p[:, 0]
-    at = np.minimum(np.searchsorted(keys, k), len(keys) - 1)
-    if (keys[at] == k).any():
-        raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
 
 
 def encode_band(y0: int, mesh: Mesh) -> dict:
@@ -121,11 +98,9 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
 
     flat = np.concatenate(lines) if lines else np.zeros(0, np.int64)
     lengths = np.array([len(c) for c in lines], dtype=np.int64)
-    firsts = np.cumsum(lengths) - lengths
-    step_rows = np.ones(len(flat), dtype=bool)
-    step_rows[firsts] = False
-    steps = (vertices[flat[1:]] - vertices[flat[:-1]])[step_rows[1:]]
-    start_keys = sorted_keys[flat[firsts]]
+    walls = chain_steps(flat, lengths)
+    steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
+    start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
     # samples: the polyline vertices in the order the polylines first reach them (a
     # wall's vertices sit on one side of a step, so each predicts the next well), then
@@ -225,9 +200,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     flat = np.searchsorted(keys, chain_keys)
     ends = np.cumsum(lengths)
     lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
-    inner = np.ones(max(total - 1, 0), dtype=bool)
-    inner[ends[:-1] - 1] = False
-    walls = np.stack([flat[:-1][inner], flat[1:][inner]], 1) if total else None
+    walls = chain_steps(flat, lengths) if total else None
 
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
@@ -246,7 +219,10 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
             raise CorruptError(f"{where}: triangles listed for a Delaunay band")
-        _check_clear(keys, points, lengths, width, where)
+        # the triangulation adds no vertex, so it has every step as an edge unless a
+        # vertex lies inside a step (then mesh.validate need not search the edges)
+        if walls is not None and len(split_at_vertices(vertices, walls, width)) != len(walls):
+            raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
         try:
             triangles = canonical_triangles(triangulate(vertices, walls))
         except ATMError as exc:

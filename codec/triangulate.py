@@ -37,18 +37,22 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.
     return np.asarray(result["triangles"], dtype=np.int64)
 
 
-def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int, height: int,
+def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int,
                       *, origin: bool = False):
     """Cut every segment at the vertices lying inside it (as the constrained
-    triangulation does), keeping the order along it. With origin=True, also return the
-    index of the input segment each piece comes from. Zero-length segments vanish."""
+    triangulation does), keeping the order along it; `width` numbers the pixels. With
+    origin=True, also return the index of the input segment each piece comes from.
+    Zero-length segments vanish."""
     segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
     source = np.flatnonzero(segments[:, 0] != segments[:, 1])
     segments = segments[source]
     if len(segments) == 0:
         return (segments, source) if origin else segments
-    lookup = np.full(width * height, -1, dtype=np.int64)
-    lookup[vertices[:, 1] * width + vertices[:, 0]] = np.arange(len(vertices))
+    # vertices found by pixel key in sorted order: memory grows with the vertices, not
+    # with the band
+    keys = vertices[:, 1].astype(np.int64) * width + vertices[:, 0]
+    order = np.argsort(keys, kind="stable")
+    keys = keys[order]
     a, b = vertices[segments[:, 0]], vertices[segments[:, 1]]
     d = b - a
     g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
@@ -56,8 +60,10 @@ def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int, he
     seg = np.repeat(np.arange(len(segments)), steps)
     t = np.arange(int(steps.sum())) - np.repeat(np.cumsum(steps) - steps, steps)
     pts = a[seg] + t[:, None] * (d[seg] // g[seg][:, None])
-    vid = lookup[pts[:, 1] * width + pts[:, 0]]
-    seg, vid = seg[vid >= 0], vid[vid >= 0]
+    q = pts[:, 1] * width + pts[:, 0]
+    at = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+    hit = keys[at] == q
+    seg, vid = seg[hit], order[at[hit]]
     same = seg[1:] == seg[:-1]
     pieces = np.stack([vid[:-1][same], vid[1:][same]], axis=1)
     return (pieces, source[seg[:-1][same]]) if origin else pieces
@@ -71,7 +77,7 @@ def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[
         return polylines
     v = np.asarray(vertices, dtype=np.int64)
     pieces, source = split_at_vertices(
-        v, segments(polylines), int(v[:, 0].max()) + 1, int(v[:, 1].max()) + 1, origin=True
+        v, segments(polylines), int(v[:, 0].max()) + 1, origin=True
     )
     # each step came from one polyline: regroup the pieces by it
     owner = np.repeat(np.arange(len(polylines)), [len(c) - 1 for c in polylines])[source]
