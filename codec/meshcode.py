@@ -25,7 +25,7 @@ from .coding import (
     zigzag,
 )
 from .errors import ATMError, CorruptError, LimitError
-from .mesh import Mesh, chain_steps, segments
+from .mesh import Mesh, chain_steps
 from .triangulate import split_at_vertices, triangulate
 
 
@@ -40,10 +40,6 @@ def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
     sizes = [len(fields[k]) + (0 if k == "samples" else 4) for k in FIELDS]
     ends = np.cumsum([len(raw) - sum(sizes)] + sizes).tolist()
     return [raw[a:b] for a, b in zip([0] + ends[:-1], ends)]
-
-
-def _segments(constraints: list[np.ndarray]) -> np.ndarray | None:
-    return segments(constraints) if constraints else None
 
 
 def _hilbert_order(vertices: np.ndarray) -> np.ndarray:
@@ -90,15 +86,15 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
     # Delaunay triangulation a decoder rebuilds depends on the order of the segments
     lines = [inverse[c] for c in mesh.constraints]
 
-    try:
-        rebuilt = canonical_triangles(triangulate(vertices, _segments(lines)))
-        delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
-    except ATMError:
-        delaunay = False
-
     flat = np.concatenate(lines) if lines else np.zeros(0, np.int64)
     lengths = np.array([len(c) for c in lines], dtype=np.int64)
     walls = chain_steps(flat, lengths)
+
+    try:
+        rebuilt = canonical_triangles(triangulate(vertices, walls))
+        delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
+    except ATMError:
+        delaunay = False
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
