@@ -128,12 +128,13 @@ def _chains(segments: np.ndarray) -> list[np.ndarray]:
     return np.split(flat, ends[:-1] + np.arange(1, len(ends)))
 
 
-def _keys(triangles: np.ndarray, base: int) -> np.ndarray | None:
-    """One integer per triangle, whichever corner it is listed from, or None when they
-    would overflow int64."""
+def _keys(pixel: np.ndarray, triangles: np.ndarray, base: int) -> np.ndarray | None:
+    """One integer per triangle from its corners' pixel numbers (`pixel`, below
+    `base`), whichever corner it is listed from and however the vertices are numbered,
+    or None when they would overflow int64."""
     if base**3 >= 2**62:
         return None
-    a, b, c = triangles.astype(np.int64).T
+    a, b, c = pixel[triangles].T
     low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
     return (low * base + (a + b + c - low - high)) * base + high
 
@@ -143,9 +144,8 @@ class _Cache:
     the triangles of the last triangulation, by triangle, so that a triangle that
     survives a round is not measured again."""
 
-    def __init__(self, layout: Statistics, base: int):
+    def __init__(self, layout: Statistics):
         self.layout = layout
-        self.base = base
         self.keys = np.zeros(0, np.int64)  # sorted
         self.stats = np.zeros((0, layout.width))
         self.sse = np.zeros(0)
@@ -153,7 +153,7 @@ class _Cache:
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int):
         """(statistics and squared error of every triangle, indices of the new ones, a
         raster of the new ones)."""
-        keys = _keys(triangles, self.base)
+        keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
         known = np.zeros(len(triangles), bool)
         pos = np.zeros(len(triangles), np.int64)
         if keys is not None and len(self.keys):
@@ -193,6 +193,18 @@ def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, hei
     return np.r_[fresh[e1], old[e2]], np.r_[x1, x2], np.r_[y1, y2], np.r_[err1, err2]
 
 
+def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int):
+    """(vertices in raster order, the segments renumbered and cut at the vertices on
+    them, the new position of every old vertex): the vertex order and wall steps a
+    band's MESH chunk stores, which codec.meshcode triangulates again to check that a
+    decoder rebuilds the same triangles."""
+    order = np.argsort(vertices[:, 1] * width + vertices[:, 0], kind="stable")
+    renumber = np.empty(len(order), np.int64)
+    renumber[order] = np.arange(len(order))
+    vertices = vertices[order]
+    return vertices, split_at_vertices(vertices, renumber[segments], width), renumber
+
+
 def refine(
     gray: np.ndarray,
     vertices: np.ndarray,
@@ -207,19 +219,26 @@ def refine(
     straight segments cut a corner of the true edge, that is where the error is.
     Rounds: `rounds`, or FOCUSED_ROUNDS where the error is CONCENTRATED.
 
-    Returns (vertices, triangles, raster, stats): the final vertices and their
-    triangulation, a raster of its elements (triangles then border
-    lines; the triangles' spans are not kept) and every element's statistics
-    (`layout`, which must have `gray` as its structure plane).
+    Returns (vertices, segments, triangles, raster, stats): the final vertices in
+    raster order, the wall segments cut at the vertices on them, their triangulation
+    (remembered by codec.triangulate for the MESH chunk's check), a raster of its
+    elements (triangles then border lines; the triangles' spans are not kept) and
+    every element's statistics (`layout`, which must have `gray` as its structure
+    plane).
     """
     height, width = gray.shape
-    cache = _Cache(layout, target + len(vertices) + 1)
-    z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+    cache = _Cache(layout)
+    ordered = False
     for r in itertools.count():
-        tris = triangulate(vertices, segments)
+        if r == rounds or target <= len(vertices):
+            # the last triangulation: made as the MESH chunk's check will make it
+            vertices, segments, _ = _raster_order(vertices, segments, width)
+            ordered = True
+        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+        tris = triangulate(vertices, segments, fast=True, remember=ordered)
         tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height)
         missing = target - len(vertices)
-        if r == rounds or missing <= 0:
+        if ordered:
             break
         lines = line_raster(vertices, width, height)
         sse = np.r_[tri_sse, element_sse(lines, layout(lines), z)]
@@ -244,12 +263,14 @@ def refine(
         x, y, err = np.r_[x[order], lx], np.r_[y[order], ly], np.r_[err[order], lerr]
         big = err > 0.5
         if not big.any():
+            # nothing worth a vertex: keep this triangulation, in raster order
+            vertices, segments, renumber = _raster_order(vertices, segments, width)
+            tris = renumber[tris]
             break
         vertices = _merge(width, vertices, np.stack([x[big], y[big]], axis=1))
-        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
     lines = line_raster(vertices, width, height)
     elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, tris, elements, np.concatenate([tri_stats, layout(lines)])
+    return vertices, segments, tris, elements, np.concatenate([tri_stats, layout(lines)])
 
 
 def build(
@@ -312,13 +333,11 @@ def build(
     vertices = _merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
     layout = Statistics(image if image.ndim == 2 else gray, fit)
-    vertices, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
+    vertices, segments, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
     if values == "lsq":
         vals = vertex_values.from_statistics(
             image, vertices, elements, stats, layout, lambda: _pixels(vertices, triangles, width, height)
         )
     else:
         vals = vertex_values.sample(image, vertices)
-    # vertices that landed on a wall split it, as the triangulation did
-    segments = split_at_vertices(vertices, segments, width)
     return Mesh(vertices, vals, triangles, width, height, _chains(segments))

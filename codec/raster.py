@@ -3,7 +3,7 @@
 Every pixel is owned by exactly one *element*, and inside it the mesh value is
 sum_i w_i z_i with the decoder's own barycentric weights (format_spec/ATM.md,
 "Decoding"): w_i = (alpha_i u + beta_i v + gamma_i) / D in coordinates (u, v) relative to
-the element's origin (a triangle's corner of lowest vertex index), with integer alpha,
+the element's origin (a triangle's first corner in raster order), with integer alpha,
 beta, gamma and D. Elements are
 
 * the triangles, owning the pixel centres of the half-open rectangle
@@ -326,13 +326,16 @@ def _triangle_coefficients(p: np.ndarray, origin: np.ndarray):
 def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int,
                     *, spans: bool = True) -> Raster:
     """The triangles' elements alone (no border lines): what they own of the image.
-    Each element's origin is its corner of lowest vertex index, so that a triangle has
-    the same statistics whichever corner it is listed from. spans=False: the weights
+    Each element's origin is its first corner in raster order, so that a triangle has
+    the same statistics whichever corner it is listed from and however the vertices
+    are numbered. spans=False: the weights
     only (no spans, for statistics measured before)."""
     v = np.asarray(vertices, dtype=np.int64)
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    origin = v[t.min(axis=1)]
-    coef, den = _triangle_coefficients(v[t], origin)
+    p = v[t]
+    first = (p[:, :, 1] * width + p[:, :, 0]).argmin(axis=1)
+    origin = p[np.arange(len(t)), first]
+    coef, den = _triangle_coefficients(p, origin)
     if spans and len(t):
         return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
     empty = np.zeros(0, np.int64)

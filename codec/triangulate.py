@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import triangle
 
@@ -9,22 +11,60 @@ from .errors import ATMError
 from .mesh import segments
 
 
-def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
+#: Largest coordinate extent (max - min, either axis) at which Triangle's plain
+#: floating-point predicates are exact; see triangulate(fast=True).
+EXACT_EXTENT = 4095
+
+# one remembered triangulation per thread (triangulate(remember=True))
+_memo = threading.local()
+
+
+def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
+                fast: bool = False, remember: bool = False) -> np.ndarray:
     """Triangulate integer (x, y) vertices, keeping every segment (pairs of vertex
     indices) as an edge. Returns M x 3 positively oriented triangles, or none when all
     vertices lie on one row or column (a one-pixel-wide image needs no triangles).
 
     The vertex set is used as given: a triangulation that would need an extra vertex
     (crossing segments) is refused, because vertices must stay on pixel centres.
+
+    fast: skip Triangle's exact arithmetic where that provably changes nothing (the
+    result is identical either way). remember: keep the result so that the next call
+    in this thread, if it has the same vertices and segments in the same order, gets
+    it without triangulating again (any call forgets it).
     """
     vertices = np.asarray(vertices, dtype=np.int64)
+    if segments is not None:
+        segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
+        if len(segments) == 0:
+            segments = None
+    last, _memo.entry = getattr(_memo, "entry", None), None
+    if (
+        last is not None
+        and np.array_equal(last[0], vertices)
+        and (last[1] is None if segments is None else last[1] is not None and np.array_equal(last[1], segments))
+    ):
+        # Triangle is deterministic (and fast=True provably changes nothing): equal
+        # input, equal output
+        return last[2].copy()
     if len(vertices) < 3 or np.ptp(vertices[:, 0]) == 0 or np.ptp(vertices[:, 1]) == 0:
         return np.zeros((0, 3), dtype=np.int64)
-    data = {"vertices": vertices.astype(np.float64)}
-    switches = "Q"
-    if segments is not None and len(segments):
-        data["segments"] = np.asarray(segments, dtype=np.int32).reshape(-1, 2)
-        switches = "pcQ"
+    coords, switches = vertices, "Q"
+    low = vertices.min(axis=0)
+    if fast and int((vertices.max(axis=0) - low).max()) <= EXACT_EXTENT:
+        # Triangle's predicates work on coordinate differences: orient2d forms
+        # dx1 dy2 - dy1 dx2 and incircle sum(lift_i (dx_j dy_k - dx_k dy_j)) with
+        # lift_i = dx_i^2 + dy_i^2. With integer coordinates at most 4095 apart every
+        # difference is an integer below 2^12, every product below 2^24, every lift and
+        # 2x2 determinant below 2^25 and the incircle sum below 3 * 2^50 < 2^53: each
+        # step is an exact double operation, so the plain predicates return the exact
+        # values and switch X (no exact arithmetic) gives the same triangulation. The
+        # shift to the minimum keeps the doubles small (it moves nothing relative).
+        coords, switches = vertices - low, "QX"
+    data = {"vertices": coords.astype(np.float64)}
+    if segments is not None:
+        data["segments"] = segments.astype(np.int32)
+        switches = "pc" + switches
     result = triangle.triangulate(data, switches)
     if len(result["vertices"]) != len(vertices):
         raise ATMError(
@@ -34,7 +74,10 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.
     # Triangle lists every triangle counterclockwise with x right and y up, which is a
     # positive doubled area here; mesh.validate checks it wherever a mesh is written or
     # read, so it is not computed a second time on this hot path
-    return np.asarray(result["triangles"], dtype=np.int64)
+    triangles = np.asarray(result["triangles"], dtype=np.int64)
+    if remember:
+        _memo.entry = (vertices.copy(), None if segments is None else segments.copy(), triangles.copy())
+    return triangles
 
 
 def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int,

@@ -278,3 +278,56 @@ def test_any_image_gives_a_valid_mesh(args):
         check_no_crossings(m)
     out = codec.decode(codec.encode(img, points=max(4, len(m.vertices))))
     assert out.shape == img.shape and out.dtype == img.dtype
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**16), st.sampled_from([3, 40, 4095]), st.booleans())
+def test_fast_triangulation_equals_exact(seed, extent, walls):
+    """Triangle without exact arithmetic gives the exact triangulation on integer
+    vertices at most 4095 apart: on a small grid (many cocircular quadruples, where
+    inexact predicates would break ties differently) and far from the origin."""
+    from codec.coding import canonical_triangles
+    from codec.triangulate import triangulate
+
+    rng = np.random.default_rng(seed)
+    n = min(300, (extent + 1) ** 2 // 2)
+    pts = rng.integers(0, extent + 1, (n, 2)) + rng.integers(0, 2**20, 2)
+    corners = pts.min(axis=0) + np.array([[0, 0], [extent, 0], [0, extent], [extent, extent]])
+    vertices = np.unique(np.r_[corners, pts], axis=0)
+    segments = None
+    if walls:
+        tris = triangulate(vertices)
+        segments = tris[rng.permutation(len(tris))[:5], :2]  # edges of one triangulation never cross
+    exact = canonical_triangles(triangulate(vertices, segments))
+    assert np.array_equal(canonical_triangles(triangulate(vertices, segments, fast=True)), exact)
+
+
+def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
+    """The mesher's vertices come in raster order and its triangles are the constrained
+    Delaunay triangulation of them with the wall steps in their order: what
+    codec.meshcode stores without triangles and checks by triangulating again, which
+    then needs no second run of Triangle."""
+    from codec import meshcode, triangulate as tri
+    from codec.mesh import segments
+    from format_spec import schema
+
+    img = corpus["camera"][:200, :300]
+    m = codec.mesh(img, points=1500)
+    keys = m.vertices[:, 1] * m.width + m.vertices[:, 0]
+    assert (np.diff(keys) > 0).all()
+    rebuilt = tri.triangulate(m.vertices, segments(m.constraints))  # the memo is spent
+    assert np.array_equal(rebuilt, m.triangles)
+    calls = []
+    run = tri.triangle.triangulate
+
+    def counted(*args):
+        calls.append(1)
+        return run(*args)
+
+    m = codec.mesh(img, points=1500)
+    try:
+        tri.triangle.triangulate = counted
+        fields = meshcode.encode_band(0, m)
+    finally:
+        tri.triangle.triangulate = run
+    assert fields["connectivity"] == schema.DELAUNAY and not calls
