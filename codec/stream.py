@@ -264,13 +264,15 @@ class StreamEncoder:
         bits per stored sample: on the corpus that buys more vertices than it costs
         (benchmarks/rate.py: equal or lower RMS at equal bytes than 0.7 or 2 times)."""
         if self._step is None:
-            from . import decoder_cpu
+            mse = getattr(mesh, "decoded_mse", None) if band_holes is None else None
+            if mse is None:
+                from . import decoder_cpu
 
-            diff = decoder_cpu.render(mesh).astype(np.float64) - band
-            diff = diff.reshape(mesh.height, mesh.width, -1)
-            if band_holes is not None:
-                diff = diff[~band_holes]
-            mse = float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
+                diff = decoder_cpu.render(mesh).astype(np.float64) - band
+                diff = diff.reshape(mesh.height, mesh.width, -1)
+                if band_holes is not None:
+                    diff = diff[~band_holes]
+                mse = float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
             self._step = max(1, int(STEP_FACTOR * np.sqrt(mse)))
         step = self._step
         if step == 1:

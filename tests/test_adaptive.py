@@ -331,3 +331,13 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
     finally:
         tri.triangle.triangulate = run
     assert fields["connectivity"] == schema.DELAUNAY and not calls
+
+
+@pytest.mark.parametrize("name", ["camera", "moon", "scene0"])
+def test_decoded_mse_matches_decoding(name, corpus):
+    """The squared error the mesher reports (used for the automatic value step instead
+    of decoding the band) is the decoded image's to within pixel rounding."""
+    img = corpus[name]
+    m = codec.mesh(img, points=round(0.01 * img.size))
+    decoded = np.mean((render(m).astype(np.float64) - img) ** 2)
+    assert abs(m.decoded_mse - decoded) <= 0.01 * decoded + 0.1, (m.decoded_mse, decoded)
