@@ -33,7 +33,10 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
     g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
     dx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) / 4
     dy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) / 4
-    return dx, dy, cv2.magnitude(dx, dy)
+    # not cv2.magnitude: its result differs in the last bit with the arrays' memory
+    # alignment (vector and scalar code paths), which made the thresholds and the wall
+    # selection, and so the bytes, vary from run to run
+    return dx, dy, np.sqrt(dx * dx + dy * dy)
 
 
 def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
