@@ -135,8 +135,15 @@ def _order_chains(simple: np.ndarray, shape: tuple[int, int], offsets: np.ndarra
     index = np.full(len(simple), -1, dtype=np.int64)
     index[flat] = np.arange(n)
     nbr = index[flat[:, None] + offsets[None, :]]
-    deg = (nbr >= 0).sum(axis=1)
-    nb = np.take_along_axis(nbr, np.argsort(nbr < 0, axis=1, kind="stable")[:, :2], axis=1)
+    # a simple pixel's (at most two) neighbours, in offset order: its first and its
+    # last, -1 where it has fewer
+    on = nbr >= 0
+    deg = on.sum(axis=1)
+    rows = np.arange(n)
+    nb = np.stack([
+        np.where(deg >= 1, nbr[rows, on.argmax(axis=1)], -1),
+        np.where(deg >= 2, nbr[rows, 7 - on[:, ::-1].argmax(axis=1)], -1),
+    ], axis=1)
     _, labels = cv2.connectedComponents(simple.reshape(shape).astype(np.uint8), connectivity=8)
     comp = labels.ravel()[flat] - 1  # label 0 is the background
     ncomp = comp.max() + 1
