@@ -82,7 +82,7 @@ class Raster:
         """K x S sums over each span's pixels of the K planes of `planes`."""
         lo = self.span_y * planes.stride + self.span_x
         hi = lo + self.span_n
-        return np.stack([np.take(f, hi) - np.take(f, lo) for f in planes.flat])
+        return (np.take(planes.table, hi, axis=0) - np.take(planes.table, lo, axis=0)).T
 
     def affine(self, vertex_values: np.ndarray) -> np.ndarray:
         """E x 3: the mesh value in each element as (a, b, c) with f = a u + b v + c."""
@@ -124,17 +124,17 @@ class Raster:
 
 
 class Planes:
-    """Prefix sums along the rows of K planes, so that the sums over any row span of
-    all of them cost two look-ups per plane."""
+    """Prefix sums along the rows of K planes, interleaved, so that the sums of all of
+    them over any row span cost two look-ups of K neighbouring numbers."""
 
-    def __init__(self, planes: list[np.ndarray]):
+    def __init__(self, planes: list[np.ndarray], dtype=None):
         h, w = planes[0].shape
         self.stride = w + 1
-        # plane k, row y, columns [x, x+n): flat[k, y*stride + x .. + n]
-        self.flat = np.zeros((len(planes), h, w + 1), dtype=planes[0].dtype)
+        # row y, columns [x, x+n) of plane k: table[y*stride + x + n, k] - table[y*stride + x, k]
+        table = np.zeros((h, w + 1, len(planes)), dtype=dtype or planes[0].dtype)
         for k, plane in enumerate(planes):
-            np.cumsum(plane, axis=1, out=self.flat[k, :, 1:])
-        self.flat = self.flat.reshape(len(planes), -1)
+            np.cumsum(plane, axis=1, dtype=table.dtype, out=table[:, 1:, k])
+        self.table = table.reshape(-1, len(planes))
 
 
 class Statistics:
@@ -167,7 +167,11 @@ class Statistics:
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
-        self.planes = Planes(planes)
+        # prefix sums of 8-bit images fit in int32 (half the memory traffic) up to
+        # widths of about 2900: b x and b b summed along a row stay below 2^31
+        top = np.iinfo(structure.dtype).max if kind is np.int64 else None
+        small = top is not None and max(top * (w - 1), top * top) * w < 2**31
+        self.planes = Planes(planes, np.int32 if small else None)
 
     def __call__(self, raster: Raster) -> np.ndarray:
         """E x width: the statistics of every element of `raster`."""
