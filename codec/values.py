@@ -47,21 +47,23 @@ def normal_equations(coef: np.ndarray, den: np.ndarray, moments: np.ndarray, ima
     (E x C x 3), from its weighted moments (E x 6: 1, u, v, uu, uv, vv) and image sums
     (E x C x 3: b, ub, vb), where a pixel's row of A holds its corners' weights
     w_i = (alpha_i u + beta_i v + gamma_i) / D."""
-    m = moments
-    c = coef.astype(np.float64)
+    # element-last copies, so that every product below runs over contiguous arrays
+    m = np.ascontiguousarray(moments.T)
+    c = coef.astype(np.float64).transpose(1, 2, 0).copy()  # [corner, (alpha, beta, gamma), element]
     d = den.astype(np.float64)
     # M = sum over pixels of p p^T with p = (u, v, 1); gram = C M C^T / D^2, C's rows
     # the corners' (alpha, beta, gamma)
-    rows = ((m[:, 3], m[:, 4], m[:, 1]), (m[:, 4], m[:, 5], m[:, 2]), (m[:, 1], m[:, 2], m[:, 0]))
-    cm = [[sum(c[:, i, k] * rows[k][l] for k in range(3)) for l in range(3)] for i in range(3)]
-    gram = np.empty((len(c), 3, 3))
+    rows = ((m[3], m[4], m[1]), (m[4], m[5], m[2]), (m[1], m[2], m[0]))
+    cm = [[sum(c[i, k] * rows[k][l] for k in range(3)) for l in range(3)] for i in range(3)]
+    gram = np.empty((3, 3, len(d)))
     for i in range(3):
         for j in range(i, 3):
-            gram[:, i, j] = gram[:, j, i] = sum(cm[i][l] * c[:, j, l] for l in range(3))
+            gram[i, j] = gram[j, i] = sum(cm[i][l] * c[j, l] for l in range(3))
+    gram = gram.transpose(2, 0, 1)
     gram /= (d * d)[:, None, None]
     # (ub, vb, b) against (alpha, beta, gamma)
     s = image_sums
-    rhs = (c[:, None, :, 0] * s[:, :, 1:2] + c[:, None, :, 1] * s[:, :, 2:3] + c[:, None, :, 2] * s[:, :, 0:1]) / d[:, None, None]
+    rhs = (c[:, 0].T[:, None, :] * s[:, :, 1:2] + c[:, 1].T[:, None, :] * s[:, :, 2:3] + c[:, 2].T[:, None, :] * s[:, :, 0:1]) / d[:, None, None]
     return gram, rhs
 
 
@@ -79,12 +81,20 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
     n = len(start)
     flat = corners.ravel()
 
-    columns = np.ascontiguousarray(gram.transpose(2, 0, 1))
+    # contiguous per (row, column) of the element matrices and per corner: the
+    # products run over plain arrays instead of broadcast (E, 3) blocks
+    g = [[np.ascontiguousarray(gram[:, i, j]) for j in range(3)] for i in range(3)]
+    by_corner = np.ascontiguousarray(corners.T)
+    y = np.empty((3, len(corners)))
 
     def apply(x: np.ndarray) -> np.ndarray:
-        xc = x[corners]
-        y = columns[0] * xc[:, 0:1] + columns[1] * xc[:, 1:2] + columns[2] * xc[:, 2:3]
-        return np.bincount(flat, weights=y.ravel(), minlength=n) + ridge * x
+        x0, x1, x2 = (np.take(x, c) for c in by_corner)
+        for i in range(3):
+            np.multiply(g[i][0], x0, out=y[i])
+            y[i] += g[i][1] * x1
+            y[i] += g[i][2] * x2
+        # summed element by element, corner by corner, as flat lists them
+        return np.bincount(flat, weights=y.T.ravel(), minlength=n) + ridge * x
 
     diag = _diagonal(corners, gram, n) + ridge
     out = np.empty(start.shape)
