@@ -157,9 +157,14 @@ class _Cache:
         keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
         known = np.zeros(len(triangles), bool)
         pos = np.zeros(len(triangles), np.int64)
-        if keys is not None and len(self.keys):
-            pos = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
-            known = self.keys[pos] == keys
+        if keys is not None:
+            # looked up in key order: sorted queries make the binary searches cheap
+            by_key = np.argsort(keys)
+            sorted_keys = keys[by_key]
+            if len(self.keys):
+                found = np.minimum(np.searchsorted(self.keys, sorted_keys), len(self.keys) - 1)
+                pos[by_key] = found
+                known[by_key] = self.keys[found] == sorted_keys
         fresh = np.flatnonzero(~known)
         raster = triangle_raster(vertices, triangles[fresh], width, height)
         stats = np.empty((len(triangles), self.layout.width))
@@ -168,14 +173,14 @@ class _Cache:
         stats[fresh] = measured
         sse[fresh] = element_sse(raster, measured, z)
         if known.any():
-            stats[known] = self.stats[pos[known]]
+            stats[known] = np.take(self.stats, pos[known], axis=0)
             sse[known] = self.sse[pos[known]]
         if keys is not None:
             # the cache for the next round: the surviving entries (still in key order)
             # with the new ones merged in
             alive = np.zeros(len(self.keys), bool)
             alive[pos[known]] = True
-            order = fresh[np.argsort(keys[fresh])]
+            order = by_key[~known[by_key]]
             at = np.searchsorted(self.keys[alive], keys[order])
             self.keys = np.insert(self.keys[alive], at, keys[order])
             self.stats = np.insert(self.stats[alive], at, stats[order], axis=0)
