@@ -220,7 +220,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
         if walls is not None and len(split_at_vertices(vertices, walls, width)) != len(walls):
             raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
         try:
-            triangles = canonical_triangles(triangulate(vertices, walls))
+            triangles = canonical_triangles(triangulate(vertices, walls, fast=True))
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:
