@@ -151,9 +151,11 @@ class _Cache:
         self.stats = np.zeros((0, layout.width))
         self.sse = np.zeros(0)
 
-    def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int):
+    def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
+                last: bool = False):
         """(statistics and squared error of every triangle, indices of the new ones, a
-        raster of the new ones)."""
+        raster of the new ones). last: no round follows, so the squared errors are not
+        needed (None) and the cache is not updated."""
         keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
         known = np.zeros(len(triangles), bool)
         pos = np.zeros(len(triangles), np.int64)
@@ -171,9 +173,12 @@ class _Cache:
         sse = np.empty(len(triangles))
         measured = self.layout(raster)
         stats[fresh] = measured
-        sse[fresh] = element_sse(raster, measured, z)
         if known.any():
             stats[known] = np.take(self.stats, pos[known], axis=0)
+        if last:
+            return stats, None, fresh, raster
+        sse[fresh] = element_sse(raster, measured, z)
+        if known.any():
             sse[known] = self.sse[pos[known]]
         if keys is not None:
             # the cache for the next round: the surviving entries (still in key order)
@@ -242,7 +247,7 @@ def refine(
             ordered = True
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         tris = triangulate(vertices, segments, fast=True, remember=ordered)
-        tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height)
+        tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
             break

@@ -84,11 +84,14 @@ class Raster:
         hi = lo + self.span_n
         return (np.take(planes.table, hi, axis=0) - np.take(planes.table, lo, axis=0)).T
 
-    def affine(self, vertex_values: np.ndarray) -> np.ndarray:
-        """E x 3: the mesh value in each element as (a, b, c) with f = a u + b v + c."""
-        z = np.asarray(vertex_values, dtype=np.float64)[self.corners]
-        c = self.coef
-        return (c[:, 0] * z[:, 0:1] + c[:, 1] * z[:, 1:2] + c[:, 2] * z[:, 2:3]) / self.den[:, None]
+    def affine(self, vertex_values: np.ndarray, elements: np.ndarray | None = None) -> np.ndarray:
+        """E x 3 (a row per element of `elements`, if given): the mesh value in each
+        element as (a, b, c) with f = a u + b v + c."""
+        corners, c, den = self.corners, self.coef, self.den
+        if elements is not None:
+            corners, c, den = corners[elements], c[elements], den[elements]
+        z = np.asarray(vertex_values, dtype=np.float64)[corners]
+        return (c[:, 0] * z[:, 0:1] + c[:, 1] * z[:, 1:2] + c[:, 2] * z[:, 2:3]) / den[:, None]
 
     def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The mesh value (unrounded) at pixels (x, y) of their elements."""
@@ -104,7 +107,8 @@ class Raster:
         e, y, x0, n = self.span_elem[spans], self.span_y[spans], self.span_x[spans], self.span_n[spans]
         if len(e) == 0:
             return e, x0, y, np.zeros(0)
-        f = self.affine(vertex_values)[e]
+        elements = np.asarray(elements, dtype=np.int64)
+        f = self.affine(vertex_values, elements)[np.searchsorted(elements, e)]
         u = _segments(x0 - self.origin[e, 0], n)
         index = np.repeat(y * plane.shape[1] + x0, n) + u - np.repeat(u[np.r_[0, np.cumsum(n)[:-1]]], n)
         mesh = np.repeat(f[:, 0], n) * u
