@@ -176,21 +176,23 @@ class Statistics:
         top = np.iinfo(structure.dtype).max if kind is np.int64 else None
         small = top is not None and max(top * (w - 1), top * top) * w < 2**31
         self.planes = Planes(planes, np.int32 if small else None)
+        # sums of x^k over columns [0, x): a span's sums of x and xx in two look-ups
+        # each (exact integers in float64 for widths up to about 180,000)
+        cols = np.arange(w, dtype=np.float64)
+        self._powers = [None] + [np.r_[0.0, np.cumsum(cols**k)] for k in (1, 2)]
 
     def __call__(self, raster: Raster) -> np.ndarray:
         """E x width: the statistics of every element of `raster`."""
         d = raster.span_sums(self.planes)
-        n = raster.span_n.astype(np.float64)
-        x0 = raster.span_x.astype(np.float64)
         y = raster.span_y.astype(np.float64)
-        x1 = x0 + n - 1
+        x0, x1 = raster.span_x, raster.span_x + raster.span_n
         # per span, in image coordinates: 1, x, y, xx, xy, yy, then b, xb, yb (and bb)
         fit = len(self._fit) if self.own else 0
-        cols = np.empty((self.width, len(n)))
-        cols[0] = n
-        cols[1] = (x0 + x1) * n / 2
-        np.multiply(y, n, out=cols[2])
-        cols[3] = (x1 * (x1 + 1) * (2 * x1 + 1) - (x0 - 1) * x0 * (2 * x0 - 1)) / 6
+        cols = np.empty((self.width, len(y)))
+        cols[0] = raster.span_n
+        cols[1] = np.take(self._powers[1], x1) - np.take(self._powers[1], x0)
+        np.multiply(y, cols[0], out=cols[2])
+        cols[3] = np.take(self._powers[2], x1) - np.take(self._powers[2], x0)
         np.multiply(y, cols[1], out=cols[4])
         np.multiply(y, cols[2], out=cols[5])
         cols[6:8] = d[0:2]
