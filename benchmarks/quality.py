@@ -12,14 +12,16 @@ and time of
            are decoded by codec's CPU decoder.
 
 and the ratios the acceptance criteria use (RMS against uniform and pydelatin, time
-against pydelatin; the time ratio counts for 512 x 512 images). Writes the adaptive mesh
+against pydelatin; the time ratio counts for 512 x 512 images). The three run in
+turn, --repeat rounds (5), in the same process: times are medians, and the time
+ratio is the median of the rounds' atm / pydelatin ratios. Writes the adaptive mesh
 drawn over each image to benchmarks/out/<name>_<points>.png.
 
 The disparity map motorcycle_disp.npz (skimage's data directory) is made 8-bit as the
 tests do: infinite values (holes) become 0 and the finite range is scaled linearly to
 0..255 and rounded.
 
-    python benchmarks/quality.py [--quick] [--no-png] [--reference DIR]
+    python benchmarks/quality.py [--quick | --repeat N] [--no-png] [--reference DIR]
 """
 
 from __future__ import annotations
@@ -48,19 +50,21 @@ def rms(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)))
 
 
-def timed(fn, repeat: int = 3):
-    """(result, best wall time of `repeat` runs)."""
-    best, out = float("inf"), None
+def timed(fns: dict, repeat: int) -> tuple[dict, dict]:
+    """(each function's result, its wall times over `repeat` runs, as an array). The
+    functions run in turn, round after round, so that a slow spell on a shared machine
+    weighs on all of them alike rather than on whichever ran during it."""
+    out, times = {}, {key: [] for key in fns}
     for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return out, best
+        for key, fn in fns.items():
+            t = time.perf_counter()
+            out[key] = fn()
+            times[key].append(time.perf_counter() - t)
+    return out, {key: np.array(v) for key, v in times.items()}
 
 
-def run_codec(img: np.ndarray, n: int, mesher: str, repeat: int):
-    data, seconds = timed(lambda: codec.encode(img, points=n, mesher=mesher), repeat)
-    return codec.info(data)["vertices"], rms(codec.decode(data), img), seconds
+def codec_result(img: np.ndarray, data: bytes):
+    return codec.info(data)["vertices"], rms(codec.decode(data), img)
 
 
 def delatin_vertices(img: np.ndarray, max_error: float) -> np.ndarray:
@@ -72,8 +76,8 @@ def delatin_vertices(img: np.ndarray, max_error: float) -> np.ndarray:
     return np.unique(xy, axis=0)
 
 
-def run_delatin(img: np.ndarray, n: int, repeat: int):
-    """pydelatin with max_error bisected until its vertex count is within 1 % of n."""
+def delatin_error(img: np.ndarray, n: int) -> float:
+    """pydelatin's max_error, bisected until its vertex count is within 1 % of n."""
     lo, hi = 0.0, float(img.max()) + 1
     err = hi / 2
     for _ in range(40):
@@ -85,10 +89,13 @@ def run_delatin(img: np.ndarray, n: int, repeat: int):
             lo = err
         else:
             hi = err
-    verts, seconds = timed(lambda: delatin_vertices(img, err), repeat)
+    return err
+
+
+def delatin_result(img: np.ndarray, verts: np.ndarray):
     h, w = img.shape
     mesh = Mesh(verts, img[verts[:, 1], verts[:, 0]], triangulate(verts), w, h)
-    return len(verts), rms(render(mesh), img), seconds
+    return len(verts), rms(render(mesh), img)
 
 
 def corpus() -> dict[str, np.ndarray]:
@@ -113,11 +120,12 @@ def reference(directory: Path) -> list[tuple[str, np.ndarray, int]]:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="time one run instead of the best of three")
+    parser.add_argument("--quick", action="store_true", help="time one run instead of the median of REPEAT")
+    parser.add_argument("--repeat", type=int, default=5, help="timed runs of each (default 5)")
     parser.add_argument("--no-png", action="store_true", help="do not write mesh pictures")
     parser.add_argument("--reference", type=Path, default=REFERENCE, help="the seed's reference images")
     args = parser.parse_args(argv)
-    repeat = 1 if args.quick else 3
+    repeat = 1 if args.quick else max(1, args.repeat)
     out_dir = ROOT / "benchmarks" / "out"
     out_dir.mkdir(parents=True, exist_ok=True)
     cases = [(name, img, round(d * img.size)) for name, img in corpus().items() for d in DENSITIES]
@@ -131,10 +139,21 @@ def main(argv: list[str] | None = None) -> None:
     print("-" * len(header))
     worst = {"unif": 0.0, "delat": 0.0, "time": 0.0}
     for name, img, n in cases:
-        an, ar, at = run_codec(img, n, "adaptive", repeat)
-        un, ur, ut = run_codec(img, n, "uniform", repeat)
-        dn, dr, dt = run_delatin(img, n, repeat)
-        ratio_u, ratio_d, ratio_t = ar / max(ur, 1e-9), ar / max(dr, 1e-9), at / max(dt, 1e-9)
+        err = delatin_error(img, n)
+        out, seconds = timed(
+            {
+                "atm": lambda: codec.encode(img, points=n),
+                "uniform": lambda: codec.encode(img, points=n, mesher="uniform"),
+                "delatin": lambda: delatin_vertices(img, err),
+            },
+            repeat,
+        )
+        (an, ar), at = codec_result(img, out["atm"]), float(np.median(seconds["atm"]))
+        (un, ur), ut = codec_result(img, out["uniform"]), float(np.median(seconds["uniform"]))
+        (dn, dr), dt = delatin_result(img, out["delatin"]), float(np.median(seconds["delatin"]))
+        ratio_u, ratio_d = ar / max(ur, 1e-9), ar / max(dr, 1e-9)
+        # the ratio of each round's pair, then their median: a pair shares its moment
+        ratio_t = float(np.median(seconds["atm"] / np.maximum(seconds["delatin"], 1e-9)))
         worst["unif"] = max(worst["unif"], ratio_u)
         worst["delat"] = max(worst["delat"], ratio_d)
         if img.shape == (512, 512):
