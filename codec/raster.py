@@ -135,13 +135,13 @@ class Planes:
     """Prefix sums along the rows of K planes, interleaved, so that the sums of all of
     them over any row span cost two look-ups of K neighbouring numbers."""
 
-    def __init__(self, planes: list[np.ndarray], dtype=None):
+    def __init__(self, planes: list[np.ndarray]):
         h, w = planes[0].shape
         self.stride = w + 1
         # row y, columns [x, x+n) of plane k: table[y*stride + x + n, k] - table[y*stride + x, k]
-        table = np.zeros((h, w + 1, len(planes)), dtype=dtype or planes[0].dtype)
+        table = np.zeros((h, w + 1, len(planes)), dtype=planes[0].dtype)
         for k, plane in enumerate(planes):
-            np.cumsum(plane, axis=1, dtype=table.dtype, out=table[:, 1:, k])
+            np.cumsum(plane, axis=1, out=table[:, 1:, k])
         self.table = table.reshape(-1, len(planes))
 
 
@@ -161,13 +161,19 @@ class Statistics:
 
     def __init__(self, structure: np.ndarray, fit=None):
         h, w = structure.shape
-        # integer images keep exact integer prefix sums (and are faster to sum)
+        self.own = fit is not None and not isinstance(fit, str)
+        channels = [] if not self.own else list(np.moveaxis(fit.reshape(h, w, -1), 2, 0))
+        # integer images keep exact integer prefix sums (and are faster to sum); those
+        # of 8-bit images fit in int32 (half the memory traffic) up to widths of about
+        # 2900: b x and b b summed along a row stay below 2^31
         kind = np.int64 if structure.dtype.kind in "ui" else np.float64
+        if kind is np.int64 and all(c.dtype.kind in "ui" for c in channels):
+            top = max(np.iinfo(a.dtype).max for a in [structure] + channels)
+            if max(top * (w - 1), top * top) * w < 2**31:
+                kind = np.int32
         xs = np.arange(w, dtype=kind)
         b = structure.astype(kind)
         planes = [b, b * xs, b * b]
-        self.own = fit is not None and not isinstance(fit, str)
-        channels = [] if not self.own else list(np.moveaxis(fit.reshape(h, w, -1), 2, 0))
         for c in channels:
             bc = c.astype(kind)
             planes += [bc, bc * xs]
@@ -175,11 +181,7 @@ class Statistics:
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
-        # prefix sums of 8-bit images fit in int32 (half the memory traffic) up to
-        # widths of about 2900: b x and b b summed along a row stay below 2^31
-        top = np.iinfo(structure.dtype).max if kind is np.int64 else None
-        small = top is not None and max(top * (w - 1), top * top) * w < 2**31
-        self.planes = Planes(planes, np.int32 if small else None)
+        self.planes = Planes(planes)
         # sums of x^k over columns [0, x): a span's sums of x and xx in two look-ups
         # each (exact integers in float64 for widths up to about 180,000)
         cols = np.arange(w, dtype=np.float64)
