@@ -22,7 +22,7 @@ mesh that changes in places only needs its new triangles measured.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -53,6 +53,8 @@ class Raster:
     span_x: np.ndarray  # S: first column
     span_n: np.ndarray  # S: pixel count (>= 0)
     span_bounds: np.ndarray | None = None  # E + 1: element e's spans are [b[e], b[e+1])
+    # corner-major float copies of corners, coef and den for affine(), made once
+    _weights: tuple | None = field(default=None, init=False, repr=False)
 
     def __len__(self) -> int:
         return len(self.den)
@@ -91,11 +93,22 @@ class Raster:
     def affine(self, vertex_values: np.ndarray, elements: np.ndarray | None = None) -> np.ndarray:
         """E x 3 (a row per element of `elements`, if given): the mesh value in each
         element as (a, b, c) with f = a u + b v + c."""
-        corners, c, den = self.corners, self.coef, self.den
+        if self._weights is None:
+            self._weights = (
+                np.ascontiguousarray(self.corners.T),
+                np.ascontiguousarray(self.coef.transpose(1, 2, 0), dtype=np.float64),
+                self.den.astype(np.float64),
+            )
+        corners, c, den = self._weights
         if elements is not None:
-            corners, c, den = corners[elements], c[elements], den[elements]
-        z = np.asarray(vertex_values, dtype=np.float64)[corners]
-        return (c[:, 0] * z[:, 0:1] + c[:, 1] * z[:, 1:2] + c[:, 2] * z[:, 2:3]) / den[:, None]
+            corners, c, den = np.take(corners, elements, axis=1), np.take(c, elements, axis=2), den[elements]
+        z = np.asarray(vertex_values, dtype=np.float64)
+        # sum over corners i of coef[i] z_i, in corner order, then / D
+        out = c[0] * np.take(z, corners[0])
+        out += c[1] * np.take(z, corners[1])
+        out += c[2] * np.take(z, corners[2])
+        out /= den
+        return out.T
 
     def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The mesh value (unrounded) at pixels (x, y) of their elements."""
