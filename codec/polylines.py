@@ -61,29 +61,43 @@ class _Grid:
         self.on = np.pad(mask, 1).ravel()
         self.offsets = _OFFSETS[:, 0] * self.stride + _OFFSETS[:, 1]
 
-    def pixels(self) -> np.ndarray:
-        return np.flatnonzero(self.on)
-
-    def neighbours(self, p: np.ndarray) -> np.ndarray:
-        """n x 8 bool: which neighbours of the padded pixels p are on."""
-        return self.on[p[:, None] + self.offsets[None, :]]
-
     def unpad(self, p: np.ndarray) -> np.ndarray:
         """Row-major index in the unpadded image."""
         return (p // self.stride - 1) * self.w + (p % self.stride - 1)
 
 
-_BITS = 1 << np.arange(8)
+def _kernel(weights) -> np.ndarray:
+    """A 3 x 3 correlation kernel giving neighbour k the weight weights[k]."""
+    kernel = np.zeros((3, 3), np.float32)
+    kernel[_OFFSETS[:, 0] + 1, _OFFSETS[:, 1] + 1] = weights
+    return kernel
+
+
+#: Every pixel's neighbourhood code (bit k: neighbour k on) and neighbour count, as
+#: image filters: integer sums up to 255, exact in cv2.filter2D's float arithmetic.
+_CODE = _kernel(1 << np.arange(8))
+_COUNT = _kernel(np.ones(8))
+_REDUNDANT_U8 = _REDUNDANT.astype(np.uint8)
+
+
+def _filtered(grid: _Grid, kernel: np.ndarray) -> np.ndarray:
+    import cv2
+
+    on = grid.on.reshape(grid.h + 2, grid.w + 2).view(np.uint8)
+    return cv2.filter2D(on, cv2.CV_8U, kernel, borderType=cv2.BORDER_CONSTANT)
 
 
 def thin(grid: _Grid) -> None:
     """Remove redundant staircase pixels in place (two passes over the two checkerboard
     colours, so that no two removed pixels are 4-neighbours and connectivity is kept)."""
+    import cv2
+
+    on = grid.on.reshape(grid.h + 2, grid.w + 2)
     for parity in (0, 1):
-        p = grid.pixels()
-        p = p[(p // grid.stride + p % grid.stride) % 2 == parity]
-        code = grid.neighbours(p) @ _BITS
-        grid.on[p[_REDUNDANT[code]]] = False
+        redundant = cv2.LUT(_filtered(grid, _CODE), _REDUNDANT_U8).view(bool)
+        for y0 in (0, 1):  # the pixels of this colour: (y + x) % 2 == parity
+            colour = (slice(y0, None, 2), slice((y0 + parity) % 2, None, 2))
+            on[colour] &= ~redundant[colour]
 
 
 @dataclass(eq=False)
@@ -289,10 +303,7 @@ def trace(
     h, w = edges.shape
     grid = _Grid(edges.astype(bool))
     thin(grid)
-    p = grid.pixels()
-    degree = grid.neighbours(p).sum(axis=1)
-    junction = np.zeros_like(grid.on)
-    junction[p[degree >= 3]] = True
+    junction = grid.on & (_filtered(grid, _COUNT).ravel() >= 3)
     simple = grid.on & ~junction
     flat_order, chain, closed = _order_chains(simple, (h + 2, w + 2), grid.offsets)
     pix, ch = _attach(flat_order, chain, closed, junction, grid.offsets)
