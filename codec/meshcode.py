@@ -25,7 +25,7 @@ from .coding import (
     zigzag,
 )
 from .errors import ATMError, CorruptError, LimitError
-from .mesh import Mesh, chain_steps
+from .mesh import Mesh, chain_steps, doubled_areas
 from .triangulate import split_at_vertices, triangulate
 
 
@@ -37,24 +37,13 @@ FIELDS = tuple(_NAMES[_NAMES.index("sample_step") + 1 :])
 def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
     """A built MESH payload cut before each variable-length field: its fixed fields,
     then each number stream (with its length prefix), for compress_parts."""
-    sizes = [len(fields[k]) + (0 if k == "samples" else 4) for k in FIELDS]
+    sizes = [len(fields[k]) + 4 for k in FIELDS]
     ends = np.cumsum([len(raw) - sum(sizes)] + sizes).tolist()
     return [raw[a:b] for a, b in zip([0] + ends[:-1], ends)]
 
 
 def _hilbert_order(vertices: np.ndarray) -> np.ndarray:
     return np.argsort(hilbert_keys(vertices[:, 0], vertices[:, 1]), kind="stable")
-
-
-def _to_planes(residuals: np.ndarray, dtype: np.dtype) -> np.ndarray:
-    """Residuals (mod 2^bits) as byte planes: all low bytes, then all high bytes."""
-    r = residuals.astype(dtype.newbyteorder("<")).ravel()
-    return r.view(np.uint8).reshape(-1, dtype.itemsize).T.ravel()
-
-
-def _from_planes(planes: np.ndarray, dtype: np.dtype, count: int) -> np.ndarray:
-    b = planes.reshape(dtype.itemsize, count).T.copy()
-    return b.view(dtype.newbyteorder("<")).ravel().astype(dtype)
 
 
 def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -71,16 +60,96 @@ def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) ->
     return run - np.repeat(before, lengths, axis=0)
 
 
-def encode_band(y0: int, mesh: Mesh) -> dict:
-    """The MeshPayload fields for a validated band mesh."""
-    w, n = mesh.width, len(mesh.vertices)
-    keys = mesh.vertices[:, 1] * w + mesh.vertices[:, 0]
+#: Vertex steps vary with fan area within 1/STEP_RANGE .. STEP_RANGE times the base step.
+STEP_RANGE = 4.0
+
+
+def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pinned: bool) -> np.ndarray:
+    """Every vertex's quantisation step (ATM.md §4.2.2): `step` scaled by the square
+    root of the mean fan area over the vertex's own, the factor kept within 1/4..4.
+    A vertex's rounding error spreads over its fan, so vertices with large fans
+    (smooth regions) get finer steps and crowded ones coarser: the same bits then buy
+    less squared error. Step 1 stays 1 everywhere (exact samples); the first row of a
+    band below another has step 1, its samples being the band above's."""
+    n = len(vertices)
+    steps = np.full(n, step, dtype=np.int64)
+    if step > 1 and len(triangles):
+        fan = np.bincount(
+            triangles.ravel(), np.repeat(doubled_areas(vertices, triangles), 3), minlength=n
+        )[:n].astype(np.int64)
+        some = fan > 0
+        if some.any():
+            mean = float(fan[some].sum()) / float(some.sum())
+            factor = np.clip(np.sqrt(mean / fan[some].astype(np.float64)), 1 / STEP_RANGE, STEP_RANGE)
+            steps[some] = np.clip(np.rint(step * factor), 1, 65535).astype(np.int64)
+    if top_pinned:
+        steps[vertices[:, 1] == 0] = 1
+    return steps
+
+
+def _raster_order(mesh: Mesh):
+    """(order, inverse, sorted keys): the vertices in raster order, as stored."""
+    keys = mesh.vertices[:, 1] * mesh.width + mesh.vertices[:, 0]
     order = np.argsort(keys, kind="stable")
-    inverse = np.empty(n, dtype=np.int64)
-    inverse[order] = np.arange(n)
+    inverse = np.empty(len(order), dtype=np.int64)
+    inverse[order] = np.arange(len(order))
+    return order, inverse, keys[order]
+
+
+def _sample_order(vertices: np.ndarray, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sequence, on_line) for raster-ordered vertices: the polyline vertices in the
+    order the polylines first reach them (a wall's vertices sit on one side of a step,
+    so each predicts the next well), then every other vertex along the Hilbert curve."""
+    first_seen = np.unique(flat, return_index=True)[1]
+    on_line = flat[np.sort(first_seen)]
+    free = np.ones(len(vertices), dtype=bool)
+    free[on_line] = False
+    free_idx = np.flatnonzero(free)
+    free_idx = free_idx[_hilbert_order(vertices[free_idx])]
+    return np.concatenate([on_line, free_idx]), free
+
+
+def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
+    """The mesh with its samples as the decoder will rebuild them from residuals with
+    base step `step` (closed-loop: each sample is coded against the previous one as
+    rebuilt, so rounding errors do not add up). Call with the final triangles; pass
+    the same step and top_pinned to the writer."""
+    if step == 1:
+        return mesh
+    order, inverse, _ = _raster_order(mesh)
+    vertices = mesh.vertices[order]
+    flat = np.concatenate([inverse[c] for c in mesh.constraints]) if mesh.constraints else np.zeros(0, np.int64)
+    seq, _ = _sample_order(vertices, flat)
+    steps = vertex_steps(vertices, inverse[mesh.triangles], step, top_pinned)[seq].tolist()
+    top = int(np.iinfo(mesh.dtype).max)
+    values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
+    out = np.empty_like(values)
+    for c in range(values.shape[1]):
+        prev, rebuilt = 0, []
+        # sequential by nature (each residual is taken against the previous sample as
+        # rebuilt); the decoder's side is a running sum
+        for v, s in zip(values[:, c].tolist(), steps):
+            nxt = prev + ((2 * (v - prev) + s) // (2 * s)) * s
+            if nxt > top:
+                nxt -= -(-(nxt - top) // s) * s
+            elif nxt < 0:
+                nxt += -(nxt // s) * s
+            rebuilt.append(nxt)
+            prev = nxt
+        out[:, c] = rebuilt
+    values = np.empty_like(out)
+    values[seq] = out
+    mesh.values = values[inverse].reshape(mesh.values.shape).astype(mesh.dtype)
+    return mesh
+
+
+def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
+    """The MeshPayload fields for a validated band mesh whose samples are as
+    quantise(mesh, step, y0 > 0) left them (any samples with step 1)."""
+    n = len(mesh.vertices)
+    order, inverse, sorted_keys = _raster_order(mesh)
     vertices = mesh.vertices[order]
     values = mesh.values[order].reshape(n, -1)
-    sorted_keys = keys[order]
     triangles = canonical_triangles(inverse[mesh.triangles])
     # the polylines keep their order: with cocircular vertices, the constrained
     # Delaunay triangulation a decoder rebuilds depends on the order of the segments
@@ -98,25 +167,12 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
-    # samples: the polyline vertices in the order the polylines first reach them (a
-    # wall's vertices sit on one side of a step, so each predicts the next well), then
-    # every other vertex along the Hilbert curve
-    first_seen = np.unique(flat, return_index=True)[1]
-    on_line = flat[np.sort(first_seen)]
-    free = np.ones(n, dtype=bool)
-    free[on_line] = False
-    free_idx = np.flatnonzero(free)
-    free_idx = free_idx[_hilbert_order(vertices[free_idx])]
-    seq_order = np.concatenate([on_line, free_idx])
-    # samples that are all multiples of a step are stored divided by it: an encoder
-    # that rounds values to a coarser step pays fewer bits for them
-    step = int(np.gcd.reduce(values.ravel().astype(np.int64))) if values.size else 1
-    step = min(max(step, 1), 65535)
-    while step > 1 and (values % step).any():  # only when the gcd exceeded 65535
-        step -= 1
-    seq = values[seq_order].astype(np.int64) // step
-    residuals = np.diff(seq, axis=0, prepend=np.zeros((1, seq.shape[1]), np.int64))
-    residuals %= 1 << (8 * mesh.dtype.itemsize)
+    seq_order, free = _sample_order(vertices, flat)
+    seq_steps = vertex_steps(vertices, triangles, step, y0 > 0)[seq_order][:, None]
+    diffs = np.diff(values[seq_order].astype(np.int64), axis=0, prepend=np.zeros((1, values.shape[1]), np.int64))
+    residuals = diffs // seq_steps
+    if (residuals * seq_steps != diffs).any():
+        raise ValueError(f"the samples were not quantised with step {step} (meshcode.quantise)")
     free_keys = sorted_keys[free]
     tri_fields = np.zeros(0, np.int64)
     if not delaunay and len(triangles):
@@ -138,7 +194,7 @@ def encode_band(y0: int, mesh: Mesh) -> dict:
         polyline_starts=varints(zigzag(np.diff(start_keys, prepend=0))),
         polyline_steps=varints(zigzag(steps).ravel()),
         positions=varints(np.diff(free_keys, prepend=-1) - 1),
-        samples=_to_planes(residuals, mesh.dtype),
+        samples=varints(zigzag(residuals).ravel()),
         triangles=varints(tri_fields),
     )
 
@@ -198,20 +254,6 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
     walls = chain_steps(flat, lengths) if total else None
 
-    if m.sample_step < 1:
-        raise CorruptError(f"{where}: sample step 0")
-    residuals = _from_planes(m.samples, dtype, n * channels).astype(np.int64).reshape(n, channels)
-    seq = np.cumsum(residuals, axis=0) % (1 << (8 * dtype.itemsize))
-    seq *= m.sample_step
-    if n and seq.max() > np.iinfo(dtype).max:
-        raise CorruptError(f"{where}: a sample times the step {m.sample_step} exceeds {dtype}")
-    free_idx = np.searchsorted(keys, free_keys)
-    free_idx = free_idx[_hilbert_order(vertices[free_idx])]
-    seq_order = np.concatenate([flat[np.sort(first_seen)], free_idx])
-    values = np.empty((n, channels), dtype=dtype)
-    values[seq_order] = seq
-    values = values[:, 0] if channels == 1 else values
-
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
             raise CorruptError(f"{where}: triangles listed for a Delaunay band")
@@ -236,4 +278,22 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
                 else "the file is damaged"
             )
         )
+    # samples last: their steps depend on the triangles' fan areas
+    if m.sample_step < 1:
+        raise CorruptError(f"{where}: sample step 0")
+    if len(triangles) and (triangles.min() < 0 or triangles.max() >= n):
+        raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
+    top = int(np.iinfo(dtype).max)
+    residuals = unzigzag(unvarints(m.samples, n * channels, f"{where} samples")).reshape(n, channels)
+    if n and np.abs(residuals).max() > top:
+        raise CorruptError(f"{where}: a sample residual exceeds the {dtype} range")
+    seq_order, _ = _sample_order(vertices, flat)
+    steps = vertex_steps(vertices, triangles, int(m.sample_step), m.y0 > 0)
+    seq = np.cumsum(residuals * steps[seq_order][:, None], axis=0)
+    if n and (seq.min() < 0 or seq.max() > top):
+        raise CorruptError(f"{where}: a sample leaves the {dtype} range")
+    values = np.empty((n, channels), dtype=dtype)
+    values[seq_order] = seq
+    values = values[:, 0] if channels == 1 else values
+
     return Mesh(vertices, values, triangles, width, rows, lines)

@@ -12,17 +12,18 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder, holes, quantise, refine
+from . import banding, container, encoder, holes, meshcode, quantise, refine
 from . import values as vertex_values
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh
 
 
-#: The automatic value step, as a multiple of the first band's RMS error: rounding to it
-#: adds step^2 / 12, about 16 % of the mean squared error, for log2(step) fewer bits
-#: per sample.
-STEP_FACTOR = 1.4
+#: The automatic base value step, as a multiple of the first band's RMS error. Vertex
+#: steps vary around it with fan area (meshcode.vertex_steps); at 1.0 the rounding
+#: costs about a tenth of the squared error and buys more vertices than it costs
+#: (benchmarks/rate.py: lower RMS at equal bytes than 0.7 or 1.4 on the corpus).
+STEP_FACTOR = 1.0
 
 
 class StreamEncoder:
@@ -233,7 +234,7 @@ class StreamEncoder:
             last_band=self._received == self.height,
             valid=~band_holes if has_holes else None,
         )
-        self._writer.write_band(self._y0, mesh)
+        self._writer.write_band(self._y0, mesh, self._step)
         self.bands += 1
         self.vertices += len(mesh.vertices)
         self.triangles += len(mesh.triangles)
@@ -258,11 +259,9 @@ class StreamEncoder:
         return max(1.0, 2.0 * float(np.sqrt(np.mean(diff**2))))
 
     def _round_values(self, mesh: Mesh, band: np.ndarray, band_holes: np.ndarray | None) -> Mesh:
-        """Round vertex values to multiples of the value step (pinned first-row values
-        already are). The automatic step, set by the first band at 1.4 times its RMS
-        error, adds about 16 % to the mean squared error and saves about log2(step)
-        bits per stored sample: on the corpus that buys more vertices than it costs
-        (benchmarks/rate.py: equal or lower RMS at equal bytes than 0.7 or 2 times)."""
+        """Quantise the vertex values as the file will store them (meshcode.quantise;
+        pinned first-row values stay exact), with the base step set by the first
+        band at STEP_FACTOR times its RMS error, or given."""
         if self._step is None:
             mse = getattr(mesh, "decoded_mse", None) if band_holes is None else None
             if mse is None:
@@ -274,15 +273,7 @@ class StreamEncoder:
                     diff = diff[~band_holes]
                 mse = float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
             self._step = max(1, int(STEP_FACTOR * np.sqrt(mse)))
-        step = self._step
-        if step == 1:
-            return mesh
-        top = (np.iinfo(mesh.dtype).max // step) * step
-        fixed = mesh.vertices[:, 1] == 0 if self._top is not None else np.zeros(len(mesh.vertices), bool)
-        rounded = np.clip(np.rint(mesh.values / step) * step, 0, top).astype(mesh.dtype)
-        rounded[fixed] = mesh.values[fixed]
-        mesh.values = rounded
-        return mesh
+        return meshcode.quantise(mesh, self._step, self._top is not None)
 
     def close(self) -> None:
         """Finish the file. Raises ATMError if fewer rows came than were declared."""

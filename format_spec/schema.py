@@ -29,7 +29,7 @@ from construct import (
 )
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-VERSION = 3
+VERSION = 4
 
 #: Chunk types. An upper-case first letter marks a critical chunk.
 HEADER = b"AHDR"
@@ -158,10 +158,6 @@ MeshPayload = Struct(
     "polyline_starts" / Section,
     "polyline_steps" / Section,
     "positions" / Section,
-    "samples"
-    / NDArray(
-        "u1",
-        lambda ctx: ctx.vertex_count * ctx._.channels * SAMPLE_DTYPES[ctx._.sample_type].itemsize,
-    ),
+    "samples" / Section,
     "triangles" / Section,
 )

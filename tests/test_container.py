@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import io
 import struct
 import zlib
 
@@ -130,7 +132,7 @@ def test_bytes_after_aend_are_ignored(sample_file):
     np.testing.assert_array_equal(codec.decode(sample_file + b"junk"), codec.decode(sample_file))
 
 
-@pytest.mark.parametrize("version", [1, 2, 4])
+@pytest.mark.parametrize("version", [1, 2, 3, 5])
 def test_other_versions_are_unsupported(sample_file, version):
     data = sample_file[:8] + struct.pack("<H", version) + sample_file[10:]
     with pytest.raises(UnsupportedError, match=f"version {version}; this codec reads version {schema.VERSION}"):
@@ -304,21 +306,39 @@ def test_reading_the_header_reads_no_band(sample_file):
     assert stream.tell() == mesh_at + 8
 
 
-def test_samples_on_a_step_are_stored_divided_by_it():
+@pytest.mark.parametrize("step", [1, 3, 12, 200])
+def test_quantised_samples_round_trip_within_their_steps(step):
+    """meshcode.quantise leaves every sample within its vertex's step of the target
+    (half a step unless the sample range was in the way), a file stores those samples
+    exactly, and the steps shrink as fans grow."""
     from codec import meshcode
+    from codec.mesh import doubled_areas
 
-    mesh = random_mesh(3, 30, 20, extra=60)
-    mesh.values = (mesh.values // 12 * 12).astype(np.uint8)
-    fields = meshcode.encode_band(0, mesh)
-    assert fields["sample_step"] == 12 or (mesh.values == 0).all()
-    _, [(_, back)] = container.unpack(container.pack(mesh))
-    assert_same_mesh(mesh, back)
+    mesh = random_mesh(3, 40, 30, extra=80)
+    target = mesh.values.astype(np.int64)
+    quantised = meshcode.quantise(dataclasses.replace(mesh), step, top_pinned=False)
+    steps = meshcode.vertex_steps(mesh.vertices, mesh.triangles, step, False)
+    err = np.abs(quantised.values.astype(np.int64) - target)
+    inner = (target >= steps) & (target <= 255 - steps)  # rounding needs no range fix
+    assert (err <= steps).all() and (err[inner] <= steps[inner] / 2).all()
+    out = io.BytesIO()
+    writer = container.Writer(out, container.Header(40, 30, np.dtype(np.uint8), 1))
+    writer.write_band(0, quantised, step)
+    writer.close()
+    _, [(_, back)] = container.unpack(out.getvalue())
+    assert_same_mesh(quantised, back)
+    fan = np.bincount(mesh.triangles.ravel(), np.repeat(doubled_areas(mesh.vertices, mesh.triangles), 3))
+    by_fan = steps[np.argsort(fan, kind="stable")]
+    assert (np.diff(by_fan) <= 0).all()
+    if step > 1 and not np.array_equal(mesh.values, quantised.values):
+        with pytest.raises(ValueError, match="quantise"):
+            meshcode.encode_band(0, mesh, step)
 
 
 def test_value_step_option():
-    image = np.add.outer(np.arange(40), np.arange(50)).astype(np.uint8) * 2
-    for step in (1, 5, 16):
-        m = codec.decode_mesh(codec.encode(image, value_step=step, points=200))
-        assert (m.values % step == 0).all()
+    """A larger base step gives a smaller file; step 1 keeps the fitted samples."""
+    image = (np.add.outer(np.arange(40), np.arange(50)) * 2 + np.random.default_rng(0).integers(0, 9, (40, 50))).astype(np.uint8)
+    sizes = [len(codec.encode(image, value_step=step, points=200)) for step in (1, 5, 16)]
+    assert sizes[0] > sizes[1] > sizes[2]
     with pytest.raises(codec.OptionError, match="value_step"):
         codec.encode(image, value_step=0)
