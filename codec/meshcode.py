@@ -2,10 +2,12 @@
 
 Polylines are stored as chains: a start pixel and the steps to each next vertex. The
 vertices on no polyline are stored in raster order as gaps between their pixel
-indices. Samples are differences along the polylines, then along the Hilbert curve
-through the other vertices; triangles either listed (canonical order, differences) or not stored at
+indices. Triangles are either listed (canonical order, differences) or not stored at
 all and rebuilt by constrained Delaunay triangulation, with a CRC of the canonical
-list either way so that a decoder can prove it has the encoder's triangles.
+list either way so that a decoder can prove it has the encoder's triangles. Samples
+come last: residuals along the polylines, then along the Hilbert curve through the
+other vertices, each in units of its vertex's step (finer where the triangles are
+larger).
 """
 
 from __future__ import annotations
