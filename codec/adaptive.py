@@ -184,15 +184,11 @@ class _Cache:
         if known.any():
             sse[known] = self.sse[pos[known]]
         if keys is not None:
-            # the cache for the next round: the surviving entries (still in key order)
-            # with the new ones merged in
-            alive = np.zeros(len(self.keys), bool)
-            alive[pos[known]] = True
-            order = by_key[~known[by_key]]
-            at = np.searchsorted(self.keys[alive], keys[order])
-            self.keys = np.insert(self.keys[alive], at, keys[order])
-            self.stats = np.insert(self.stats[alive], at, stats[order], axis=0)
-            self.sse = np.insert(self.sse[alive], at, sse[order])
+            # the cache for the next round: this triangulation's triangles (the
+            # surviving entries and the new ones), in key order
+            self.keys = sorted_keys
+            self.stats = np.take(stats, by_key, axis=0)
+            self.sse = sse[by_key]
         return stats, sse, fresh, raster
 
 
