@@ -3,6 +3,7 @@ otherwise pick (JPEG, WebP, JPEG 2000 through OpenCV), on the public corpus.
 
     python benchmarks/rate.py                  # table on stdout, plot in benchmarks/out/
     python benchmarks/rate.py --images camera motorcycle_disp --bpp 0.1 0.2
+    python benchmarks/rate.py --effort 3       # the slower, more thorough mesher
 
 Every codec is brought to the same byte budget by bisection on its own knob (quality
 for the peers, the vertex count for .atm), taking the largest setting that fits. Two
@@ -79,8 +80,12 @@ def largest_fitting(fn, lo: int, hi: int, budget: int) -> tuple[int, float] | No
     return (size, err) if size <= budget else best
 
 
+#: encoder options for every .atm encode (rate.py --effort sets "effort")
+OPTIONS: dict = {}
+
+
 def atm(image: np.ndarray, points: int) -> tuple[int, float]:
-    data = codec.encode(image, points=points)
+    data = codec.encode(image, points=points, **OPTIONS)
     return len(data), rms(codec.decode(data), image)
 
 
@@ -108,7 +113,7 @@ def holes_table(bpps: list[float]) -> None:
     h, w = image.shape
 
     def atm_masked(n: int) -> tuple[int, float]:
-        data = codec.encode(image, points=n, mask=holes, nodata=0)
+        data = codec.encode(image, points=n, mask=holes, nodata=0, **OPTIONS)
         out = codec.decode(data)
         return len(data), rms(out[valid], image[valid])
 
@@ -167,7 +172,10 @@ def main() -> None:
     parser.add_argument("--bpp", nargs="+", type=float, default=[0.05, 0.1, 0.2, 0.3, 0.5])
     parser.add_argument("--no-plot", action="store_true")
     parser.add_argument("--skip-holes", action="store_true", help="skip the nodata and float tables")
+    parser.add_argument("--effort", type=int, choices=(1, 2, 3), help="the adaptive mesher's effort (default: the codec's)")
     args = parser.parse_args()
+    if args.effort is not None:
+        OPTIONS["effort"] = args.effort
     images = corpus()
     names = args.images or list(images)
     curves: dict[str, dict[str, list]] = {}

@@ -51,7 +51,7 @@ class _Counter:
 def encode_options(args: argparse.Namespace) -> dict:
     """The encoder options the command line sets (the ones left unset take the codec's
     defaults)."""
-    names = ("points", "band_height", "mesher", "quality", "max_rms", "max_error", "precision", "nodata")
+    names = ("points", "band_height", "mesher", "effort", "quality", "max_rms", "max_error", "precision", "nodata")
     options = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
     if getattr(args, "value_range", None) is not None:
         options["value_range"] = tuple(args.value_range)

@@ -127,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--nodata", type=float, metavar="V", help="samples equal to V are holes, kept exactly (NaN and infinity always are in float data)")
     enc.add_argument("--metadata", metavar="JSON", help='a JSON object stored with the image, e.g. \'{"units": "m"}\'')
     enc.add_argument("--mesher", help="mesher: adaptive or uniform (default: the codec's default)")
+    enc.add_argument("--effort", type=int, metavar="E", help="adaptive mesher: 1 (quickest), 2 (default) or 3 (smallest error per byte, about 1.5x slower)")
     enc.add_argument("-v", "--verbose", action="store_true", help="print a summary line on stderr")
     _add_batch_options(enc)
     enc.set_defaults(run=cmd_encode)

@@ -32,12 +32,9 @@ from .triangulate import split_at_vertices, triangulate
 from .unfold import Walls, unfold
 
 #: Default shares of the vertex budget: at most EDGE_SHARE on walls, REGION_SHARE on
-#: curvature sampling; refinement takes the rest. Error-driven refinement places
-#: vertices better than curvature does, so region sampling only seeds it: 0.1 gave
-#: lower RMS at equal bytes than 0.3, 0.15 or 0.05 on the corpus (rate.py at JPEG
-#: q5/q10 sizes) and on range scenes at 1 % density.
+#: curvature sampling (at the default effort); refinement takes the rest.
 EDGE_SHARE = 0.3
-REGION_SHARE = 0.1
+REGION_SHARE = 0.3
 #: Edge pixels traced per wall foot of the budget: a polyline's control points are a few
 #: pixels apart and give two feet each, so this leaves the selection a wide choice.
 TRACED = 8
@@ -51,7 +48,13 @@ DECAY = 0.7
 #: this share of the squared error (steps in a piecewise-smooth image rather than
 #: texture), insertions crowd each other and the budget goes in FOCUSED_ROUNDS rounds.
 CONCENTRATED = 0.7
-FOCUSED_ROUNDS = 8
+FOCUSED_ROUNDS = 6
+#: effort -> (region share, rounds, focused rounds). Error-driven refinement places
+#: vertices better than curvature sampling but costs a triangulation and a measure
+#: per round: effort 3 leaves it 90 % of the budget in up to 8 rounds, for 2-5 %
+#: lower RMS at equal bytes on the corpus and about 1.4-1.6x the encode time of effort 2
+#: (the default); effort 1 is the quickest (benchmarks/quality.py, rate.py --effort).
+EFFORTS = {1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, ROUNDS, 8)}
 
 
 def _check_share(value, name: str) -> float:
@@ -222,12 +225,13 @@ def refine(
     target: int,
     layout: Statistics,
     rounds: int = ROUNDS,
+    focused_rounds: int = FOCUSED_ROUNDS,
 ):
     """Add vertices until there are `target`: in each round, the elements with the
     largest squared error (against the mesh through the sampled pixel values) each get
     a vertex at their worst pixel. Pixels beside walls may get one: where a wall's
     straight segments cut a corner of the true edge, that is where the error is.
-    Rounds: `rounds`, or FOCUSED_ROUNDS where the error is CONCENTRATED.
+    Rounds: `rounds`, or `focused_rounds` where the error is CONCENTRATED.
 
     Returns (vertices, segments, triangles, raster, stats): the final vertices in
     raster order, the wall segments cut at the vertices on them, their triangulation
@@ -255,7 +259,7 @@ def refine(
         if r == 0:
             quarter = min(len(sse), math.ceil(missing / 4))
             if np.partition(sse, len(sse) - quarter)[len(sse) - quarter :].sum() >= CONCENTRATED * sse.sum():
-                rounds = max(rounds, FOCUSED_ROUNDS)
+                rounds = max(rounds, focused_rounds)
         weights = DECAY ** np.arange(rounds - r)
         batch = math.ceil(missing * weights[0] / weights.sum())
         if batch < len(sse):
@@ -293,8 +297,9 @@ def build(
     per_tile: tuple[int, int] | None = None,
     canny: tuple[float, float] | None = None,
     edge_share: float = EDGE_SHARE,
-    region_share: float = REGION_SHARE,
+    region_share: float | None = None,
     values: str = "lsq",
+    effort: int = 2,
 ) -> Mesh:
     """Mesh `image` with about `points` vertices, walls along its discontinuities.
 
@@ -302,14 +307,20 @@ def build(
     tiles=(H, V), per_tile=(R, Z): region sampling grid and samples per tile (by default
     chosen from `points`). canny=(low, high): edge thresholds in 8-bit gray levels
     (default: automatic). edge_share, region_share: parts of the budget for the walls
-    (at most) and the region samples; the rest goes to error-driven refinement.
+    (at most) and the region samples (default: by effort); the rest goes to
+    error-driven refinement. effort: 1 (quickest), 2 (default) or 3 (lowest error per
+    byte, about 1.4x slower): how much of the budget refinement places, in how many
+    rounds.
     values: "lsq" (least squares, default) or "sample" (the pixel values, as the seed).
     Explicit tiles and per_tile are honoured even when they give more than `points`.
     """
     if values not in vertex_values.METHODS:
         raise OptionError(f"unknown values method {values!r}; choose one of {', '.join(vertex_values.METHODS)}")
+    if isinstance(effort, bool) or not isinstance(effort, (int, np.integer)) or effort not in EFFORTS:
+        raise OptionError(f"effort must be 1, 2 or 3, not {effort!r}")
+    default_share, rounds, focused_rounds = EFFORTS[effort]
     edge_share = _check_share(edge_share, "edge_share")
-    region_share = _check_share(region_share, "region_share")
+    region_share = _check_share(default_share if region_share is None else region_share, "region_share")
     thresholds = edge_stage.check_thresholds(canny)
     tiles = None if tiles is None else sampling.check_pair(tiles, "tiles")
     per_tile = None if per_tile is None else sampling.check_pair(per_tile, "per_tile")
@@ -343,7 +354,9 @@ def build(
     vertices = _merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
     layout = Statistics(image if image.ndim == 2 else gray, fit)
-    vertices, segments, triangles, elements, stats = refine(gray, vertices, segments, points, layout)
+    vertices, segments, triangles, elements, stats = refine(
+        gray, vertices, segments, points, layout, rounds, focused_rounds
+    )
     if values == "lsq":
         vals = vertex_values.from_statistics(
             image, vertices, elements, stats, layout, lambda: _pixels(vertices, triangles, width, height)

@@ -204,3 +204,18 @@ def test_nodata_flag_and_bad_option_values(tmp_path, png):
     r = atm("encode", png, tmp_path / "x.atm", "--quality", "200")
     assert r.returncode == 2 and b"quality" in r.stderr
     assert not (tmp_path / "x.atm").exists()
+
+
+def test_effort_flag_matches_the_api(png, tmp_path):
+    """--effort reaches the mesher: the file is the one codec.encode(effort=...) gives,
+    and a level out of range is one line and exit status 2."""
+    import codec
+
+    out = tmp_path / "e.atm"
+    r = atm("encode", png, out, "--points", 400, "--effort", 3)
+    assert r.returncode == 0, r.stderr
+    assert out.read_bytes() == codec.encode(read_image(png), points=400, effort=3)
+    assert out.read_bytes() != codec.encode(read_image(png), points=400)
+    r = atm("encode", png, tmp_path / "bad.atm", "--effort", 9)
+    assert r.returncode == 2 and r.stderr.decode().count("\n") == 1 and "effort" in r.stderr.decode()
+    assert not (tmp_path / "bad.atm").exists()
