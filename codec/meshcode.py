@@ -126,18 +126,19 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     top = int(np.iinfo(mesh.dtype).max)
     values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
     out = np.empty_like(values)
+    halves = [2 * s for s in steps]
     for c in range(values.shape[1]):
         prev, rebuilt = 0, []
+        append = rebuilt.append
         # sequential by nature (each residual is taken against the previous sample as
         # rebuilt); the decoder's side is a running sum
-        for v, s in zip(values[:, c].tolist(), steps):
-            nxt = prev + ((2 * (v - prev) + s) // (2 * s)) * s
-            if nxt > top:
-                nxt -= -(-(nxt - top) // s) * s
-            elif nxt < 0:
-                nxt += -(nxt // s) * s
-            rebuilt.append(nxt)
-            prev = nxt
+        for v, s, s2 in zip(values[:, c].tolist(), steps, halves):
+            prev += ((2 * (v - prev) + s) // s2) * s
+            if prev > top:
+                prev -= -(-(prev - top) // s) * s
+            elif prev < 0:
+                prev -= (prev // s) * s
+            append(prev)
         out[:, c] = rebuilt
     values = np.empty_like(out)
     values[seq] = out
