@@ -44,6 +44,51 @@ def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
     return [raw[a:b] for a, b in zip([0] + ends[:-1], ends)]
 
 
+#: Largest number of low bits of a position gap stored apart (§4.2.2).
+MAX_POSITION_BITS = 24
+
+
+def _byte_entropy(data: bytes) -> float:
+    """Order-0 entropy of a byte string in bytes: what zstd's entropy stage can reach."""
+    counts = np.bincount(np.frombuffer(data, np.uint8), minlength=256)
+    p = counts[counts > 0] / len(data)
+    return float(-(p * np.log2(p)).sum() * len(data) / 8)
+
+
+def position_fields(gaps: np.ndarray, bits: int | None = None) -> dict:
+    """The positions and position_bits fields of free-vertex gaps: each gap's low
+    `bits` bits packed apart (nearly uniform, so raw bits beat an entropy coder on
+    them) and its high part with the count of low bits first as varints. By default
+    the split with the smallest estimated size."""
+    gaps = np.asarray(gaps, dtype=np.int64)
+    if bits is None:
+        sizes = [
+            _byte_entropy(varints(gaps >> k)) + len(gaps) * k / 8 if len(gaps) else k
+            for k in range(MAX_POSITION_BITS + 1)
+        ]
+        bits = int(np.argmin(sizes))
+    low = (gaps[:, None] >> np.arange(bits - 1, -1, -1)) & 1
+    return dict(
+        positions=varints(np.r_[bits, gaps >> bits]),
+        position_bits=np.packbits(low.astype(np.uint8).ravel()).tobytes(),
+    )
+
+
+def _position_gaps(m, free: int, where: str) -> np.ndarray:
+    nums = unvarints(m.positions, free + 1, f"{where} positions")
+    bits = int(nums[0])
+    if bits > MAX_POSITION_BITS:
+        raise CorruptError(f"{where}: {bits} low bits per position, more than {MAX_POSITION_BITS}")
+    packed = np.frombuffer(m.position_bits, np.uint8)
+    if len(packed) != (free * bits + 7) // 8:
+        raise CorruptError(f"{where}: {len(packed)} bytes of position bits for {free} positions of {bits} bits")
+    flat = np.unpackbits(packed)
+    if flat[free * bits :].any():
+        raise CorruptError(f"{where}: position bits padded with ones")
+    low = flat[: free * bits].reshape(free, bits).astype(np.int64) @ (1 << np.arange(bits - 1, -1, -1))
+    return (nums[1:] << bits) + low
+
+
 def _hilbert_order(vertices: np.ndarray) -> np.ndarray:
     return np.argsort(hilbert_keys(vertices[:, 0], vertices[:, 1]), kind="stable")
 
@@ -196,7 +241,7 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
         polyline_lengths=varints(lengths),
         polyline_starts=varints(zigzag(np.diff(start_keys, prepend=0))),
         polyline_steps=varints(zigzag(steps).ravel()),
-        positions=varints(np.diff(free_keys, prepend=-1) - 1),
+        **position_fields(np.diff(free_keys, prepend=-1) - 1),
         samples=varints(zigzag(residuals).ravel()),
         triangles=varints(tri_fields),
     )
@@ -244,7 +289,10 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     free = n - len(line_keys)
     if free < 0:
         raise CorruptError(f"{where}: the polylines have more vertices than the {n} stored")
-    free_keys = np.cumsum(unvarints(m.positions, free, f"{where} positions") + 1) - 1
+    gaps = _position_gaps(m, free, where)
+    if free and gaps.max() >= pixels:
+        raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+    free_keys = np.cumsum(gaps + 1) - 1
     if free and free_keys[-1] >= pixels:
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
     keys = np.concatenate([line_keys, free_keys])

@@ -158,6 +158,7 @@ MeshPayload = Struct(
     "polyline_starts" / Section,
     "polyline_steps" / Section,
     "positions" / Section,
+    "position_bits" / Section,
     "samples" / Section,
     "triangles" / Section,
 )

@@ -180,25 +180,54 @@ def test_mesh_invariants_are_checked(sample_file):
     one_wall = dict(polyline_count=1, polyline_index_count=2, polyline_lengths=varints([2]),
                     polyline_starts=varints(zigzag([keys[0]])),
                     polyline_steps=varints(zigzag(mesh.vertices[1] - mesh.vertices[0])))
-    twice = dict(one_wall, positions=varints(np.diff(keys[:-2], prepend=-1) - 1))
+    twice = dict(one_wall, **meshcode.position_fields(np.diff(keys[:-2], prepend=-1) - 1))
     empty_step = dict(one_wall, polyline_steps=varints(zigzag([0, 0])))
     leaving = dict(one_wall, polyline_starts=varints(zigzag([0])), polyline_steps=varints(zigzag([-1, 0])))
     cases = {
         "wrongly oriented": listed(flipped),
         "beyond": listed(beyond),
-        "outside": dict(positions=varints(gaps)),
+        "outside": meshcode.position_fields(gaps),
         "cover": listed(mesh.triangles[:-1]),
         "leaves the": leaving,
         "step is empty": empty_step,
         "stored both on a polyline and by position": twice,
         "CRC mismatch": dict(triangle_crc=good["triangle_crc"] ^ 1),
         "hold": dict(positions=good["positions"] + b"\x01"),
+        "more than 24": dict(positions=varints([25]) + good["positions"][1:]),
+        "bytes of position bits": dict(position_bits=good["position_bits"] + b"\x00"),
     }
     np.testing.assert_array_equal(codec.decode(repack()), codec.decode(sample_file))
     np.testing.assert_array_equal(codec.decode(repack(**listed(mesh.triangles))), codec.decode(sample_file))
     for message, change in cases.items():
         with pytest.raises(CorruptError, match=message):
             codec.decode(repack(**change))
+
+
+@pytest.mark.parametrize("bits", [0, 1, 3, 8])
+def test_position_bits_round_trip_and_padding_is_checked(bits):
+    """Any split of the position gaps decodes to the same vertices; the packed low
+    bits must fill their bytes exactly, padded with zeros."""
+    import zstandard
+
+    from codec import meshcode
+
+    grid = np.stack(np.meshgrid(np.arange(0, 15, 5), np.arange(0, 9, 4)), -1).reshape(-1, 2)
+    mesh = codec.Mesh(grid, np.arange(9, dtype=np.uint8) * 20, triangulate(grid), 11, 9)
+    data = container.pack(mesh)
+    mesh_at = chunks(data)[1][0]
+
+    def with_fields(**changes) -> bytes:
+        fields = dict(meshcode.encode_band(0, mesh), **changes)
+        raw = schema.MeshPayload.build(fields, sample_type=0, channels=1)
+        return data[:mesh_at] + make_chunk(b"MESH", zstandard.ZstdCompressor().compress(raw)) + make_chunk(b"AEND", b"")
+
+    keys = np.sort(grid[:, 1] * 11 + grid[:, 0])
+    split = meshcode.position_fields(np.diff(keys, prepend=-1) - 1, bits=bits)
+    np.testing.assert_array_equal(codec.decode(with_fields(**split)), codec.decode(data))
+    if 9 * bits % 8:
+        padded = dict(split, position_bits=split["position_bits"][:-1] + bytes([split["position_bits"][-1] | 1]))
+        with pytest.raises(CorruptError, match="padded with ones"):
+            codec.decode(with_fields(**padded))
 
 
 def test_a_wall_over_a_vertex_is_corrupt():
@@ -215,7 +244,7 @@ def test_a_wall_over_a_vertex_is_corrupt():
     free = np.setdiff1d(np.arange(9), [0, 2])  # keys of the pixels off the wall
     fields.update(polyline_count=1, polyline_index_count=2, polyline_lengths=varints([2]),
                   polyline_starts=varints(zigzag([0])), polyline_steps=varints(zigzag([2, 0])),
-                  positions=varints(np.diff(free, prepend=-1) - 1))
+                  **meshcode.position_fields(np.diff(free, prepend=-1) - 1))
     raw = schema.MeshPayload.build(fields, sample_type=0, channels=1)
     data = container.pack(mesh)
     mesh_at = chunks(data)[1][0]
