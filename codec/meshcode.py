@@ -48,9 +48,15 @@ def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
 MAX_POSITION_BITS = 24
 
 
-def _byte_entropy(data: bytes) -> float:
-    """Order-0 entropy of a byte string in bytes: what zstd's entropy stage can reach."""
-    counts = np.bincount(np.frombuffer(data, np.uint8), minlength=256)
+def _varint_entropy(values: np.ndarray) -> float:
+    """Order-0 entropy in bytes of the varint bytes of `values` (what zstd's entropy
+    stage can reach), from a histogram of the bytes without writing them."""
+    if values.max() >= 1 << 14:
+        data = np.frombuffer(varints(values), np.uint8)
+    else:
+        long = values >= 128
+        data = np.r_[np.where(long, (values & 127) | 128, values), values[long] >> 7]
+    counts = np.bincount(data, minlength=256)
     p = counts[counts > 0] / len(data)
     return float(-(p * np.log2(p)).sum() * len(data) / 8)
 
@@ -62,11 +68,13 @@ def position_fields(gaps: np.ndarray, bits: int | None = None) -> dict:
     the split with the smallest estimated size."""
     gaps = np.asarray(gaps, dtype=np.int64)
     if bits is None:
-        sizes = [
-            _byte_entropy(varints(gaps >> k)) + len(gaps) * k / 8 if len(gaps) else k
-            for k in range(MAX_POSITION_BITS + 1)
-        ]
-        bits = int(np.argmin(sizes))
+        bits = 0
+        if len(gaps):
+            # the best split lies a few bits below the mean gap's size
+            top = min(MAX_POSITION_BITS, int(np.log2(gaps.mean() + 1)) + 1)
+            ks = range(max(0, top - 5), top + 1)
+            sizes = [_varint_entropy(gaps >> k) + len(gaps) * k / 8 for k in ks]
+            bits = ks[int(np.argmin(sizes))]
     low = (gaps[:, None] >> np.arange(bits - 1, -1, -1)) & 1
     return dict(
         positions=varints(np.r_[bits, gaps >> bits]),
