@@ -359,3 +359,23 @@ def test_effort_trades_time_for_error():
     for bad in (0, 4, 2.0, True, "3"):
         with pytest.raises(OptionError, match="effort"):
             codec.mesh(img, points=500, effort=bad)
+
+
+def test_piecewise_smooth_images_are_told_from_photos():
+    """Range images keep their curvature on their edges, photos do not: the former
+    get the smaller region share by default."""
+    from skimage import data
+
+    from codec import edges
+    from codec.image import structure
+
+    def off_edges(img):
+        gray = structure(img)
+        found, _, _ = edges.detect(gray, float(np.iinfo(img.dtype).max), None)
+        return adaptive._off_edge_curvature(gray, found)
+
+    for seed in range(3):
+        assert off_edges(range_scene(200, 150, seed=seed)) < adaptive.SMOOTH_OFF_EDGES
+        assert off_edges(range_scene(200, 150, seed=seed, dtype=np.uint16)) < adaptive.SMOOTH_OFF_EDGES
+    for photo in (data.camera(), data.moon(), data.coins()):
+        assert off_edges(photo) > 2 * adaptive.SMOOTH_OFF_EDGES
