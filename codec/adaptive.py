@@ -59,7 +59,7 @@ EFFORTS = {1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, R
 #: SMOOTH_OFF_EDGES of their curvature energy away from their edges. Curvature
 #: sampling then has nothing to follow off the walls, and refinement places the
 #: vertices better: such images get at most SMOOTH_REGION_SHARE of the budget for
-#: region samples (the corpus' range images: 0.2-2 % off the edges, photos 11-50 %;
+#: region samples (the corpus' range images: 0.2-2 % off the edges, photos 11-40 %;
 #: at 0.12 instead of 0.3, range scenes at 1 % density lose a quarter of their RMS;
 #: 0.1 and 0.05 did about as well on average but worse on single scenes).
 SMOOTH_OFF_EDGES = 0.05
