@@ -25,8 +25,7 @@ from . import sampling
 from . import values as vertex_values
 from .errors import OptionError
 from .image import structure
-from .encoder import MeasuredMesh
-from .mesh import Mesh
+from .mesh import MeasuredMesh, Mesh
 from .raster import Statistics, concat, element_sse, line_raster, triangle_raster
 from .triangulate import split_at_vertices, triangulate
 from .unfold import Walls, unfold
@@ -52,7 +51,7 @@ FOCUSED_ROUNDS = 6
 #: effort -> (region share, rounds, focused rounds). Error-driven refinement places
 #: vertices better than curvature sampling but costs a triangulation and a measure
 #: per round: effort 3 leaves it 90 % of the budget in up to 8 rounds, for 2-5 %
-#: lower RMS at equal bytes on the corpus and about 1.4-1.6x the encode time of effort 2
+#: lower RMS at equal bytes on the corpus and about 1.5x the encode time of effort 2
 #: (the default); effort 1 is the quickest (benchmarks/quality.py, rate.py --effort).
 EFFORTS = {1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, ROUNDS, 8)}
 #: Piecewise-smooth images (range images: surfaces and steps) keep less than
@@ -271,7 +270,7 @@ def refine(
             vertices, segments, _ = _raster_order(vertices, segments, width)
             ordered = True
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        tris = triangulate(vertices, segments, fast=True, remember=ordered)
+        tris = triangulate(vertices, segments, remember=ordered)
         tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
@@ -329,10 +328,10 @@ def build(
     tiles=(H, V), per_tile=(R, Z): region sampling grid and samples per tile (by default
     chosen from `points`). canny=(low, high): edge thresholds in 8-bit gray levels
     (default: automatic). edge_share, region_share: parts of the budget for the walls
-    (at most) and the region samples (default: by effort, less on piecewise-smooth images); the rest goes to
-    error-driven refinement. effort: 1 (quickest), 2 (default) or 3 (lowest error per
-    byte, about 1.4x slower): how much of the budget refinement places, in how many
-    rounds.
+    (at most) and the region samples (default: by effort, less on piecewise-smooth
+    images); the rest goes to error-driven refinement. effort: 1 (quickest), 2
+    (default) or 3 (lowest error per byte, about 1.5x slower): how much of the budget
+    refinement places, in how many rounds.
     values: "lsq" (least squares, default) or "sample" (the pixel values, as the seed).
     Explicit tiles and per_tile are honoured even when they give more than `points`.
     """
@@ -344,6 +343,7 @@ def build(
     edge_share = _check_share(edge_share, "edge_share")
     if region_share is not None:
         region_share = _check_share(region_share, "region_share")
+    smooth = False
     thresholds = edge_stage.check_thresholds(canny)
     tiles = None if tiles is None else sampling.check_pair(tiles, "tiles")
     per_tile = None if per_tile is None else sampling.check_pair(per_tile, "per_tile")
@@ -356,8 +356,7 @@ def build(
     excluded = np.zeros((height, width), dtype=bool)
     if width > 2 and height > 2:
         found, magnitude, _ = edge_stage.detect(gray, peak, thresholds)
-        if region_share is None and _off_edge_curvature(gray, found) < SMOOTH_OFF_EDGES:
-            region_share = min(default_share, SMOOTH_REGION_SHARE)
+        smooth = region_share is None and _off_edge_curvature(gray, found) < SMOOTH_OFF_EDGES
         budget = int(edge_share * points)
         lines = polyline_stage.trace(
             found, magnitude, segment_length=segment_length, segment_error=segment_error,
@@ -368,7 +367,7 @@ def build(
         wall_pts, segments = walls.points, walls.segments
         excluded = _excluded(lines, walls, (height, width))
     if region_share is None:
-        region_share = default_share
+        region_share = min(default_share, SMOOTH_REGION_SHARE) if smooth else default_share
     region = max(0, int(region_share * points))
     if tiles is None:
         tiles = (max(1, round(width / TILE)), max(1, round(height / TILE)))

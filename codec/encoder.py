@@ -6,7 +6,6 @@ import importlib
 import io
 import inspect
 import numbers
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,16 +13,6 @@ from . import container
 from .errors import OptionError
 from .image import as_image
 from .mesh import Mesh
-
-@dataclass(eq=False, repr=False)
-class MeasuredMesh(Mesh):
-    """A mesher's mesh with the mean squared error (over all pixels, against the image
-    it was made from) that decoding it gives, where the mesher's own statistics tell
-    it at no cost. Any change to the mesh makes a plain Mesh, so the figure never
-    outlives the mesh it describes (values must not be changed in place)."""
-
-    decoded_mse: float | None = None
-
 
 #: Mesher name -> module with a `build(image, points, **options) -> Mesh` function.
 MESHERS = {"adaptive": "codec.adaptive", "uniform": "codec.uniform"}

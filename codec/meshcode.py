@@ -142,17 +142,24 @@ def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pin
     return steps
 
 
-def _raster_order(mesh: Mesh):
-    """(order, inverse, sorted keys): the vertices in raster order, as stored."""
+def _stored_order(mesh: Mesh):
+    """(order, inverse, sorted keys, polylines): the vertices in raster order, as
+    stored, and the polylines renumbered to it (in their own order: with cocircular
+    vertices, the constrained Delaunay triangulation a decoder rebuilds depends on the
+    order of the segments)."""
     keys = mesh.vertices[:, 1] * mesh.width + mesh.vertices[:, 0]
     order = np.argsort(keys, kind="stable")
     inverse = np.empty(len(order), dtype=np.int64)
     inverse[order] = np.arange(len(order))
-    return order, inverse, keys[order]
+    return order, inverse, keys[order], [inverse[c] for c in mesh.constraints]
+
+
+def _flat(lines: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(lines) if lines else np.zeros(0, np.int64)
 
 
 def _sample_order(vertices: np.ndarray, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(sequence, on_line) for raster-ordered vertices: the polyline vertices in the
+    """(sequence, free mask) for raster-ordered vertices: the polyline vertices in the
     order the polylines first reach them (a wall's vertices sit on one side of a step,
     so each predicts the next well), then every other vertex along the Hilbert curve."""
     first_seen = np.unique(flat, return_index=True)[1]
@@ -165,16 +172,15 @@ def _sample_order(vertices: np.ndarray, flat: np.ndarray) -> tuple[np.ndarray, n
 
 
 def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
-    """The mesh with its samples as the decoder will rebuild them from residuals with
+    """A copy of the mesh with its samples as the decoder will rebuild them from residuals with
     base step `step` (closed-loop: each sample is coded against the previous one as
     rebuilt, so rounding errors do not add up). Call with the final triangles; pass
     the same step and top_pinned to the writer."""
     if step == 1:
         return mesh
-    order, inverse, _ = _raster_order(mesh)
+    order, inverse, _, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
-    flat = np.concatenate([inverse[c] for c in mesh.constraints]) if mesh.constraints else np.zeros(0, np.int64)
-    seq, _ = _sample_order(vertices, flat)
+    seq, _ = _sample_order(vertices, _flat(lines))
     steps = vertex_steps(vertices, inverse[mesh.triangles], step, top_pinned)[seq].tolist()
     top = int(np.iinfo(mesh.dtype).max)
     values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
@@ -195,23 +201,19 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
         out[:, c] = rebuilt
     values = np.empty_like(out)
     values[seq] = out
-    mesh.values = values[inverse].reshape(mesh.values.shape).astype(mesh.dtype)
-    return mesh
+    values = values[inverse].reshape(mesh.values.shape).astype(mesh.dtype)
+    return Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
 
 
 def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     """The MeshPayload fields for a validated band mesh whose samples are as
     quantise(mesh, step, y0 > 0) left them (any samples with step 1)."""
     n = len(mesh.vertices)
-    order, inverse, sorted_keys = _raster_order(mesh)
+    order, inverse, sorted_keys, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
     values = mesh.values[order].reshape(n, -1)
     triangles = canonical_triangles(inverse[mesh.triangles])
-    # the polylines keep their order: with cocircular vertices, the constrained
-    # Delaunay triangulation a decoder rebuilds depends on the order of the segments
-    lines = [inverse[c] for c in mesh.constraints]
-
-    flat = np.concatenate(lines) if lines else np.zeros(0, np.int64)
+    flat = _flat(lines)
     lengths = np.array([len(c) for c in lines], dtype=np.int64)
     walls = chain_steps(flat, lengths)
 
@@ -298,7 +300,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     if free < 0:
         raise CorruptError(f"{where}: the polylines have more vertices than the {n} stored")
     gaps = _position_gaps(m, free, where)
-    if free and gaps.max() >= pixels:
+    if free and gaps.max() >= pixels:  # checked before the running sum can overflow
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
     free_keys = np.cumsum(gaps + 1) - 1
     if free and free_keys[-1] >= pixels:
@@ -321,7 +323,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
         if walls is not None and len(split_at_vertices(vertices, walls, width)) != len(walls):
             raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
         try:
-            triangles = canonical_triangles(triangulate(vertices, walls, fast=True))
+            triangles = canonical_triangles(triangulate(vertices, walls))
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:
@@ -340,7 +342,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     # samples last: their steps depend on the triangles' fan areas
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
-    if len(triangles) and (triangles.min() < 0 or triangles.max() >= n):
+    if len(triangles) and triangles.max() >= n:  # listed indices are unsigned
         raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
     top = int(np.iinfo(dtype).max)
     residuals = unzigzag(unvarints(m.samples, n * channels, f"{where} samples")).reshape(n, channels)

@@ -360,8 +360,8 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
     """The triangles' elements alone (no border lines): what they own of the image.
     Each element's origin is its first corner in raster order, so that a triangle has
     the same statistics whichever corner it is listed from and however the vertices
-    are numbered. spans=False: the weights
-    only (no spans, for statistics measured before)."""
+    are numbered. spans=False: the weights only (no spans, for statistics measured
+    before)."""
     v = np.asarray(vertices, dtype=np.int64)
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     p = np.take(v, t, axis=0)

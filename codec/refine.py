@@ -130,7 +130,7 @@ def refine(
             segments = None
             mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [], mesh.holes)
         vertices = np.concatenate([mesh.vertices, new]) if len(new) else mesh.vertices
-        triangles = triangulate(vertices, segments, fast=True) if len(new) else mesh.triangles
+        triangles = triangulate(vertices, segments) if len(new) else mesh.triangles
         sampled = np.concatenate([sampled | at_vertex, np.ones(len(new), bool)])
         if values == "sample":
             vals = np.concatenate([mesh.values, image[new[:, 1], new[:, 0]]]) if len(new) else mesh.values.copy()

@@ -224,7 +224,7 @@ class StreamEncoder:
                 top = mesh.vertices[:, 1] == 0
                 fitted[top] = mesh.values[top]
             mesh.values = fitted
-        mesh = self._round_values(mesh, band, band_holes if has_holes else None)
+        mesh = self._quantise(mesh, band, band_holes if has_holes else None)
         mesh = refine.refine(
             mesh,
             band,
@@ -258,7 +258,7 @@ class StreamEncoder:
         diff = decoder_cpu.render(mesh).astype(np.float64) - band
         return max(1.0, 2.0 * float(np.sqrt(np.mean(diff**2))))
 
-    def _round_values(self, mesh: Mesh, band: np.ndarray, band_holes: np.ndarray | None) -> Mesh:
+    def _quantise(self, mesh: Mesh, band: np.ndarray, band_holes: np.ndarray | None) -> Mesh:
         """Quantise the vertex values as the file will store them (meshcode.quantise;
         pinned first-row values stay exact), with the base step set by the first
         band at STEP_FACTOR times its RMS error, or given."""

@@ -12,7 +12,7 @@ from .mesh import segments
 
 
 #: Largest coordinate extent (max - min, either axis) at which Triangle's plain
-#: floating-point predicates are exact; see triangulate(fast=True).
+#: floating-point predicates are exact (see triangulate).
 EXACT_EXTENT = 4095
 
 # one remembered triangulation per thread (triangulate(remember=True))
@@ -20,7 +20,7 @@ _memo = threading.local()
 
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
-                fast: bool = False, remember: bool = False) -> np.ndarray:
+                remember: bool = False, exact: bool = False) -> np.ndarray:
     """Triangulate integer (x, y) vertices, keeping every segment (pairs of vertex
     indices) as an edge. Returns M x 3 positively oriented triangles, or none when all
     vertices lie on one row or column (a one-pixel-wide image needs no triangles).
@@ -28,10 +28,11 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     The vertex set is used as given: a triangulation that would need an extra vertex
     (crossing segments) is refused, because vertices must stay on pixel centres.
 
-    fast: skip Triangle's exact arithmetic where that provably changes nothing (the
-    result is identical either way). remember: keep the result so that the next call
-    in this thread, if it has the same vertices and segments in the same order, gets
-    it without triangulating again (any call forgets it).
+    Triangle's exact arithmetic is skipped where that provably changes nothing
+    (exact=True keeps it, for tests: the result is identical). remember: keep the
+    result so that the next call in this thread, if it has the same vertices and
+    segments in the same order, gets it without triangulating again (any call
+    forgets it).
     """
     vertices = np.asarray(vertices, dtype=np.int64)
     if segments is not None:
@@ -44,14 +45,14 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
         and np.array_equal(last[0], vertices)
         and (last[1] is None if segments is None else last[1] is not None and np.array_equal(last[1], segments))
     ):
-        # Triangle is deterministic (and fast=True provably changes nothing): equal
-        # input, equal output
+        # Triangle is deterministic (and skipping exact arithmetic provably changes
+        # nothing): equal input, equal output
         return last[2].copy()
     if len(vertices) < 3 or np.ptp(vertices[:, 0]) == 0 or np.ptp(vertices[:, 1]) == 0:
         return np.zeros((0, 3), dtype=np.int64)
     coords, switches = vertices, "Q"
     low = vertices.min(axis=0)
-    if fast and int((vertices.max(axis=0) - low).max()) <= EXACT_EXTENT:
+    if not exact and int((vertices.max(axis=0) - low).max()) <= EXACT_EXTENT:
         # Triangle's predicates work on coordinate differences: orient2d forms
         # dx1 dy2 - dy1 dx2 and incircle sum(lift_i (dx_j dy_k - dx_k dy_j)) with
         # lift_i = dx_i^2 + dy_i^2. With integer coordinates at most 4095 apart every
