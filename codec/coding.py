@@ -31,21 +31,26 @@ def varints(values: np.ndarray) -> bytes:
 
 
 def unvarints(data: bytes, count: int, what: str) -> np.ndarray:
-    """Decode exactly `count` varints that fill `data`; CorruptError otherwise."""
+    """Decode exactly `count` varints that fill `data` (int64); CorruptError otherwise."""
     b = np.frombuffer(data, dtype=np.uint8)
     last = b < 0x80
-    if int(last.sum()) != count or (count and not last[-1]) or (count == 0 and b.size):
+    ends = np.flatnonzero(last)
+    if len(ends) != count or (count and not last[-1]) or (count == 0 and b.size):
         raise CorruptError(f"{what}: {b.size} bytes do not hold {count} numbers")
-    if count == 0:
-        return np.zeros(0, dtype=np.int64)
-    ends = np.flatnonzero(last) + 1
-    starts = np.r_[0, ends[:-1]]
-    lengths = ends - starts
-    if lengths.max() > MAX_VARINT_BYTES:
+    # a number's last byte holds its top group (and no continuation bit); most numbers
+    # are one byte, so the few longer ones get their lower groups added on their own
+    out = b[ends].astype(np.int64)
+    if b.size == count:
+        return out
+    lengths = np.diff(ends, prepend=-1)
+    multi = np.flatnonzero(lengths > 1)
+    longest = int(lengths[multi].max())
+    if longest > MAX_VARINT_BYTES:
         raise CorruptError(f"{what}: a number is longer than {MAX_VARINT_BYTES} bytes")
-    k = np.arange(b.size) - np.repeat(starts, lengths)
-    parts = (b & 0x7F).astype(np.int64) << (7 * k)
-    return np.add.reduceat(parts, starts)
+    for j in range(1, longest):  # a loop over byte positions (at most 4)
+        multi = multi[lengths[multi] > j]
+        out[multi] = (out[multi] << 7) | (b[ends[multi] - j] & 0x7F)
+    return out
 
 
 def zigzag(v: np.ndarray) -> np.ndarray:
@@ -55,8 +60,10 @@ def zigzag(v: np.ndarray) -> np.ndarray:
 
 
 def unzigzag(u: np.ndarray) -> np.ndarray:
+    """Unsigned -> signed, the inverse of zigzag (int64)."""
     u = np.asarray(u, dtype=np.int64)
-    return np.where(u & 1, -(u >> 1) - 1, u >> 1)
+    # -(u & 1) is all ones for odd u, and x ^ -1 = -x - 1
+    return (u >> 1) ^ -(u & 1)
 
 
 # The Hilbert mapping of ATM.md §4.2.2 as a state machine: the reflections and swaps
@@ -85,19 +92,53 @@ def _hilbert_tables() -> tuple[np.ndarray, np.ndarray]:
 
 _HILBERT_DIGIT, _HILBERT_NEXT = _hilbert_tables()
 
+#: Bits of x and of y that one lookup of hilbert_keys consumes.
+_HILBERT_GROUP = 5
+_hilbert_groups: list = []
+
+
+def _hilbert_group_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The one-bit tables composed over _HILBERT_GROUP levels: index state * 4**g + x
+    bits * 2**g + y bits (high level first) -> (2g-bit digit, next state). Built on
+    first use, by running the one-bit machine on every index at once."""
+    if not _hilbert_groups:
+        g = _HILBERT_GROUP
+        i = np.arange(4 << (2 * g))
+        state = (i >> (2 * g)).astype(np.uint8)
+        gx, gy = (i >> g) & ((1 << g) - 1), i & ((1 << g) - 1)
+        digit = np.zeros(len(i), dtype=np.int64)
+        for k in range(g - 1, -1, -1):
+            j = state * np.uint8(4) + (((gx >> k) & 1) * 2 + ((gy >> k) & 1)).astype(np.uint8)
+            digit = (digit << 2) | _HILBERT_DIGIT[j]
+            state = _HILBERT_NEXT[j]
+        _hilbert_groups.extend([digit, state.astype(np.int64) << (2 * g)])
+    return _hilbert_groups[0], _hilbert_groups[1]
+
 
 def hilbert_keys(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Position of each (x, y) along the Hilbert curve over the smallest 2^k square
     that holds them all (the classic xy -> d mapping, ATM.md §4.2.2)."""
     x = np.asarray(x, dtype=np.int64)
     y = np.asarray(y, dtype=np.int64)
-    top = int(max(x.max(initial=0), y.max(initial=0)))
+    levels = int(max(x.max(initial=0), y.max(initial=0))).bit_length()
+    g = _HILBERT_GROUP
+    digit, nxt = _hilbert_group_tables()
+    # The levels are taken g at a time, from a multiple of g. A level whose bits are
+    # both 0 adds a 0 digit and toggles the swap (state 0 <-> 2, the only states
+    # reached from 0 that way), so the padding levels above the top leave d alone and
+    # the state at the top level 2 if their number is odd.
+    groups = -(-levels // g)
     d = np.zeros(x.shape, dtype=np.int64)
-    state = np.zeros(x.shape, dtype=np.uint8)
-    for k in range(top.bit_length() - 1, -1, -1):
-        i = state * np.uint8(4) + (((x >> k) & 1) * 2 + ((y >> k) & 1)).astype(np.uint8)
-        d = (d << 2) | _HILBERT_DIGIT[i]
-        state = _HILBERT_NEXT[i]
+    state = np.full(x.shape, ((groups * g - levels) & 1) << (2 * g + 1), dtype=np.int64)
+    mask = (1 << g) - 1
+    for k in range((groups - 1) * g, -1, -g):  # a loop over groups of g levels
+        i = (x >> k) & mask
+        i <<= g
+        i |= (y >> k) & mask
+        i |= state
+        d <<= 2 * g
+        d |= digit[i]
+        state = nxt[i]
     return d
 
 
@@ -107,19 +148,29 @@ def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
     t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     if len(t) == 0:
         return t
+    bits = int(t.max()).bit_length()
+    if t.min() >= 0 and 3 * bits <= 63:
+        # The three indices as one int64 sort key per rotation, a bits-bit field each:
+        # the three indices are distinct, so the rotation starting at the smallest has
+        # the smallest key, and keys order like the rows they spell
+        a, b, c = (np.ascontiguousarray(col) for col in t.T)
+        keys = (a << 2 * bits) | (b << bits) | c
+        keys = np.minimum(keys, (b << 2 * bits) | (c << bits) | a, out=keys)
+        keys = np.minimum(keys, (c << 2 * bits) | (a << bits) | b, out=keys)
+        keys.sort()
+        if len(keys) < 2 or (keys[1:] != keys[:-1]).all():
+            out = np.empty_like(t)
+            mask = (1 << bits) - 1
+            np.right_shift(keys, 2 * bits, out=out[:, 0])
+            np.bitwise_and(keys >> bits, mask, out=out[:, 1])
+            np.bitwise_and(keys, mask, out=out[:, 2])
+            return out
     a, b, c = t[:, 0], t[:, 1], t[:, 2]
     first_b = (b < a) & (b < c)
     first_c = (c < a) & (c < b)
     r0 = np.where(first_b, b, np.where(first_c, c, a))
     r1 = np.where(first_b, c, np.where(first_c, a, b))
     r2 = np.where(first_b, a, np.where(first_c, b, c))
-    n = int(t.max()) + 1
-    if n < 1 << 21:  # the three indices fit one int64 sort key, distinct per triangle
-        keys = np.sort((r0 * n + r1) * n + r2)
-        if len(keys) < 2 or (keys[1:] != keys[:-1]).all():
-            r01, r2 = np.divmod(keys, n)
-            r0, r1 = np.divmod(r01, n)
-            return np.stack([r0, r1, r2], 1)
     t = np.stack([r0, r1, r2], 1)
     return t[np.lexsort((r2, r1, r0))]
 

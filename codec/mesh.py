@@ -67,9 +67,13 @@ class MeasuredMesh(Mesh):
 
 def doubled_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Signed doubled areas (x1-x0)(y2-y0) - (x2-x0)(y1-y0), exact in int64."""
-    x = vertices[:, 0].astype(np.int64)[triangles]
-    y = vertices[:, 1].astype(np.int64)[triangles]
-    return (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])
+    # gathered corner-major (3 x M), so that the arithmetic runs on contiguous rows
+    t = np.asarray(triangles).T
+    x = vertices[:, 0].astype(np.int64, copy=False)[t]
+    y = vertices[:, 1].astype(np.int64, copy=False)[t]
+    x[1:] -= x[0]
+    y[1:] -= y[0]
+    return x[1] * y[2] - x[2] * y[1]
 
 
 def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -80,12 +84,13 @@ def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return triangles
 
 
-def validate(mesh: Mesh, *, walls_are_edges: bool = False) -> None:
+def validate(mesh: Mesh, *, walls_are_edges: bool = False, areas: np.ndarray | None = None) -> None:
     """Raise CorruptError (or LimitError) unless the mesh is one the decoders can render.
 
     Checked: shapes, index ranges, vertices inside the image and distinct, triangle
     orientation, total area equal to the image's, constraint indices, and that every
     constraint step is a triangle edge (unless the caller knows it: walls_are_edges).
+    areas: the triangles' doubled_areas, when the caller has them already.
     """
     w, h = mesh.width, mesh.height
     limits.check_image_size(w, h)
@@ -106,18 +111,22 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False) -> None:
         raise CorruptError(f"a vertex lies outside the {w}x{h} image")
     keys = y.astype(np.int64) * w + x
     # decoded meshes come in raster order, where distinctness is a linear-time check
-    if not (np.diff(keys) > 0).all() and len(np.unique(keys)) != len(v):
+    if not (keys[1:] > keys[:-1]).all() and len(np.unique(keys)) != len(v):
         raise CorruptError("two vertices share a pixel")
     if len(t):
         if t.min() < 0 or t.max() >= len(v):
             raise CorruptError(f"a triangle refers to a vertex beyond the {len(v)} stored")
-        areas = doubled_areas(v, t)
+        if areas is None:
+            areas = doubled_areas(v, t)
         if areas.min() <= 0:
             raise CorruptError("a triangle is degenerate or wrongly oriented")
         if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
             raise CorruptError("the triangles do not cover the image exactly once")
-        ys = v[:, 1].astype(np.int64)[t]
-        extent = int((ys.max(axis=1) - ys.min(axis=1) + 1).sum())
+        ys = y.astype(np.int64, copy=False)[t.T]  # corner-major: contiguous rows
+        extent = np.maximum(ys[0], ys[1])
+        np.maximum(extent, ys[2], out=extent)
+        extent -= np.minimum(np.minimum(ys[0], ys[1], out=ys[0]), ys[2], out=ys[0])
+        extent = int(extent.sum()) + len(t)
         if extent > limits.max_triangle_rows(w, h):
             raise LimitError(
                 f"the triangles cross {extent:,} rows in all, too many to render a {w}x{h} "
@@ -131,12 +140,16 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False) -> None:
         along = x if h == 1 else y
         if along.min() != 0 or along.max() != max(w, h) - 1:
             raise CorruptError("a one-pixel-wide mesh needs a vertex at each end of the line")
-    walls = segments(mesh.constraints)
-    if mesh.constraints:
-        lengths = np.fromiter((len(c) for c in mesh.constraints), np.int64, len(mesh.constraints))
-        if lengths.min() < 2 or walls.min() < 0 or walls.max() >= len(v):
-            raise CorruptError("a constraint polyline refers to a missing vertex")
-    if len(walls) and len(t) and not walls_are_edges:
+    if not mesh.constraints:
+        return
+    lines = mesh.constraints
+    lengths = np.fromiter(map(len, lines), np.int64, len(lines))
+    # with every polyline 2 long or more, its steps name each of its indices
+    flat = np.concatenate(lines)
+    if lengths.min() < 2 or flat.min() < 0 or flat.max() >= len(v):
+        raise CorruptError("a constraint polyline refers to a missing vertex")
+    if len(t) and not walls_are_edges:
+        walls = chain_steps(flat.astype(np.int64), lengths)
         known = np.sort(_edge_keys(edges(t), len(v)))
         keys = _edge_keys(walls, len(v))
         at = np.clip(np.searchsorted(known, keys), 0, len(known) - 1)
@@ -148,7 +161,7 @@ def segments(polylines: list[np.ndarray]) -> np.ndarray:
     """The (i, j) vertex pairs of every step of every polyline, as one K x 2 array."""
     if not polylines:
         return np.zeros((0, 2), np.int64)
-    lengths = np.fromiter((len(c) for c in polylines), np.int64, len(polylines))
+    lengths = np.fromiter(map(len, polylines), np.int64, len(polylines))
     return chain_steps(np.concatenate(polylines).astype(np.int64), lengths)
 
 

@@ -28,7 +28,7 @@ from .coding import (
 )
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, chain_steps, doubled_areas
-from .triangulate import split_at_vertices, triangulate
+from .triangulate import step_over_vertex, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
@@ -90,11 +90,29 @@ def _position_gaps(m, free: int, where: str) -> np.ndarray:
     packed = np.frombuffer(m.position_bits, np.uint8)
     if len(packed) != (free * bits + 7) // 8:
         raise CorruptError(f"{where}: {len(packed)} bytes of position bits for {free} positions of {bits} bits")
-    flat = np.unpackbits(packed)
-    if flat[free * bits :].any():
+    pad = 8 * len(packed) - free * bits  # all in the last byte
+    if pad and packed[-1] & ((1 << pad) - 1):
         raise CorruptError(f"{where}: position bits padded with ones")
-    low = flat[: free * bits].reshape(free, bits).astype(np.int64) @ (1 << np.arange(bits - 1, -1, -1))
-    return (nums[1:] << bits) + low
+    high = nums[1:]
+    if bits == 0:
+        return high
+    # each gap's b bits lie in the `span` bytes from the one holding its first bit:
+    # read them as one big-endian number and shift the bits into place
+    first = np.arange(free, dtype=np.int64) * bits
+    at = first >> 3
+    span = (7 + bits + 7) // 8
+    packed = np.concatenate([packed, np.zeros(span, np.uint8)])
+    low = packed[at].astype(np.int64)
+    for j in range(1, span):  # a loop over bytes (at most 4)
+        low <<= 8
+        low |= packed[at + j]
+    first &= 7
+    first += bits - 8 * span
+    low >>= -first
+    low &= (1 << bits) - 1
+    high <<= bits
+    high += low
+    return high
 
 
 def _hilbert_order(vertices: np.ndarray) -> np.ndarray:
@@ -119,18 +137,22 @@ def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) ->
 STEP_RANGE = 4.0
 
 
-def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pinned: bool) -> np.ndarray:
+def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pinned: bool,
+                 areas: np.ndarray | None = None) -> np.ndarray:
     """Every vertex's quantisation step (ATM.md §4.2.2): `step` scaled by the square
     root of the mean fan area over the vertex's own, the factor kept within 1/4..4.
     A vertex's rounding error spreads over its fan, so vertices with large fans
     (smooth regions) get finer steps and crowded ones coarser: the same bits then buy
     less squared error. Step 1 stays 1 everywhere (exact samples); the first row of a
-    band below another has step 1, its samples being the band above's."""
+    band below another has step 1, its samples being the band above's. areas: the
+    triangles' doubled_areas, when the caller has them."""
     n = len(vertices)
     steps = np.full(n, step, dtype=np.int64)
     if step > 1 and len(triangles):
         fan = np.bincount(
-            triangles.ravel(), np.repeat(doubled_areas(vertices, triangles), 3), minlength=n
+            triangles.ravel(),
+            np.repeat(doubled_areas(vertices, triangles) if areas is None else areas, 3),
+            minlength=n,
         )[:n].astype(np.int64)
         some = fan > 0
         if some.any():
@@ -257,9 +279,10 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     )
 
 
-def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Mesh:
-    """The Mesh of a parsed MeshPayload; CorruptError if any field is inconsistent.
-    Structural checks of the result are left to mesh.validate."""
+def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray]:
+    """The Mesh of a parsed MeshPayload and its triangles' doubled areas (for
+    mesh.validate); CorruptError if any field is inconsistent. Structural checks of
+    the result are left to mesh.validate."""
     n, rows = int(m.vertex_count), int(m.rows)
     if n > limits.max_vertices(width, rows):
         raise LimitError(f"{where}: {n:,} vertices is too many for {width}x{rows} pixels")
@@ -302,25 +325,44 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
     gaps = _position_gaps(m, free, where)
     if free and gaps.max() >= pixels:  # checked before the running sum can overflow
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
-    free_keys = np.cumsum(gaps + 1) - 1
+    gaps += 1
+    free_keys = np.cumsum(gaps, out=gaps)
+    free_keys -= 1
     if free and free_keys[-1] >= pixels:
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
-    keys = np.concatenate([line_keys, free_keys])
-    keys.sort(kind="stable")
-    if n > 1 and not (keys[1:] != keys[:-1]).all():
-        raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
-    vertices = np.stack([keys % width, keys // width], 1)
+    # Both key lists are increasing: merged, each free vertex's index is its own rank
+    # plus the number of polyline pixels before it (searchsorted), and a shared pixel
+    # is one of those found equal
+    free_index = np.searchsorted(line_keys, free_keys)
+    if len(line_keys) and free:
+        found = line_keys[np.minimum(free_index, len(line_keys) - 1)]
+        if (found == free_keys).any():
+            raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
+    free_index += np.arange(free)
+    keys = np.empty(n, np.int64)
+    is_free = np.zeros(n, bool)
+    is_free[free_index] = True
+    keys[free_index] = free_keys
+    keys[~is_free] = line_keys
+    vertices = np.empty((n, 2), np.int64)
+    np.divmod(keys, width, out=(vertices[:, 1], vertices[:, 0]))
     flat = np.searchsorted(keys, chain_keys)
     ends = np.cumsum(lengths)
     lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
-    walls = chain_steps(flat, lengths) if total else None
+    walls = None
+    if total:
+        # step s joins chain point `begin[s]` to the next (no step across polylines)
+        inner = np.ones(total - 1, bool)
+        inner[ends[:-1] - 1] = False
+        begin = np.flatnonzero(inner)
+        walls = np.stack([flat[begin], flat[begin + 1]], 1)
 
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
             raise CorruptError(f"{where}: triangles listed for a Delaunay band")
         # the triangulation adds no vertex, so it has every step as an edge unless a
         # vertex lies inside a step (then mesh.validate need not search the edges)
-        if walls is not None and len(split_at_vertices(vertices, walls, width)) != len(walls):
+        if walls is not None and step_over_vertex(keys, points[begin], steps, width):
             raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
         try:
             triangles = canonical_triangles(triangulate(vertices, walls))
@@ -344,17 +386,26 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> Me
         raise CorruptError(f"{where}: sample step 0")
     if len(triangles) and triangles.max() >= n:  # listed indices are unsigned
         raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
+    areas = doubled_areas(vertices, triangles)
     top = int(np.iinfo(dtype).max)
-    residuals = unzigzag(unvarints(m.samples, n * channels, f"{where} samples")).reshape(n, channels)
-    if n and np.abs(residuals).max() > top:
+    residuals = unvarints(m.samples, n * channels, f"{where} samples")
+    if n and residuals.max() > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
         raise CorruptError(f"{where}: a sample residual exceeds the {dtype} range")
-    seq_order, _ = _sample_order(vertices, flat)
-    steps = vertex_steps(vertices, triangles, int(m.sample_step), m.y0 > 0)
-    seq = np.cumsum(residuals * steps[seq_order][:, None], axis=0)
+    residuals = unzigzag(residuals).reshape(n, channels)
+    # the sample order (as _sample_order gives it, from what is known here): the
+    # polyline vertices as first reached, then the free ones along the Hilbert curve
+    seq_order = np.concatenate([
+        flat[np.sort(first_seen)],
+        free_index[np.argsort(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1]))],
+    ])
+    if m.sample_step > 1:  # step 1 is every vertex's step
+        steps = vertex_steps(vertices, triangles, int(m.sample_step), m.y0 > 0, areas)
+        residuals *= steps[seq_order][:, None]
+    seq = np.cumsum(residuals, axis=0, out=residuals)
     if n and (seq.min() < 0 or seq.max() > top):
         raise CorruptError(f"{where}: a sample leaves the {dtype} range")
     values = np.empty((n, channels), dtype=dtype)
     values[seq_order] = seq
     values = values[:, 0] if channels == 1 else values
 
-    return Mesh(vertices, values, triangles, width, rows, lines)
+    return Mesh(vertices, values, triangles, width, rows, lines), areas

@@ -97,13 +97,8 @@ def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int,
     keys = vertices[:, 1].astype(np.int64) * width + vertices[:, 0]
     order = np.argsort(keys, kind="stable")
     keys = keys[order]
-    a, b = vertices[segments[:, 0]], vertices[segments[:, 1]]
-    d = b - a
-    g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))
-    steps = g + 1  # the lattice points from a to b, both included
-    seg = np.repeat(np.arange(len(segments)), steps)
-    t = np.arange(int(steps.sum())) - np.repeat(np.cumsum(steps) - steps, steps)
-    pts = a[seg] + t[:, None] * (d[seg] // g[seg][:, None])
+    a = vertices[segments[:, 0]]
+    seg, pts = _lattice_points(a, vertices[segments[:, 1]] - a, ends=True)
     q = pts[:, 1] * width + pts[:, 0]
     at = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
     hit = keys[at] == q
@@ -111,6 +106,32 @@ def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int,
     same = seg[1:] == seg[:-1]
     pieces = np.stack([vid[:-1][same], vid[1:][same]], axis=1)
     return (pieces, source[seg[:-1][same]]) if origin else pieces
+
+
+def _lattice_points(a: np.ndarray, d: np.ndarray, ends: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(segment, (x, y)) of every pixel centre on the segments from points a by steps d
+    (K x 2, no step zero), segment by segment from a; the end points too if `ends`."""
+    g = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1]))  # the segment is g unit steps
+    count = g + 1 if ends else g - 1
+    seg = np.repeat(np.arange(len(a)), count)
+    t = np.arange(len(seg)) - np.repeat(np.cumsum(count) - count, count)
+    if not ends:
+        t += 1
+    return seg, a[seg] + t[:, None] * (d // g[:, None])[seg]
+
+
+def step_over_vertex(keys: np.ndarray, starts: np.ndarray, steps: np.ndarray, width: int) -> bool:
+    """Whether a pixel strictly inside one of the segments from `starts` by `steps` (K x
+    2, none zero) is a vertex; `keys` are the vertices' pixel numbers y * width + x,
+    sorted. Only steps longer than one unit step have such pixels, and there are few."""
+    g = np.gcd(np.abs(steps[:, 0]), np.abs(steps[:, 1]))
+    long = np.flatnonzero(g > 1)
+    if len(long) == 0 or len(keys) == 0:
+        return False
+    _, pts = _lattice_points(starts[long], steps[long], ends=False)
+    q = pts[:, 1] * width + pts[:, 0]
+    at = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+    return bool((keys[at] == q).any())
 
 
 def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[np.ndarray]:
