@@ -227,16 +227,24 @@ def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, hei
     return np.r_[fresh[e1], old[e2]], np.r_[x1, x2], np.r_[y1, y2], np.r_[err1, err2]
 
 
-def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int):
+def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_walls: bool = False):
     """(vertices in raster order, the segments renumbered and cut at the vertices on
     them, the new position of every old vertex): the vertex order and wall steps a
     band's MESH chunk stores, which codec.meshcode triangulates again to check that a
-    decoder rebuilds the same triangles."""
+    decoder rebuilds the same triangles. sort_walls: also put the runs of segments
+    (the stored polylines) in the raster order of their first vertices, so that their
+    stored starts are small forward gaps (about 30 % fewer bytes for them); only before
+    a triangulation, which with cocircular vertices may depend on the segment order."""
     order = np.argsort(vertices[:, 1] * width + vertices[:, 0], kind="stable")
     renumber = np.empty(len(order), np.int64)
     renumber[order] = np.arange(len(order))
     vertices = vertices[order]
-    return vertices, split_at_vertices(vertices, renumber[segments], width), renumber
+    segments = split_at_vertices(vertices, renumber[segments], width)
+    if sort_walls and len(segments):
+        run = np.r_[0, np.cumsum(segments[1:, 0] != segments[:-1, 1])]
+        starts = segments[np.r_[0, np.flatnonzero(np.diff(run)) + 1], 0]
+        segments = segments[np.argsort(starts[run], kind="stable")]
+    return vertices, segments, renumber
 
 
 def refine(
@@ -267,7 +275,7 @@ def refine(
     for r in itertools.count():
         if r == rounds or target <= len(vertices):
             # the last triangulation: made as the MESH chunk's check will make it
-            vertices, segments, _ = _raster_order(vertices, segments, width)
+            vertices, segments, _ = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         tris = triangulate(vertices, segments, remember=ordered)
