@@ -67,13 +67,12 @@ class MeasuredMesh(Mesh):
 
 def doubled_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Signed doubled areas (x1-x0)(y2-y0) - (x2-x0)(y1-y0), exact in int64."""
-    # gathered corner-major (3 x M), so that the arithmetic runs on contiguous rows
-    t = np.asarray(triangles).T
-    x = vertices[:, 0].astype(np.int64, copy=False)[t]
-    y = vertices[:, 1].astype(np.int64, copy=False)[t]
-    x[1:] -= x[0]
-    y[1:] -= y[0]
-    return x[1] * y[2] - x[2] * y[1]
+    x = vertices[:, 0].astype(np.int64)
+    y = vertices[:, 1].astype(np.int64)
+    # corner by corner, so that the arithmetic runs on contiguous arrays
+    a, b, c = np.asarray(triangles).T
+    xa, ya = x[a], y[a]
+    return (x[b] - xa) * (y[c] - ya) - (x[c] - xa) * (y[b] - ya)
 
 
 def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -122,11 +121,11 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, areas: np.ndarray | N
             raise CorruptError("a triangle is degenerate or wrongly oriented")
         if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
             raise CorruptError("the triangles do not cover the image exactly once")
-        ys = y.astype(np.int64, copy=False)[t.T]  # corner-major: contiguous rows
-        extent = np.maximum(ys[0], ys[1])
-        np.maximum(extent, ys[2], out=extent)
-        extent -= np.minimum(np.minimum(ys[0], ys[1], out=ys[0]), ys[2], out=ys[0])
-        extent = int(extent.sum()) + len(t)
+        y0, y1, y2 = (y[i] for i in t.T)  # corner by corner: contiguous arrays
+        extent = np.maximum(y0, y1)
+        np.maximum(extent, y2, out=extent)
+        extent -= np.minimum(np.minimum(y0, y1, out=y0), y2, out=y0)
+        extent = int(extent.sum(dtype=np.int64)) + len(t)
         if extent > limits.max_triangle_rows(w, h):
             raise LimitError(
                 f"the triangles cross {extent:,} rows in all, too many to render a {w}x{h} "
