@@ -146,11 +146,16 @@ def _merge(width: int, *groups: np.ndarray) -> np.ndarray:
     return pts[np.sort(first)]
 
 
+def _run_breaks(segments: np.ndarray) -> np.ndarray:
+    """Where a run of segments that continue each other ends and the next begins."""
+    return np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1
+
+
 def _chains(segments: np.ndarray) -> list[np.ndarray]:
     """Constraint polylines: the runs of segments that continue each other."""
     if len(segments) == 0:
         return []
-    ends = np.r_[np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1, len(segments)]
+    ends = np.r_[_run_breaks(segments), len(segments)]
     # each run's first vertices, then its last segment's end
     flat = np.insert(segments[:, 0], ends, segments[ends - 1, 1])
     return np.split(flat, ends[:-1] + np.arange(1, len(ends)))
@@ -241,9 +246,9 @@ def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_w
     vertices = vertices[order]
     segments = split_at_vertices(vertices, renumber[segments], width)
     if sort_walls and len(segments):
-        run = np.r_[0, np.cumsum(segments[1:, 0] != segments[:-1, 1])]
-        starts = segments[np.r_[0, np.flatnonzero(np.diff(run)) + 1], 0]
-        segments = segments[np.argsort(starts[run], kind="stable")]
+        firsts = np.r_[0, _run_breaks(segments)]
+        first_vertex = np.repeat(segments[firsts, 0], np.diff(np.r_[firsts, len(segments)]))
+        segments = segments[np.argsort(first_vertex, kind="stable")]
     return vertices, segments, renumber
 
 

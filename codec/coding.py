@@ -3,6 +3,7 @@ LEB128 varints, zigzag, the Hilbert order of vertices, canonical triangle lists.
 
 from __future__ import annotations
 
+import functools
 import zlib
 
 import numpy as np
@@ -94,25 +95,23 @@ _HILBERT_DIGIT, _HILBERT_NEXT = _hilbert_tables()
 
 #: Bits of x and of y that one lookup of hilbert_keys consumes.
 _HILBERT_GROUP = 5
-_hilbert_groups: list = []
 
 
+@functools.cache
 def _hilbert_group_tables() -> tuple[np.ndarray, np.ndarray]:
     """The one-bit tables composed over _HILBERT_GROUP levels: index state * 4**g + x
     bits * 2**g + y bits (high level first) -> (2g-bit digit, next state). Built on
     first use, by running the one-bit machine on every index at once."""
-    if not _hilbert_groups:
-        g = _HILBERT_GROUP
-        i = np.arange(4 << (2 * g))
-        state = (i >> (2 * g)).astype(np.uint8)
-        gx, gy = (i >> g) & ((1 << g) - 1), i & ((1 << g) - 1)
-        digit = np.zeros(len(i), dtype=np.int64)
-        for k in range(g - 1, -1, -1):
-            j = state * np.uint8(4) + (((gx >> k) & 1) * 2 + ((gy >> k) & 1)).astype(np.uint8)
-            digit = (digit << 2) | _HILBERT_DIGIT[j]
-            state = _HILBERT_NEXT[j]
-        _hilbert_groups.extend([digit, state.astype(np.int64) << (2 * g)])
-    return _hilbert_groups[0], _hilbert_groups[1]
+    g = _HILBERT_GROUP
+    i = np.arange(4 << (2 * g))
+    state = (i >> (2 * g)).astype(np.uint8)
+    gx, gy = (i >> g) & ((1 << g) - 1), i & ((1 << g) - 1)
+    digit = np.zeros(len(i), dtype=np.int64)
+    for k in range(g - 1, -1, -1):
+        j = state * np.uint8(4) + (((gx >> k) & 1) * 2 + ((gy >> k) & 1)).astype(np.uint8)
+        digit = (digit << 2) | _HILBERT_DIGIT[j]
+        state = _HILBERT_NEXT[j]
+    return digit, state.astype(np.int64) << (2 * g)
 
 
 def hilbert_keys(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -188,9 +188,13 @@ def _sample_order(vertices: np.ndarray, flat: np.ndarray) -> tuple[np.ndarray, n
     on_line = flat[np.sort(first_seen)]
     free = np.ones(len(vertices), dtype=bool)
     free[on_line] = False
-    free_idx = np.flatnonzero(free)
-    free_idx = free_idx[_hilbert_order(vertices[free_idx])]
-    return np.concatenate([on_line, free_idx]), free
+    return _sequence(vertices, on_line, np.flatnonzero(free)), free
+
+
+def _sequence(vertices: np.ndarray, on_line: np.ndarray, free_idx: np.ndarray) -> np.ndarray:
+    """The samples' order from its parts: the polyline vertices as first reached, then
+    the free vertices (`free_idx`, any order) along the Hilbert curve."""
+    return np.concatenate([on_line, free_idx[_hilbert_order(vertices[free_idx])]])
 
 
 def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
@@ -351,11 +355,11 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
     walls = None
     if total:
-        # step s joins chain point `begin[s]` to the next (no step across polylines)
-        inner = np.ones(total - 1, bool)
-        inner[ends[:-1] - 1] = False
-        begin = np.flatnonzero(inner)
-        walls = np.stack([flat[begin], flat[begin + 1]], 1)
+        # the steps as pairs of chain positions: their first points are where the
+        # stored steps start
+        pairs = chain_steps(np.arange(total), lengths)
+        begin = pairs[:, 0]
+        walls = flat[pairs]
 
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
@@ -392,12 +396,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     if n and residuals.max() > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
         raise CorruptError(f"{where}: a sample residual exceeds the {dtype} range")
     residuals = unzigzag(residuals).reshape(n, channels)
-    # the sample order (as _sample_order gives it, from what is known here): the
-    # polyline vertices as first reached, then the free ones along the Hilbert curve
-    seq_order = np.concatenate([
-        flat[np.sort(first_seen)],
-        free_index[np.argsort(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1]))],
-    ])
+    # the encoder's _sample_order, from the parts known here
+    seq_order = _sequence(vertices, flat[np.sort(first_seen)], free_index)
     if m.sample_step > 1:  # step 1 is every vertex's step
         steps = vertex_steps(vertices, triangles, int(m.sample_step), m.y0 > 0, areas)
         residuals *= steps[seq_order][:, None]

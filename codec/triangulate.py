@@ -101,9 +101,7 @@ def split_at_vertices(vertices: np.ndarray, segments: np.ndarray, width: int,
     keys = keys[order]
     a = vertices[segments[:, 0]]
     seg, pts = _lattice_points(a, vertices[segments[:, 1]] - a, ends=True)
-    q = pts[:, 1] * width + pts[:, 0]
-    at = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
-    hit = keys[at] == q
+    hit, at = _find(keys, pts, width)
     seg, vid = seg[hit], order[at[hit]]
     same = seg[1:] == seg[:-1]
     pieces = np.stack([vid[:-1][same], vid[1:][same]], axis=1)
@@ -131,9 +129,15 @@ def step_over_vertex(keys: np.ndarray, starts: np.ndarray, steps: np.ndarray, wi
     if len(long) == 0 or len(keys) == 0:
         return False
     _, pts = _lattice_points(starts[long], steps[long], ends=False)
+    return bool(_find(keys, pts, width)[0].any())
+
+
+def _find(keys: np.ndarray, pts: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """(found, at): whether each point's pixel number is among the sorted `keys`, and
+    where in them (meaningful where found)."""
     q = pts[:, 1] * width + pts[:, 0]
     at = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
-    return bool((keys[at] == q).any())
+    return keys[at] == q, at
 
 
 def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[np.ndarray]:
