@@ -114,21 +114,51 @@ def _hilbert_group_tables() -> tuple[np.ndarray, np.ndarray]:
     return digit, state.astype(np.int64) << (2 * g)
 
 
-def hilbert_keys(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Position of each (x, y) along the Hilbert curve over the smallest 2^k square
-    that holds them all (the classic xy -> d mapping, ATM.md §4.2.2)."""
-    x = np.asarray(x, dtype=np.int64)
-    y = np.asarray(y, dtype=np.int64)
-    levels = int(max(x.max(initial=0), y.max(initial=0))).bit_length()
+@functools.cache
+def _hilbert_inverse_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The group tables read backwards: index state * 4**g + 2g-bit digit -> (x bits *
+    2**g + y bits, next state), so that a key is turned back into its pixel g levels
+    per lookup."""
     g = _HILBERT_GROUP
     digit, nxt = _hilbert_group_tables()
-    # The levels are taken g at a time, from a multiple of g. A level whose bits are
-    # both 0 adds a 0 digit and toggles the swap (state 0 <-> 2, the only states
-    # reached from 0 that way), so the padding levels above the top leave d alone and
-    # the state at the top level 2 if their number is odd.
+    i = np.arange(len(digit))
+    state = i >> (2 * g)
+    xy = np.empty(len(digit), dtype=np.int64)
+    back = np.empty(len(digit), dtype=np.int64)
+    # within one state, the 4**g bit pairs map one to one onto the 4**g digits
+    at = (state << (2 * g)) | digit
+    xy[at] = i & ((1 << (2 * g)) - 1)
+    back[at] = nxt
+    return xy, back
+
+
+def _hilbert_start(levels: int) -> tuple[int, int]:
+    """(number of g-level groups, starting state) for a 2**levels square. The levels
+    are taken g at a time, from a multiple of g. A level whose bits are both 0 adds a
+    0 digit and toggles the swap (state 0 <-> 2, the only states reached from 0 that
+    way), so padding levels above the top leave d alone and the state at the top level
+    2 if their number is odd."""
+    g = _HILBERT_GROUP
     groups = -(-levels // g)
+    return groups, ((groups * g - levels) & 1) << (2 * g + 1)
+
+
+def hilbert_levels(width: int, height: int) -> int:
+    """The number of levels of the Hilbert curve over a width x height band: the
+    smallest square of side 2**levels that holds its pixels (ATM.md §4.2.2)."""
+    return (max(width, height) - 1).bit_length()
+
+
+def hilbert_keys(x: np.ndarray, y: np.ndarray, levels: int) -> np.ndarray:
+    """Position of each (x, y) along the Hilbert curve over the 2**levels square (the
+    classic xy -> d mapping, ATM.md §4.2.2); x and y must be below 2**levels."""
+    x = np.asarray(x, dtype=np.int64)
+    y = np.asarray(y, dtype=np.int64)
+    g = _HILBERT_GROUP
+    digit, nxt = _hilbert_group_tables()
+    groups, start = _hilbert_start(levels)
     d = np.zeros(x.shape, dtype=np.int64)
-    state = np.full(x.shape, ((groups * g - levels) & 1) << (2 * g + 1), dtype=np.int64)
+    state = np.full(x.shape, start, dtype=np.int64)
     mask = (1 << g) - 1
     for k in range((groups - 1) * g, -1, -g):  # a loop over groups of g levels
         i = (x >> k) & mask
@@ -139,6 +169,30 @@ def hilbert_keys(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         d |= digit[i]
         state = nxt[i]
     return d
+
+
+def hilbert_points(d: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) of each key d < 4**levels along the Hilbert curve over the 2**levels
+    square: the inverse of hilbert_keys."""
+    d = np.asarray(d, dtype=np.int64)
+    g = _HILBERT_GROUP
+    xy, back = _hilbert_inverse_tables()
+    groups, start = _hilbert_start(levels)
+    x = np.zeros(d.shape, dtype=np.int64)
+    y = np.zeros(d.shape, dtype=np.int64)
+    state = np.full(d.shape, start, dtype=np.int64)
+    mask = (1 << (2 * g)) - 1
+    low = (1 << g) - 1
+    for k in range((groups - 1) * 2 * g, -1, -2 * g):  # a loop over groups of g levels
+        i = (d >> k) & mask
+        i |= state
+        bits = xy[i]
+        x <<= g
+        x |= bits >> g
+        y <<= g
+        y |= bits & low
+        state = back[i]
+    return x, y
 
 
 def canonical_triangles(triangles: np.ndarray) -> np.ndarray:

@@ -388,7 +388,7 @@ class Reader:
         # a position and samples per vertex; up to two polyline points per vertex, each
         # a step of two numbers, and a length and a start per polyline of two or more
         per_vertex = v + h.storage.itemsize * h.channels + 2 * (2 * v) + 2 * v
-        return 64 + nv * per_vertex + nt * 3 * v
+        return 65 + nv * per_vertex + nt * 3 * v
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
         h = self.header

@@ -1,13 +1,14 @@
 """One band's mesh <-> the fields of its MESH payload (format_spec/ATM.md §4.2).
 
-Polylines are stored as chains: a start pixel and the steps to each next vertex. The
-vertices on no polyline are stored in raster order as gaps between their pixel
-indices. Triangles are either listed (canonical order, differences) or not stored at
-all and rebuilt by constrained Delaunay triangulation, with a CRC of the canonical
-list either way so that a decoder can prove it has the encoder's triangles. Samples
-come last: residuals along the polylines, then along the Hilbert curve through the
-other vertices, each in units of its vertex's step (finer where the triangles are
-larger).
+Polylines are stored as chains: a start pixel and the steps to each next vertex, each
+step turned by the quadrant of the one before it. The vertices on no polyline are
+stored as gaps between their keys, in raster order or along the band's Hilbert curve,
+whichever is smaller. Triangles are either listed (canonical order, differences) or
+not stored at all and rebuilt by constrained Delaunay triangulation, with a CRC of the
+canonical list either way so that a decoder can prove it has the encoder's triangles.
+Samples come last: along the polylines, then along the Hilbert curve through the other
+vertices, each predicted from an earlier neighbour and stored in units of its vertex's
+step (finer where the triangles are larger).
 """
 
 from __future__ import annotations
@@ -16,10 +17,12 @@ import numpy as np
 
 from format_spec import schema
 
-from . import limits
+from . import frames, limits
 from .coding import (
     canonical_triangles,
     hilbert_keys,
+    hilbert_levels,
+    hilbert_points,
     triangle_crc,
     unvarints,
     unzigzag,
@@ -115,8 +118,53 @@ def _position_gaps(m, free: int, where: str) -> np.ndarray:
     return high
 
 
-def _hilbert_order(vertices: np.ndarray) -> np.ndarray:
-    return np.argsort(hilbert_keys(vertices[:, 0], vertices[:, 1]), kind="stable")
+def _hilbert_order(vertices: np.ndarray, levels: int) -> np.ndarray:
+    return np.argsort(hilbert_keys(vertices[:, 0], vertices[:, 1], levels))
+
+
+#: x and y of a step turned by r quarter turns (x, y) -> (-y, x), by r
+_COS = np.array([1, 0, -1, 0])
+_SIN = np.array([0, 1, 0, -1])
+
+
+def quadrants(steps: np.ndarray) -> np.ndarray:
+    """The quadrant 0..3 of each non-zero step (dx, dy): 0 for dx > 0 and dy >= 0, and
+    each quarter turn (x, y) -> (-y, x) adds one (ATM.md §4.2.2)."""
+    dx, dy = steps[:, 0], steps[:, 1]
+    return np.where(dx > 0, np.where(dy >= 0, 0, 3), np.where(dy > 0, 1, np.where(dx < 0, 2, 3)))
+
+
+def turn(steps: np.ndarray, quarters: np.ndarray) -> np.ndarray:
+    """Each step turned by its number of quarter turns (x, y) -> (-y, x)."""
+    c, s = _COS[quarters % 4], _SIN[quarters % 4]
+    return np.stack([c * steps[:, 0] - s * steps[:, 1], s * steps[:, 0] + c * steps[:, 1]], 1)
+
+
+def _first_steps(lengths: np.ndarray) -> np.ndarray:
+    """Index of the first step of each polyline of `lengths` points."""
+    return np.cumsum(lengths - 1) - (lengths - 1)
+
+
+def turned_steps(steps: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The steps as stored (ATM.md §4.2.2): each turned back by the quadrant of the
+    step before it on its polyline, so that a polyline going on in about the same
+    direction gives about the same numbers whichever way it runs."""
+    back = np.r_[0, quadrants(steps[:-1])] if len(steps) else np.zeros(0, np.int64)
+    back[_first_steps(lengths)] = 0
+    return turn(steps, -back)
+
+
+def unturned_steps(stored: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The inverse of turned_steps: a step's quadrant is its stored one plus that of
+    the step before it, so the turn of each step is a running sum of the stored
+    quadrants before it on its polyline."""
+    if not len(stored):
+        return stored
+    q = quadrants(stored)
+    before = np.cumsum(q)
+    before -= q
+    first = _first_steps(lengths)
+    return turn(stored, before - np.repeat(before[first], lengths - 1))
 
 
 def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -180,51 +228,91 @@ def _flat(lines: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(lines) if lines else np.zeros(0, np.int64)
 
 
-def _sample_order(vertices: np.ndarray, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _sample_order(vertices: np.ndarray, flat: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
     """(sequence, free mask) for raster-ordered vertices: the polyline vertices in the
     order the polylines first reach them (a wall's vertices sit on one side of a step,
-    so each predicts the next well), then every other vertex along the Hilbert curve."""
+    so each predicts the next well), then every other vertex along the Hilbert curve
+    of `levels` levels."""
     first_seen = np.unique(flat, return_index=True)[1]
     on_line = flat[np.sort(first_seen)]
     free = np.ones(len(vertices), dtype=bool)
     free[on_line] = False
-    return _sequence(vertices, on_line, np.flatnonzero(free)), free
+    free_idx = np.flatnonzero(free)
+    return np.concatenate([on_line, free_idx[_hilbert_order(vertices[free_idx], levels)]]), free
 
 
-def _sequence(vertices: np.ndarray, on_line: np.ndarray, free_idx: np.ndarray) -> np.ndarray:
-    """The samples' order from its parts: the polyline vertices as first reached, then
-    the free vertices (`free_idx`, any order) along the Hilbert curve."""
-    return np.concatenate([on_line, free_idx[_hilbert_order(vertices[free_idx])]])
+def sample_parents(triangles: np.ndarray, seq_order: np.ndarray) -> np.ndarray:
+    """For each place j of the sample sequence (ATM.md §4.2.4), the place of the sample
+    it is predicted from: of the vertices that share a triangle with it and come
+    before it, the last; j - 1 if none does (-1: predicted from 0). A neighbour lies on
+    the same surface far more often than the previous vertex along the curve, which
+    may be across the image."""
+    n = len(seq_order)
+    parent = np.arange(-1, n - 1, dtype=np.int64)
+    if len(triangles):
+        pos = np.empty(n, np.int64)
+        pos[seq_order] = np.arange(n)
+        corners = pos[triangles]
+        a, b, c = (np.ascontiguousarray(col) for col in corners.T)
+        # each corner's candidates: the later of the two others that come before it
+        best = [np.maximum(np.where(o1 < me, o1, -1), np.where(o2 < me, o2, -1))
+                for me, o1, o2 in ((a, b, c), (b, c, a), (c, a, b))]
+        me, cand = np.concatenate([a, b, c]), np.concatenate(best)
+        keys = me[cand >= 0] * n + cand[cand >= 0]
+        keys.sort()
+        # the largest key of each corner is the last in its run
+        last = np.r_[keys[1:] // n != keys[:-1] // n, True] if len(keys) else np.zeros(0, bool)
+        parent[keys[last] // n] = keys[last] % n
+    return parent
+
+
+def tree_sums(increments: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """Each sample as its increment plus its parent's sample (parent[j] < j; -1: none),
+    summed along the tree by pointer jumping: each pass doubles the stretch of
+    ancestors a partial sum covers, so the passes are as many as the bits of the
+    deepest chain."""
+    acc = increments.copy()
+    up = parent.copy()
+    live = np.flatnonzero(up >= 0)
+    while len(live):
+        above = up[live]
+        acc[live] += acc[above]
+        up[live] = up[above]
+        live = live[up[live] >= 0]
+    return acc
 
 
 def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     """A copy of the mesh with its samples as the decoder will rebuild them from residuals with
-    base step `step` (closed-loop: each sample is coded against the previous one as
+    base step `step` (closed-loop: each sample is coded against its parent as
     rebuilt, so rounding errors do not add up). Call with the final triangles; pass
     the same step and top_pinned to the writer."""
     if step == 1:
         return mesh
     order, inverse, _, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
-    seq, _ = _sample_order(vertices, _flat(lines))
-    steps = vertex_steps(vertices, inverse[mesh.triangles], step, top_pinned)[seq].tolist()
+    seq, _ = _sample_order(vertices, _flat(lines), hilbert_levels(mesh.width, mesh.height))
+    triangles = inverse[mesh.triangles]
+    steps = vertex_steps(vertices, triangles, step, top_pinned)[seq].tolist()
+    parents = sample_parents(triangles, seq).tolist()
     top = int(np.iinfo(mesh.dtype).max)
     values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
     out = np.empty_like(values)
     halves = [2 * s for s in steps]
     for c in range(values.shape[1]):
-        prev, rebuilt = 0, []
+        rebuilt = [0]  # at -1: the prediction of a sample with no parent
         append = rebuilt.append
-        # sequential by nature (each residual is taken against the previous sample as
-        # rebuilt); the decoder's side is a running sum
-        for v, s, s2 in zip(values[:, c].tolist(), steps, halves):
+        # sequential by nature (each residual is taken against the parent's sample as
+        # rebuilt); the decoder's side is a sum along the tree
+        for v, s, s2, p in zip(values[:, c].tolist(), steps, halves, parents):
+            prev = rebuilt[p + 1]
             prev += ((2 * (v - prev) + s) // s2) * s
             if prev > top:
                 prev -= -(-(prev - top) // s) * s
             elif prev < 0:
                 prev -= (prev // s) * s
             append(prev)
-        out[:, c] = rebuilt
+        out[:, c] = rebuilt[1:]
     values = np.empty_like(out)
     values[seq] = out
     values = values[inverse].reshape(mesh.values.shape).astype(mesh.dtype)
@@ -251,13 +339,22 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
-    seq_order, free = _sample_order(vertices, flat)
+    levels = hilbert_levels(mesh.width, mesh.height)
+    seq_order, free = _sample_order(vertices, flat, levels)
     seq_steps = vertex_steps(vertices, triangles, step, y0 > 0)[seq_order][:, None]
-    diffs = np.diff(values[seq_order].astype(np.int64), axis=0, prepend=np.zeros((1, values.shape[1]), np.int64))
+    in_order = values[seq_order].astype(np.int64)
+    parents = sample_parents(triangles, seq_order)
+    diffs = in_order - np.where(parents[:, None] >= 0, in_order[parents], 0)
     residuals = diffs // seq_steps
     if (residuals * seq_steps != diffs).any():
         raise ValueError(f"the samples were not quantised with step {step} (meshcode.quantise)")
-    free_keys = sorted_keys[free]
+    # the free vertices' positions in raster order or along the Hilbert curve, whichever
+    # is smaller: clustered vertices (a range image's walls and corners) are closer
+    # along the curve, evenly spread ones along the rows
+    raster = position_fields(np.diff(sorted_keys[free], prepend=-1) - 1)
+    curve = position_fields(np.diff(np.sort(hilbert_keys(*vertices[free].T, levels)), prepend=-1) - 1)
+    sizes = [len(frames.compress(f["positions"])) + len(f["position_bits"]) for f in (raster, curve)]
+    position_order = schema.POSITIONS_RASTER if sizes[0] <= sizes[1] else schema.POSITIONS_HILBERT
     tri_fields = np.zeros(0, np.int64)
     if not delaunay and len(triangles):
         a = triangles[:, 0]
@@ -272,12 +369,13 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
         polyline_count=len(lines),
         polyline_index_count=len(flat),
         connectivity=schema.DELAUNAY if delaunay else schema.LISTED,
+        position_order=position_order,
         triangle_crc=triangle_crc(triangles),
         sample_step=step,
         polyline_lengths=varints(lengths),
         polyline_starts=varints(zigzag(np.diff(start_keys, prepend=0))),
-        polyline_steps=varints(zigzag(steps).ravel()),
-        **position_fields(np.diff(free_keys, prepend=-1) - 1),
+        polyline_steps=varints(zigzag(turned_steps(steps, lengths)).ravel()),
+        **(raster if position_order == schema.POSITIONS_RASTER else curve),
         samples=varints(zigzag(residuals).ravel()),
         triangles=varints(tri_fields),
     )
@@ -308,12 +406,14 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         raise CorruptError(f"{where}: a polyline starts outside the {width}x{rows} band")
     steps = unzigzag(unvarints(m.polyline_steps, 2 * (total - count), f"{where} polyline steps"))
     steps = steps.reshape(-1, 2)
+    if len(steps) and not np.abs(steps).any(axis=1).all():
+        raise CorruptError(f"{where}: a polyline step is empty")
+    steps = unturned_steps(steps, lengths)
     if len(steps) and (
-        not np.abs(steps).any(axis=1).all()
-        or np.abs(steps[:, 0]).max() >= width
+        np.abs(steps[:, 0]).max() >= width
         or np.abs(steps[:, 1]).max() >= rows
     ):
-        raise CorruptError(f"{where}: a polyline step is empty or longer than the band")
+        raise CorruptError(f"{where}: a polyline step is longer than the band")
     starts = np.stack([start_keys % width, start_keys // width], 1)
     points = _chain_points(lengths, starts, steps)
     if total and (
@@ -326,14 +426,28 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     free = n - len(line_keys)
     if free < 0:
         raise CorruptError(f"{where}: the polylines have more vertices than the {n} stored")
+    if m.position_order not in (schema.POSITIONS_RASTER, schema.POSITIONS_HILBERT):
+        raise CorruptError(f"{where}: unknown position order {m.position_order}")
+    by_rows = m.position_order == schema.POSITIONS_RASTER
+    levels = hilbert_levels(width, rows)
+    span = pixels if by_rows else 1 << 2 * levels  # the keys' range
     gaps = _position_gaps(m, free, where)
-    if free and gaps.max() >= pixels:  # checked before the running sum can overflow
+    # checked before the running sum can overflow: the float sum is loose, the last
+    # key exact
+    if free and (gaps.max() >= span or float(gaps.sum(dtype=np.float64)) + free > 2.0 * span):
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
     gaps += 1
     free_keys = np.cumsum(gaps, out=gaps)
     free_keys -= 1
-    if free and free_keys[-1] >= pixels:
+    if free and free_keys[-1] >= span:
         raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+    if not by_rows:
+        x, y = hilbert_points(free_keys, levels)
+        if free and (x.max() >= width or y.max() >= rows):
+            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+        free_keys = y * width + x
+        by_curve = np.argsort(free_keys)
+        free_keys = free_keys[by_curve]
     # Both key lists are increasing: merged, each free vertex's index is its own rank
     # plus the number of polyline pixels before it (searchsorted), and a shared pixel
     # is one of those found equal
@@ -396,12 +510,18 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     if n and residuals.max() > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
         raise CorruptError(f"{where}: a sample residual exceeds the {dtype} range")
     residuals = unzigzag(residuals).reshape(n, channels)
-    # the encoder's _sample_order, from the parts known here
-    seq_order = _sequence(vertices, flat[np.sort(first_seen)], free_index)
+    # the encoder's _sample_order, from the parts known here: the positions along the
+    # curve are already in its order
+    if by_rows:
+        curve = free_index[_hilbert_order(vertices[free_index], levels)]
+    else:
+        curve = np.empty(free, np.int64)
+        curve[by_curve] = free_index
+    seq_order = np.concatenate([flat[np.sort(first_seen)], curve])
     if m.sample_step > 1:  # step 1 is every vertex's step
         steps = vertex_steps(vertices, triangles, int(m.sample_step), m.y0 > 0, areas)
         residuals *= steps[seq_order][:, None]
-    seq = np.cumsum(residuals, axis=0, out=residuals)
+    seq = tree_sums(residuals, sample_parents(triangles, seq_order))
     if n and (seq.min() < 0 or seq.max() > top):
         raise CorruptError(f"{where}: a sample leaves the {dtype} range")
     values = np.empty((n, channels), dtype=dtype)

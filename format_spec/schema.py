@@ -1,4 +1,4 @@
-"""Byte layout of .atm version 3 as `construct` declarations.
+"""Byte layout of .atm version 5 as `construct` declarations.
 
 Every multi-byte integer is little-endian. ATM.md (beside this file) is the normative
 description; the names here match its field names.
@@ -29,7 +29,7 @@ from construct import (
 )
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-VERSION = 4
+VERSION = 5
 
 #: Chunk types. An upper-case first letter marks a critical chunk.
 HEADER = b"AHDR"
@@ -119,6 +119,11 @@ Header = Struct(
 LISTED = 0
 DELAUNAY = 1
 
+#: position_order codes: the free vertices' positions as gaps in raster order or along
+#: the band's Hilbert curve
+POSITIONS_RASTER = 0
+POSITIONS_HILBERT = 1
+
 #: Byte sections whose length comes first (varint streams, decoded by the codec).
 Section = Prefixed(Int32ul, GreedyBytes)
 
@@ -152,6 +157,7 @@ MeshPayload = Struct(
     "polyline_count" / Int32ul,
     "polyline_index_count" / Int32ul,
     "connectivity" / Int8ul,
+    "position_order" / Int8ul,
     "triangle_crc" / Int32ul,
     "sample_step" / Int16ul,
     "polyline_lengths" / Section,

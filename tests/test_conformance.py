@@ -8,14 +8,16 @@ import numpy as np
 import pytest
 
 import codec
+from codec import frames
 from codec.files import read_image
+from format_spec import schema
 
 VECTORS = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
 CASES = sorted(p.stem for p in VECTORS.glob("*.atm"))
 
 
 def test_there_are_conformance_files():
-    assert {"gray8_steps", "gray16_scene", "rgb8_grid", "line_1x9", "bands_gray8", "float_elevation", "holes_float"} <= set(CASES)
+    assert {"gray8_steps", "gray16_scene", "rgb8_grid", "line_1x9", "bands_gray8", "float_elevation", "holes_float", "walls_hilbert"} <= set(CASES)
 
 
 @pytest.mark.parametrize("name", CASES)
@@ -26,6 +28,21 @@ def test_decodes_exactly(name):
     out = codec.decode(data)
     assert out.dtype == expected.dtype
     np.testing.assert_array_equal(out, expected)  # NaN where expected has NaN
+
+
+def _mesh_payloads(data: bytes):
+    at = schema.FileHeader.sizeof()
+    while at < len(data):
+        chunk = schema.Chunk.parse(data[at:])
+        at += 12 + chunk.length
+        if chunk.type == schema.MESH:
+            yield schema.MeshPayload.parse(frames.decompress(chunk.payload, 1 << 30, "MESH"), sample_type=0, channels=1)
+
+
+def test_conformance_files_store_positions_both_ways():
+    """Both position orders of a MESH chunk (ATM.md §4.2.2) are exercised by a file."""
+    orders = {m.position_order for name in CASES for m in _mesh_payloads((VECTORS / f"{name}.atm").read_bytes())}
+    assert orders == {schema.POSITIONS_RASTER, schema.POSITIONS_HILBERT}
 
 
 def test_walls_survive_in_the_conformance_file():

@@ -132,7 +132,7 @@ def test_bytes_after_aend_are_ignored(sample_file):
     np.testing.assert_array_equal(codec.decode(sample_file + b"junk"), codec.decode(sample_file))
 
 
-@pytest.mark.parametrize("version", [1, 2, 3, 5])
+@pytest.mark.parametrize("version", [1, 2, 3, 4, 6])
 def test_other_versions_are_unsupported(sample_file, version):
     data = sample_file[:8] + struct.pack("<H", version) + sample_file[10:]
     with pytest.raises(UnsupportedError, match=f"version {version}; this codec reads version {schema.VERSION}"):
@@ -148,7 +148,7 @@ def test_mesh_invariants_are_checked(sample_file):
     import zstandard
 
     from codec import meshcode
-    from codec.coding import triangle_crc, varints, zigzag
+    from codec.coding import hilbert_keys, triangle_crc, varints, zigzag
 
     header, [(_, mesh)] = container.unpack(sample_file)
     good = meshcode.encode_band(0, mesh)  # mesh came from a file: raster order, canonical
@@ -180,13 +180,25 @@ def test_mesh_invariants_are_checked(sample_file):
     one_wall = dict(polyline_count=1, polyline_index_count=2, polyline_lengths=varints([2]),
                     polyline_starts=varints(zigzag([keys[0]])),
                     polyline_steps=varints(zigzag(mesh.vertices[1] - mesh.vertices[0])))
-    twice = dict(one_wall, **meshcode.position_fields(np.diff(keys[:-2], prepend=-1) - 1))
+    raster = dict(position_order=schema.POSITIONS_RASTER)
+    twice = dict(one_wall, **raster, **meshcode.position_fields(np.diff(keys[:-2], prepend=-1) - 1))
+    # along the Hilbert curve of the 20 x 12 band's 32 x 32 square: a free vertex moved
+    # to (25, 3), in the square but not in the band, and a key beyond the square
+    hx, hy = free % 20, free // 20
+    hx[-1], hy[-1] = 25, 3
+    moved = np.sort(hilbert_keys(hx, hy, 5))
+    beyond_square = np.diff(np.sort(hilbert_keys(free % 20, free // 20, 5)), prepend=-1) - 1
+    beyond_square[-1] += 32 * 32
+    curve = dict(position_order=schema.POSITIONS_HILBERT)
     empty_step = dict(one_wall, polyline_steps=varints(zigzag([0, 0])))
     leaving = dict(one_wall, polyline_starts=varints(zigzag([0])), polyline_steps=varints(zigzag([-1, 0])))
     cases = {
         "wrongly oriented": listed(flipped),
         "beyond": listed(beyond),
-        "outside": meshcode.position_fields(gaps),
+        "outside": dict(raster, **meshcode.position_fields(gaps)),
+        "lies outside the 20x12 band": dict(curve, **meshcode.position_fields(np.diff(moved, prepend=-1) - 1)),
+        "lies outside": dict(curve, **meshcode.position_fields(beyond_square)),
+        "unknown position order": dict(position_order=2),
         "cover": listed(mesh.triangles[:-1]),
         "leaves the": leaving,
         "step is empty": empty_step,
@@ -222,7 +234,7 @@ def test_position_bits_round_trip_and_padding_is_checked(bits):
         return data[:mesh_at] + make_chunk(b"MESH", zstandard.ZstdCompressor().compress(raw)) + make_chunk(b"AEND", b"")
 
     keys = np.sort(grid[:, 1] * 11 + grid[:, 0])
-    split = meshcode.position_fields(np.diff(keys, prepend=-1) - 1, bits=bits)
+    split = dict(meshcode.position_fields(np.diff(keys, prepend=-1) - 1, bits=bits), position_order=schema.POSITIONS_RASTER)
     np.testing.assert_array_equal(codec.decode(with_fields(**split)), codec.decode(data))
     if 9 * bits % 8:
         padded = dict(split, position_bits=split["position_bits"][:-1] + bytes([split["position_bits"][-1] | 1]))
@@ -244,6 +256,7 @@ def test_a_wall_over_a_vertex_is_corrupt():
     free = np.setdiff1d(np.arange(9), [0, 2])  # keys of the pixels off the wall
     fields.update(polyline_count=1, polyline_index_count=2, polyline_lengths=varints([2]),
                   polyline_starts=varints(zigzag([0])), polyline_steps=varints(zigzag([2, 0])),
+                  position_order=schema.POSITIONS_RASTER,
                   **meshcode.position_fields(np.diff(free, prepend=-1) - 1))
     raw = schema.MeshPayload.build(fields, sample_type=0, channels=1)
     data = container.pack(mesh)

@@ -53,6 +53,9 @@ def main() -> None:
         "bands_gray8": codec.encode(
             synthetic.range_scene(40, 30, seed=6), points=200, mesher="uniform", band_height=8
         ),
+        # the adaptive mesher's walls, with free vertices clustered enough that their
+        # positions go along the Hilbert curve
+        "walls_hilbert": codec.encode(synthetic.range_scene(64, 48, seed=3), points=150),
         "line_1x9": codec.encode(
             np.array([[0, 30, 60, 90, 255, 200, 100, 50, 7]], np.uint8), points=4, mesher="uniform"
         ),

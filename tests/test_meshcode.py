@@ -1,0 +1,112 @@
+"""The MESH payload's number transforms against the rules of ATM.md §4.2, written out
+as plain loops: the Hilbert curve, the turned polyline steps, and the samples'
+parents and their sums."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from codec import meshcode
+from codec.coding import hilbert_keys, hilbert_levels, hilbert_points
+from codec.triangulate import triangulate
+
+
+def spec_hilbert(x: int, y: int, n: int) -> int:
+    d, s = 0, n // 2
+    while s > 0:
+        rx, ry = int(x & s != 0), int(y & s != 0)
+        d += s * s * ((3 * rx) ^ ry)
+        if ry == 0:
+            if rx == 1:
+                x, y = n - 1 - x, n - 1 - y
+            x, y = y, x
+        s //= 2
+    return d
+
+
+@given(st.integers(0, 13), st.data())
+def test_hilbert_keys_follow_the_spec_and_invert(levels, data):
+    n = 1 << levels
+    pts = data.draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)), min_size=1, max_size=40))
+    x, y = np.array(pts).T
+    d = hilbert_keys(x, y, levels)
+    assert d.tolist() == [spec_hilbert(int(a), int(b), n) for a, b in pts]
+    bx, by = hilbert_points(d, levels)
+    assert bx.tolist() == x.tolist() and by.tolist() == y.tolist()
+
+
+def test_every_hilbert_key_is_one_pixel():
+    for levels in range(0, 7):
+        d = np.arange(1 << 2 * levels)
+        x, y = hilbert_points(d, levels)
+        assert len(set(zip(x.tolist(), y.tolist()))) == len(d)
+        # consecutive keys are neighbouring pixels: it is a curve
+        assert (np.abs(np.diff(x)) + np.abs(np.diff(y)) == 1).all()
+
+
+def test_hilbert_levels_cover_the_band():
+    assert [hilbert_levels(w, h) for w, h in [(1, 1), (2, 1), (3, 2), (4, 4), (5, 3), (640, 480)]] == [0, 1, 2, 2, 3, 10]
+
+
+def spec_quadrant(a: int, b: int) -> int:
+    if a > 0 and b >= 0:
+        return 0
+    if a <= 0 and b > 0:
+        return 1
+    if a < 0 and b <= 0:
+        return 2
+    return 3
+
+
+def spec_turn(a: int, b: int, quarters: int) -> tuple[int, int]:
+    for _ in range(quarters % 4):
+        a, b = -b, a
+    return a, b
+
+
+steps = st.tuples(st.integers(-9, 9), st.integers(-9, 9)).filter(lambda s: s != (0, 0))
+
+
+@given(st.lists(st.lists(steps, min_size=1, max_size=12), min_size=1, max_size=6))
+def test_turned_steps_follow_the_spec_and_invert(polylines):
+    flat = np.array([s for line in polylines for s in line])
+    lengths = np.array([len(line) + 1 for line in polylines])
+    stored = meshcode.turned_steps(flat, lengths)
+    expected = []
+    for line in polylines:
+        prev = None
+        for a, b in line:
+            expected.append((a, b) if prev is None else spec_turn(a, b, 4 - spec_quadrant(*prev)))
+            prev = (a, b)
+    assert stored.tolist() == [list(e) for e in expected]
+    assert meshcode.unturned_steps(stored, lengths).tolist() == flat.tolist()
+
+
+def test_a_straight_wall_stores_one_step_whatever_its_direction():
+    for step in [(3, 1), (-1, 3), (-3, -1), (1, -3)]:
+        stored = meshcode.turned_steps(np.array([step] * 5), np.array([6]))
+        assert {tuple(s) for s in stored[1:].tolist()} == {(3, 1)}
+
+
+@settings(max_examples=40)
+@given(st.integers(3, 60), st.integers(0, 2**32 - 1))
+def test_sample_parents_and_sums_follow_the_spec(count, seed):
+    rng = np.random.default_rng(seed)
+    keys = rng.choice(24 * 18, size=count, replace=False)
+    vertices = np.stack([keys % 24, keys // 24], 1)
+    vertices = np.unique(np.r_[vertices, [[0, 0], [23, 0], [0, 17], [23, 17]]], axis=0)
+    triangles = triangulate(vertices)
+    order = rng.permutation(len(vertices))
+    parent = meshcode.sample_parents(triangles, order)
+    place = {int(v): j for j, v in enumerate(order)}
+    for j, v in enumerate(order.tolist()):
+        earlier = [place[int(u)] for t in triangles.tolist() if v in t for u in t if place[int(u)] < j]
+        assert parent[j] == (max(earlier) if earlier else j - 1)
+    increments = rng.integers(-50, 50, (len(order), 2))
+    sums = meshcode.tree_sums(increments, parent)
+    expected = np.zeros_like(increments)
+    for j in range(len(order)):
+        expected[j] = increments[j] + (expected[parent[j]] if parent[j] >= 0 else 0)
+    np.testing.assert_array_equal(sums, expected)
