@@ -252,17 +252,17 @@ def sample_parents(triangles: np.ndarray, seq_order: np.ndarray) -> np.ndarray:
     if len(triangles):
         pos = np.empty(n, np.int64)
         pos[seq_order] = np.arange(n)
-        corners = pos[triangles]
-        a, b, c = (np.ascontiguousarray(col) for col in corners.T)
-        # each corner's candidates: the later of the two others that come before it
-        best = [np.maximum(np.where(o1 < me, o1, -1), np.where(o2 < me, o2, -1))
-                for me, o1, o2 in ((a, b, c), (b, c, a), (c, a, b))]
-        me, cand = np.concatenate([a, b, c]), np.concatenate(best)
-        keys = me[cand >= 0] * n + cand[cand >= 0]
-        keys.sort()
-        # the largest key of each corner is the last in its run
-        last = np.r_[keys[1:] // n != keys[:-1] // n, True] if len(keys) else np.zeros(0, bool)
-        parent[keys[last] // n] = keys[last] % n
+        a, b, c = (pos[np.ascontiguousarray(col)] for col in triangles.T)
+        # a triangle's corners by place: the last one's candidate is the middle one,
+        # the middle one's the first (strictly earlier: a listed triangle may repeat a
+        # corner, and a sample must not be its own parent)
+        lo = np.minimum(np.minimum(a, b), c)
+        hi = np.maximum(np.maximum(a, b), c)
+        mid = a + b + c - lo - hi
+        best = np.full(n, -1, np.int64)
+        np.maximum.at(best, hi, np.where(mid < hi, mid, -1))
+        np.maximum.at(best, mid, np.where(lo < mid, lo, -1))
+        np.copyto(parent, best, where=best >= 0)
     return parent
 
 
@@ -270,16 +270,17 @@ def tree_sums(increments: np.ndarray, parent: np.ndarray) -> np.ndarray:
     """Each sample as its increment plus its parent's sample (parent[j] < j; -1: none),
     summed along the tree by pointer jumping: each pass doubles the stretch of
     ancestors a partial sum covers, so the passes are as many as the bits of the
-    deepest chain."""
-    acc = increments.copy()
-    up = parent.copy()
-    live = np.flatnonzero(up >= 0)
-    while len(live):
-        above = up[live]
-        acc[live] += acc[above]
-        up[live] = up[above]
-        live = live[up[live] >= 0]
-    return acc
+    deepest chain. A root's parent is a zero past the end."""
+    n = len(parent)
+    up = np.append(parent, n)
+    up[up < 0] = n
+    acc = np.concatenate([increments, np.zeros((1,) + increments.shape[1:], increments.dtype)])
+    one = acc.ndim == 2 and acc.shape[1] == 1
+    work = acc[:, 0] if one else acc  # a view: one channel sums as a flat array
+    while not (up == n).all():
+        work += work[up]
+        up = up[up]
+    return acc[:n]
 
 
 def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
