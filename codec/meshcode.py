@@ -118,10 +118,6 @@ def _position_gaps(m, free: int, where: str) -> np.ndarray:
     return high
 
 
-def _hilbert_order(vertices: np.ndarray, levels: int) -> np.ndarray:
-    return np.argsort(hilbert_keys(vertices[:, 0], vertices[:, 1], levels))
-
-
 #: x and y of a step turned by r quarter turns (x, y) -> (-y, x), by r
 _COS = np.array([1, 0, -1, 0])
 _SIN = np.array([0, 1, 0, -1])
@@ -228,17 +224,19 @@ def _flat(lines: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(lines) if lines else np.zeros(0, np.int64)
 
 
-def _sample_order(vertices: np.ndarray, flat: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
-    """(sequence, free mask) for raster-ordered vertices: the polyline vertices in the
-    order the polylines first reach them (a wall's vertices sit on one side of a step,
-    so each predicts the next well), then every other vertex along the Hilbert curve
-    of `levels` levels."""
+def _sample_order(vertices: np.ndarray, flat: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sequence, free mask, the free vertices' Hilbert keys in increasing order) for
+    raster-ordered vertices: the polyline vertices in the order the polylines first
+    reach them (a wall's vertices sit on one side of a step, so each predicts the next
+    well), then every other vertex along the Hilbert curve of `levels` levels."""
     first_seen = np.unique(flat, return_index=True)[1]
     on_line = flat[np.sort(first_seen)]
     free = np.ones(len(vertices), dtype=bool)
     free[on_line] = False
     free_idx = np.flatnonzero(free)
-    return np.concatenate([on_line, free_idx[_hilbert_order(vertices[free_idx], levels)]]), free
+    keys = hilbert_keys(vertices[free_idx, 0], vertices[free_idx, 1], levels)
+    along = np.argsort(keys)
+    return np.concatenate([on_line, free_idx[along]]), free, keys[along]
 
 
 def sample_parents(triangles: np.ndarray, seq_order: np.ndarray) -> np.ndarray:
@@ -292,7 +290,7 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
         return mesh
     order, inverse, _, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
-    seq, _ = _sample_order(vertices, _flat(lines), hilbert_levels(mesh.width, mesh.height))
+    seq, _, _ = _sample_order(vertices, _flat(lines), hilbert_levels(mesh.width, mesh.height))
     triangles = inverse[mesh.triangles]
     steps = vertex_steps(vertices, triangles, step, top_pinned)[seq].tolist()
     parents = sample_parents(triangles, seq).tolist()
@@ -340,8 +338,7 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
-    levels = hilbert_levels(mesh.width, mesh.height)
-    seq_order, free = _sample_order(vertices, flat, levels)
+    seq_order, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
     seq_steps = vertex_steps(vertices, triangles, step, y0 > 0)[seq_order][:, None]
     in_order = values[seq_order].astype(np.int64)
     parents = sample_parents(triangles, seq_order)
@@ -353,7 +350,7 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     # is smaller: clustered vertices (a range image's walls and corners) are closer
     # along the curve, evenly spread ones along the rows
     raster = position_fields(np.diff(sorted_keys[free], prepend=-1) - 1)
-    curve = position_fields(np.diff(np.sort(hilbert_keys(*vertices[free].T, levels)), prepend=-1) - 1)
+    curve = position_fields(np.diff(curve_keys, prepend=-1) - 1)
     sizes = [len(frames.compress(f["positions"])) + len(f["position_bits"]) for f in (raster, curve)]
     position_order = schema.POSITIONS_RASTER if sizes[0] <= sizes[1] else schema.POSITIONS_HILBERT
     tri_fields = np.zeros(0, np.int64)
@@ -514,7 +511,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     # the encoder's _sample_order, from the parts known here: the positions along the
     # curve are already in its order
     if by_rows:
-        curve = free_index[_hilbert_order(vertices[free_index], levels)]
+        curve = free_index[np.argsort(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1], levels))]
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index
