@@ -1,12 +1,24 @@
-"""Shared test helpers: random meshes and the public corpus."""
+"""Shared test helpers: random meshes, a file's chunks and the public corpus."""
 
 from __future__ import annotations
+
+import struct
 
 import numpy as np
 import pytest
 
 from codec.mesh import Mesh
 from codec.triangulate import triangulate
+
+
+def chunks(data: bytes) -> list[tuple[int, bytes, bytes]]:
+    """(offset, type, payload) of each chunk of a well-formed file."""
+    out, pos = [], 10
+    while pos < len(data):
+        length, ctype = struct.unpack_from("<I4s", data, pos)
+        out.append((pos, ctype, data[pos + 8 : pos + 8 + length]))
+        pos += 12 + length
+    return out
 
 
 def random_mesh(seed: int, width: int, height: int, *, dtype=np.uint8, channels: int = 1,

@@ -11,6 +11,7 @@ import codec
 from codec import frames
 from codec.files import read_image
 from format_spec import schema
+from tests.conftest import chunks
 
 VECTORS = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
 CASES = sorted(p.stem for p in VECTORS.glob("*.atm"))
@@ -30,18 +31,14 @@ def test_decodes_exactly(name):
     np.testing.assert_array_equal(out, expected)  # NaN where expected has NaN
 
 
-def _mesh_payloads(data: bytes):
-    at = schema.FileHeader.sizeof()
-    while at < len(data):
-        chunk = schema.Chunk.parse(data[at:])
-        at += 12 + chunk.length
-        if chunk.type == schema.MESH:
-            yield schema.MeshPayload.parse(frames.decompress(chunk.payload, 1 << 30, "MESH"), sample_type=0, channels=1)
-
-
 def test_conformance_files_store_positions_both_ways():
     """Both position orders of a MESH chunk (ATM.md §4.2.2) are exercised by a file."""
-    orders = {m.position_order for name in CASES for m in _mesh_payloads((VECTORS / f"{name}.atm").read_bytes())}
+    orders = {
+        schema.MeshPayload.parse(frames.decompress(payload, 1 << 30, "MESH"), sample_type=0, channels=1).position_order
+        for name in CASES
+        for _, kind, payload in chunks((VECTORS / f"{name}.atm").read_bytes())
+        if kind == schema.MESH
+    }
     assert orders == {schema.POSITIONS_RASTER, schema.POSITIONS_HILBERT}
 
 

@@ -18,7 +18,7 @@ from codec.coding import canonical_triangles
 from codec.errors import ATMError, CorruptError, FormatError, TruncatedError, UnsupportedError
 from codec.triangulate import triangulate
 from format_spec import schema
-from tests.conftest import random_mesh
+from tests.conftest import chunks, random_mesh
 
 mesh_args = st.tuples(
     st.integers(0, 2**32 - 1),
@@ -62,16 +62,6 @@ def test_pack_unpack_is_exact_for_arbitrary_meshes(args):
     assert (header.width, header.height, header.dtype, header.channels) == (w, h, np.dtype(dtype), channels)
     assert_same_mesh(mesh, back)
     assert container.pack(back) == data
-
-
-def chunks(data: bytes) -> list[tuple[int, bytes, bytes]]:
-    """(offset, type, payload) of each chunk of a well-formed file."""
-    out, pos = [], 10
-    while pos < len(data):
-        length, ctype = struct.unpack_from("<I4s", data, pos)
-        out.append((pos, ctype, data[pos + 8 : pos + 8 + length]))
-        pos += 12 + length
-    return out
 
 
 def make_chunk(ctype: bytes, payload: bytes) -> bytes:
