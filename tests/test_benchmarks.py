@@ -1,0 +1,31 @@
+"""Smoke runs of the benchmark scripts that need nothing beyond the test extra: they
+must keep running and print their table (their figures are measurements, not checked)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _table(stdout: str) -> list[list[str]]:
+    return [[c.strip() for c in line.strip().strip("|").split("|")]
+            for line in stdout.splitlines() if line.startswith("|")]
+
+
+def test_speed_benchmark_prints_its_table() -> None:
+    run = subprocess.run(
+        [sys.executable, "benchmarks/speed.py", "--repeat", "1", "--images", "text"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, rule, *rows = _table(run.stdout)
+    assert [r[0] for r in rows] == ["text"]
+    row = rows[0]
+    assert len(row) == len(head) == len(rule)
+    assert row[1] == "448x172"
+    figures = dict(zip(head[3:], map(float, row[3:])))
+    assert {"jpeg ms", "render ms", "decode ms", "triangulate ms", "render / jpeg"} <= figures.keys()
+    assert all(f > 0 for f in figures.values())
