@@ -70,6 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         gl = False
     corpus = load_corpus()
     names = args.images or list(corpus)
+    unknown = sorted(set(names) - set(corpus))
+    if unknown:
+        parser.error(f"no corpus image {', '.join(unknown)}; choose from {', '.join(corpus)}")
     cols = ["jpeg", "render", "decode", "triangulate"] + (["gl render", "gl decode"] if gl else [])
     head = ["image", "size", "triangles"] + [f"{c} ms" for c in cols]
     head += [f"{c} / jpeg" for c in cols[1:]]
