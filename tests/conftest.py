@@ -2,13 +2,27 @@
 
 from __future__ import annotations
 
+import os
 import struct
 
 import numpy as np
 import pytest
 
+from codec import decoder_gl
+from codec.errors import BackendError
 from codec.mesh import Mesh
 from codec.triangulate import triangulate
+
+
+@pytest.fixture(scope="module")
+def gl() -> None:
+    """Require a GL context: fail in CI (CI set), skip elsewhere."""
+    try:
+        decoder_gl.context()
+    except BackendError as exc:
+        if os.environ.get("CI"):
+            pytest.fail(f"CI must test the OpenGL decoder: {exc}")
+        pytest.skip(str(exc))
 
 
 def chunks(data: bytes) -> list[tuple[int, bytes, bytes]]:

