@@ -83,13 +83,16 @@ def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return triangles
 
 
-def validate(mesh: Mesh, *, walls_are_edges: bool = False, areas: np.ndarray | None = None) -> None:
+def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
+             areas: np.ndarray | None = None) -> None:
     """Raise CorruptError (or LimitError) unless the mesh is one the decoders can render.
 
     Checked: shapes, index ranges, vertices inside the image and distinct, triangle
-    orientation, total area equal to the image's, constraint indices, and that every
-    constraint step is a triangle edge (unless the caller knows it: walls_are_edges).
-    areas: the triangles' doubled_areas, when the caller has them already.
+    orientation, that the triangles tile the image (ATM.md §4.2.3, constraint 4: total
+    area, and edges shared as a tiling shares them, unless the caller knows it: tiles),
+    constraint indices, and that every constraint step is a triangle edge (unless the
+    caller knows it: walls_are_edges). areas: the triangles' doubled_areas, when the
+    caller has them already.
     """
     w, h = mesh.width, mesh.height
     limits.check_image_size(w, h)
@@ -105,6 +108,7 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, areas: np.ndarray | N
     vals = mesh.values
     if vals.shape[0] != len(v) or vals.ndim not in (1, 2):
         raise CorruptError(f"{len(vals)} values for {len(v)} vertices")
+    known = None  # the triangles' edges as sorted keys, once _check_edges has them
     x, y = v[:, 0], v[:, 1]
     if x.min() < 0 or y.min() < 0 or x.max() >= w or y.max() >= h:
         raise CorruptError(f"a vertex lies outside the {w}x{h} image")
@@ -121,6 +125,8 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, areas: np.ndarray | N
             raise CorruptError("a triangle is degenerate or wrongly oriented")
         if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
             raise CorruptError("the triangles do not cover the image exactly once")
+        if not tiles:
+            known = _check_edges(v, t, w, h)
         y0, y1, y2 = (y[i] for i in t.T)  # corner by corner: contiguous arrays
         extent = np.maximum(y0, y1)
         np.maximum(extent, y2, out=extent)
@@ -149,11 +155,65 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, areas: np.ndarray | N
         raise CorruptError("a constraint polyline refers to a missing vertex")
     if len(t) and not walls_are_edges:
         walls = chain_steps(flat.astype(np.int64), lengths)
-        known = np.sort(_edge_keys(edges(t), len(v)))
-        keys = _edge_keys(walls, len(v))
+        if known is None:
+            known = np.sort(_edge_keys(edges(t), len(v)))
+        keys = _edge_keys(walls, len(v)).astype(known.dtype)
         at = np.clip(np.searchsorted(known, keys), 0, len(known) - 1)
         if not (known[at] == keys).all():
             raise CorruptError("a constraint polyline runs along no triangle edge")
+
+
+#: Most vertices for which _check_edges sorts edges as single integer keys (below 2**63).
+_KEYED_EDGES = 1 << 31
+
+
+def _check_edges(v: np.ndarray, t: np.ndarray, w: int, h: int) -> np.ndarray | None:
+    """CorruptError unless every edge of the (positively oriented) triangles is shared
+    as in a tiling of the image: no two triangles on the same side of an edge, and an
+    edge with a triangle on one side only lies on the image's border. With the total
+    area equal to the image's, that makes the triangles tile it (ATM.md §4.2.3), which
+    is what lets both decoders give every pixel to exactly one triangle, and the same
+    one. Returns the edges' keys min * N + max, sorted (uint64), as _edge_keys numbers
+    them (None for meshes of over 2**31 vertices)."""
+    a = t.ravel()
+    b = np.ascontiguousarray(t[:, [1, 2, 0]]).ravel()  # directed edges a -> b
+    n = len(v)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    forward = a < b  # which side of the undirected edge lo - hi its triangle lies on
+    if n <= _KEYED_EDGES:
+        # one sort of (edge, side) keys, below 2**63
+        key = lo.astype(np.uint64) * np.uint64(n) + hi.astype(np.uint64)
+        key <<= np.uint64(1)
+        key |= forward
+        key.sort()
+        side = (key & np.uint64(1)).astype(bool)
+        key >>= np.uint64(1)
+    else:
+        order = np.lexsort((forward, hi, lo))
+        lo, hi, side = lo[order], hi[order], forward[order]
+        key = None
+    same = key[1:] == key[:-1] if key is not None else (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    # sorted by side within an edge: two triangles on one side (or three on an edge)
+    # show up as neighbours with equal sides
+    if (same & (side[1:] == side[:-1])).any():
+        raise CorruptError("two triangles overlap: they lie on the same side of a shared edge")
+    alone = np.ones(len(side), bool)
+    alone[1:] &= ~same
+    alone[:-1] &= ~same
+    if key is not None:
+        lo, hi = np.divmod(key[alone], np.uint64(n))
+    else:
+        lo, hi = lo[alone], hi[alone]
+    p, q = v[lo.astype(np.int64)], v[hi.astype(np.int64)]
+    border = (((p[:, 0] == 0) & (q[:, 0] == 0)) | ((p[:, 0] == w - 1) & (q[:, 0] == w - 1))
+              | ((p[:, 1] == 0) & (q[:, 1] == 0)) | ((p[:, 1] == h - 1) & (q[:, 1] == h - 1)))
+    if not border.all():
+        x, y = p[np.argmin(border)]
+        raise CorruptError(
+            "the triangles do not tile the image: an edge from vertex "
+            f"({x}, {y}) has a triangle on one side only but lies inside the image"
+        )
+    return key
 
 
 def segments(polylines: list[np.ndarray]) -> np.ndarray:

@@ -138,7 +138,8 @@ def test_mesh_invariants_are_checked(sample_file):
     import zstandard
 
     from codec import meshcode
-    from codec.coding import hilbert_keys, triangle_crc, varints, zigzag
+    from codec.coding import canonical_triangles, hilbert_keys, triangle_crc, varints, zigzag
+    from codec.mesh import doubled_areas
 
     header, [(_, mesh)] = container.unpack(sample_file)
     good = meshcode.encode_band(0, mesh)  # mesh came from a file: raster order, canonical
@@ -198,11 +199,21 @@ def test_mesh_invariants_are_checked(sample_file):
         "more than 24": dict(positions=varints([25]) + good["positions"][1:]),
         "bytes of position bits": dict(position_bits=good["position_bits"] + b"\x00"),
     }
+    # listed triangles whose areas still add up: one triangle twice in place of another
+    # of the same area (a hole where that one was)
+    areas = doubled_areas(mesh.vertices, mesh.triangles)
+    first, second = next((i, j) for i in range(len(areas)) for j in range(i + 1, len(areas))
+                         if areas[i] == areas[j])
+    twice_one = canonical_triangles(np.delete(np.vstack([mesh.triangles, mesh.triangles[first]]), second, axis=0))
+    cases["overlap: they lie on the same side of a shared edge"] = listed(twice_one)
     np.testing.assert_array_equal(codec.decode(repack()), codec.decode(sample_file))
     np.testing.assert_array_equal(codec.decode(repack(**listed(mesh.triangles))), codec.decode(sample_file))
     for message, change in cases.items():
         with pytest.raises(CorruptError, match=message):
             codec.decode(repack(**change))
+    # refused before any decoder runs, so the GL backend gives the same error
+    with pytest.raises(CorruptError, match="overlap"):
+        codec.decode(repack(**listed(twice_one)), backend="gl")
 
 
 def test_both_position_orders_give_the_same_mesh():

@@ -5,15 +5,18 @@ they are skipped."""
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import codec
 from codec import decoder_cpu, decoder_gl
 from codec.errors import BackendError, CorruptError
-from codec.mesh import Mesh, validate
+from codec.mesh import Mesh, doubled_areas, validate
 from codec.triangulate import triangulate
 
 
@@ -208,6 +211,56 @@ def test_cpu_overlap_is_corrupt() -> None:
     doubled = Mesh(m.vertices, m.values, np.concatenate([m.triangles, m.triangles[:1]]), m.width, m.height)
     with pytest.raises(CorruptError, match="twice"):
         decoder_cpu.render(doubled)
+
+
+@st.composite
+def sheared(draw) -> Mesh:
+    """A valid mesh with one triangle's corner moved to a new vertex along the line
+    parallel to the opposite edge: every area and the total stay as they were, but the
+    triangles overlap on one side and leave a gap on the other, which may hold no pixel
+    centre at all."""
+    mesh = draw(meshes().filter(lambda m: len(m.triangles) > 0))
+    v, t = mesh.vertices, mesh.triangles.copy()
+    k = draw(st.integers(0, len(t) - 1))
+    i = draw(st.integers(0, 2))
+    a, b, c = t[k, i], t[k, (i + 1) % 3], t[k, (i + 2) % 3]
+    d = v[c] - v[b]
+    d //= np.gcd(abs(d[0]), abs(d[1]))
+    moved = v[a] + draw(st.sampled_from([-2, -1, 1, 2])) * d
+    assume(0 <= moved[0] < mesh.width and 0 <= moved[1] < mesh.height)
+    assume(not (v == moved).all(axis=1).any())
+    t[k, i] = len(v)
+    values = np.concatenate([mesh.values, mesh.values[:1]])
+    return Mesh(np.vstack([v, moved]), values, t, mesh.width, mesh.height)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(sheared(), meshes(), st.booleans())
+def test_overlapping_triangles_are_refused_before_either_decoder(bad: Mesh, good: Mesh, keyed: bool) -> None:
+    """The area check alone passes such a mesh; left to the decoders, the CPU one
+    refused some and the GL one drew them, or the other way round. validate refuses
+    them all, so a file's mesh reaches a decoder only if it tiles the image; a mesh
+    that tiles it passes. Both ways of sorting the edges (integer keys, and the
+    lexsort kept for meshes of over 2**31 vertices) are exercised."""
+    assert doubled_areas(bad.vertices, bad.triangles).sum() == 2 * (bad.width - 1) * (bad.height - 1)
+    with _keyed_edges(keyed):
+        with pytest.raises(CorruptError, match="overlap|tile"):
+            validate(bad)
+        validate(good)
+
+
+# the module, which codec.mesh (the function) hides
+mesh_module = importlib.import_module("codec.mesh")
+
+
+@contextlib.contextmanager
+def _keyed_edges(keyed: bool):
+    saved = mesh_module._KEYED_EDGES
+    mesh_module._KEYED_EDGES = saved if keyed else 0
+    try:
+        yield
+    finally:
+        mesh_module._KEYED_EDGES = saved
 
 
 # ---------------------------------------------------------------- GL decoder
