@@ -22,9 +22,10 @@ with [xl, xr] the triangle's exact cross-section on row y:
 * row y is the triangle's if ymin <= y < ymax, or if y = ymax = H - 1;
 * column x of such a row is the triangle's if xl <= x < xr, or if xl < x = xr = W - 1.
 
-For a mesh that tiles the image (what mesh.validate checks, plus no overlaps) every
-pixel is thus written exactly once. The decoder checks that the spans tile each band of
-rows exactly and raises CorruptError otherwise (a pixel uncovered, or covered twice).
+For a mesh that tiles the image (what mesh.validate checks) every pixel is thus written
+exactly once. The decoder still checks that the spans tile each band of rows exactly,
+for meshes handed to it unvalidated, and raises CorruptError otherwise (a pixel
+uncovered, or covered twice).
 
 Implementation, all vectorised (no Python loop runs per triangle, span or pixel):
 
