@@ -214,6 +214,39 @@ def test_cpu_overlap_is_corrupt() -> None:
 
 
 @st.composite
+def flipped(draw) -> Mesh:
+    """A valid mesh with some of its diagonals flipped (where the two triangles on an
+    edge form a convex quadrilateral): still a tiling, but no longer a Delaunay one, as
+    listed triangles may be."""
+    mesh = draw(meshes().filter(lambda m: len(m.triangles) > 1))
+    v, t = mesh.vertices, mesh.triangles.copy()
+    for _ in range(draw(st.integers(1, 12))):  # a loop over flips (test code)
+        e = draw(st.integers(0, 3 * len(t) - 1))
+        k, i = divmod(e, 3)
+        a, b, c = t[k, i], t[k, (i + 1) % 3], t[k, (i + 2) % 3]
+        # the triangle on the other side of a -> b has the directed edge b -> a
+        other = [(m, j) for m in range(len(t)) for j in range(3)
+                 if t[m, j] == b and t[m, (j + 1) % 3] == a]
+        if not other:
+            continue  # a border edge
+        m, j = other[0]
+        d = t[m, (j + 2) % 3]
+        quad = np.array([[a, d, c], [d, b, c]])
+        if (doubled_areas(v, quad) > 0).all():  # convex: the other diagonal works
+            t[k], t[m] = quad
+    return Mesh(v, mesh.values, t, mesh.width, mesh.height)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(flipped())
+def test_decoders_agree_on_tilings_that_are_not_delaunay(gl, mesh: Mesh) -> None:
+    validate(mesh)
+    cpu = decoder_cpu.render(mesh)
+    assert np.array_equal(cpu, reference(mesh))
+    assert np.array_equal(decoder_gl.render(mesh), cpu)
+
+
+@st.composite
 def sheared(draw) -> Mesh:
     """A valid mesh with one triangle's corner moved to a new vertex along the line
     parallel to the opposite edge: every area and the total stay as they were, but the
