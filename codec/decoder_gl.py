@@ -225,18 +225,21 @@ def _skirt(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = np.asarray(mesh.triangles, dtype=np.int64)
     n = len(v)
     vals = mesh.values.reshape(n, -1)
-    # boundary edges: in a mesh that tiles the image, exactly the edges with both ends
-    # on one side of it (a hole elsewhere shows up as an undrawn pixel)
-    a = t.reshape(-1)
-    b = t[:, [1, 2, 0]].reshape(-1)
-    xa, ya, xb, yb = v[a, 0], v[a, 1], v[b, 0], v[b, 1]
-    ox = np.where((xa == 0) & (xb == 0), -1, np.where((xa == w - 1) & (xb == w - 1), 1, 0))
-    oy = np.where((ya == 0) & (yb == 0), -1, np.where((ya == h - 1) & (yb == h - 1), 1, 0))
-    on_side = np.flatnonzero((ox != 0) | (oy != 0))
+    # boundary edges: in a mesh that tiles the image (what mesh.validate checks), each
+    # side of it is cut into edges by the vertices on it that triangles use
+    used = np.zeros(n, bool)
+    used[t.ravel()] = True
+    sides = []  # each side's used vertices in order along it: top, bottom, left, right
+    for on, along in ((v[:, 1] == 0, v[:, 0]), (v[:, 1] == h - 1, v[:, 0]),
+                      (v[:, 0] == 0, v[:, 1]), (v[:, 0] == w - 1, v[:, 1])):
+        side = np.flatnonzero(on & used)
+        sides.append(side[np.argsort(along[side])])
+    a = np.concatenate([side[:-1] for side in sides])
+    b = np.concatenate([side[1:] for side in sides])
     # outward unit offset of each boundary edge, from the side it lies on
-    a, b, ox, oy = a[on_side], b[on_side], ox[on_side], oy[on_side]
+    off = np.repeat(np.array([[0, -1], [0, 1], [-1, 0], [1, 0]], np.int64),
+                    [max(len(side) - 1, 0) for side in sides], axis=0)
     m = len(a)
-    off = np.stack([ox, oy], axis=1)
     # quad a, b, b', a' as triangles (a, b, b') and (a, b', a'); a' = n + 2i, b' = n + 2i + 1
     skirt_v = np.empty((2 * m, 2), np.int64)
     skirt_v[0::2] = v[a] + off
@@ -249,10 +252,11 @@ def _skirt(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # corner squares of the corner's value, outside each image corner
     corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.int64)
     out_dir = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.int64)
-    key = v[:, 1] * w + v[:, 0]
-    order = np.argsort(key)
-    found = np.searchsorted(key[order], corners[:, 1] * w + corners[:, 0])
-    corner_idx = order[np.minimum(found, n - 1)]
+    # the ends of the top and bottom sides, in the order of `corners`
+    top, bottom = sides[0], sides[1]
+    if len(top) == 0 or len(bottom) == 0:
+        raise CorruptError("the mesh lacks a vertex at an image corner")
+    corner_idx = np.array([top[0], top[-1], bottom[-1], bottom[0]])
     if not np.array_equal(v[corner_idx], corners):
         raise CorruptError("the mesh lacks a vertex at an image corner")
     dx = out_dir * [1, 0]
