@@ -156,14 +156,14 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
     if len(t) and not walls_are_edges:
         walls = chain_steps(flat.astype(np.int64), lengths)
         if known is None:
-            known = np.sort(_edge_keys(edges(t), len(v)))
-        keys = _edge_keys(walls, len(v)).astype(known.dtype)
+            known = np.sort(_edge_keys(*edges(t).T, len(v)))
+        keys = _edge_keys(walls[:, 0], walls[:, 1], len(v))
         at = np.clip(np.searchsorted(known, keys), 0, len(known) - 1)
         if not (known[at] == keys).all():
             raise CorruptError("a constraint polyline runs along no triangle edge")
 
 
-#: Most vertices for which _check_edges sorts edges as single integer keys (below 2**63).
+#: Most vertices for which _check_edges sorts (edge, side) as single int64 keys.
 _KEYED_EDGES = 1 << 31
 
 
@@ -173,22 +173,22 @@ def _check_edges(v: np.ndarray, t: np.ndarray, w: int, h: int) -> np.ndarray | N
     edge with a triangle on one side only lies on the image's border. With the total
     area equal to the image's, that makes the triangles tile it (ATM.md §4.2.3), which
     is what lets both decoders give every pixel to exactly one triangle, and the same
-    one. Returns the edges' keys min * N + max, sorted (uint64), as _edge_keys numbers
-    them (None for meshes of over 2**31 vertices)."""
+    one. Returns the edges' _edge_keys, sorted (None for meshes of over _KEYED_EDGES
+    vertices)."""
     a = t.ravel()
     b = np.ascontiguousarray(t[:, [1, 2, 0]]).ravel()  # directed edges a -> b
     n = len(v)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    forward = a < b  # which side of the undirected edge lo - hi its triangle lies on
+    forward = a < b  # which side of the undirected edge its triangle lies on
     if n <= _KEYED_EDGES:
         # one sort of (edge, side) keys, below 2**63
-        key = lo.astype(np.uint64) * np.uint64(n) + hi.astype(np.uint64)
-        key <<= np.uint64(1)
+        key = _edge_keys(a, b, n)
+        key <<= 1
         key |= forward
         key.sort()
-        side = (key & np.uint64(1)).astype(bool)
-        key >>= np.uint64(1)
+        side = (key & 1).astype(bool)
+        key >>= 1
     else:
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
         order = np.lexsort((forward, hi, lo))
         lo, hi, side = lo[order], hi[order], forward[order]
         key = None
@@ -201,10 +201,10 @@ def _check_edges(v: np.ndarray, t: np.ndarray, w: int, h: int) -> np.ndarray | N
     alone[1:] &= ~same
     alone[:-1] &= ~same
     if key is not None:
-        lo, hi = np.divmod(key[alone], np.uint64(n))
+        lo, hi = np.divmod(key[alone], n)
     else:
         lo, hi = lo[alone], hi[alone]
-    p, q = v[lo.astype(np.int64)], v[hi.astype(np.int64)]
+    p, q = v[lo], v[hi]
     border = (((p[:, 0] == 0) & (q[:, 0] == 0)) | ((p[:, 0] == w - 1) & (q[:, 0] == w - 1))
               | ((p[:, 1] == 0) & (q[:, 1] == 0)) | ((p[:, 1] == h - 1) & (q[:, 1] == h - 1)))
     if not border.all():
@@ -239,9 +239,11 @@ def edges(triangles: np.ndarray) -> np.ndarray:
     return np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
 
 
-def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
-    pairs = np.sort(np.asarray(pairs, dtype=np.int64), axis=1)
-    return pairs[:, 0] * n + pairs[:, 1]
+def _edge_keys(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
+    """The key min * n + max of each undirected edge a - b (int64; exact for n <= 2**31)."""
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    return np.minimum(a, b) * n + np.maximum(a, b)
 
 
 def without_vertices(mesh: Mesh, keep: np.ndarray) -> Mesh:

@@ -25,6 +25,19 @@ def gl() -> None:
         pytest.skip(str(exc))
 
 
+@pytest.fixture
+def no_gl(monkeypatch) -> None:
+    """A machine where no GL context can be made: EGL fails, and no context is cached."""
+    import moderngl
+
+    def no_egl(**kwargs):
+        raise Exception("eglGetDisplay failed")
+
+    monkeypatch.setattr(decoder_gl, "_state", None)
+    monkeypatch.setattr(decoder_gl, "_failure", None)
+    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
+
+
 def chunks(data: bytes) -> list[tuple[int, bytes, bytes]]:
     """(offset, type, payload) of each chunk of a well-formed file."""
     out, pos = [], 10

@@ -230,18 +230,9 @@ def test_decode_backend_gl_gives_the_cpu_pixels(gl, png, tmp_path):
     assert np.array_equal(read_image(tmp_path / "gl.png"), read_image(tmp_path / "cpu.png"))
 
 
-def test_decode_backend_gl_without_context_is_one_line(png, tmp_path, monkeypatch, capsys):
-    import moderngl
-
+def test_decode_backend_gl_without_context_is_one_line(no_gl, png, tmp_path, capsys):
     from cli.main import main
-    from codec import decoder_gl
 
-    def no_egl(**kwargs):
-        raise Exception("eglGetDisplay failed")
-
-    monkeypatch.setattr(decoder_gl, "_state", None)
-    monkeypatch.setattr(decoder_gl, "_failure", None)
-    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
     data, out = tmp_path / "a.atm", tmp_path / "out.png"
     assert atm("encode", png, data).returncode == 0
     out.write_bytes(b"precious")

@@ -335,15 +335,7 @@ def test_gl_hole_is_corrupt(gl) -> None:
         decoder_gl.render(_holed(_grid_mesh()))
 
 
-def test_gl_without_context_raises_backend_error(monkeypatch) -> None:
-    import moderngl
-
-    def no_egl(**kwargs):
-        raise Exception("eglGetDisplay failed")
-
-    monkeypatch.setattr(decoder_gl, "_state", None)
-    monkeypatch.setattr(decoder_gl, "_failure", None)
-    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
+def test_gl_without_context_raises_backend_error(no_gl) -> None:
     data = codec.encode(np.zeros((8, 8), np.uint8))
     with pytest.raises(BackendError, match="libegl1.*backend='cpu'"):
         codec.decode(data, backend="gl")
