@@ -490,12 +490,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         triangles = np.stack([a, a + t[:, 1] + 1, a + t[:, 2] + 1], 1)
     if len(triangles) != m.triangle_count or triangle_crc(triangles) != m.triangle_crc:
         raise CorruptError(
-            f"{where}: the triangles differ from the encoder's (CRC mismatch); "
-            + (
-                "this machine's Delaunay triangulation differs from the encoder's"
-                if m.connectivity == schema.DELAUNAY
-                else "the file is damaged"
-            )
+            # ATM.md 4.2.5 defines the Delaunay triangles uniquely: the CRC only checks
+            f"{where}: the triangles differ from the encoder's (CRC mismatch): the file is damaged"
         )
     # samples last: their steps depend on the triangles' fan areas
     if m.sample_step < 1:

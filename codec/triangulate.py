@@ -7,6 +7,7 @@ import threading
 import numpy as np
 import triangle
 
+from .canonical import canonicalise
 from .errors import ATMError
 from .mesh import segments
 
@@ -78,6 +79,9 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     # Triangle lists every triangle counterclockwise with x right and y up, which is a
     # positive doubled area here; mesh.validate checks it wherever a mesh is written or
     # read, so it is not computed a second time on this hot path
+    # ties between cocircular vertices are Triangle's to break as its input order falls:
+    # the format's own rule decides them (ATM.md section 4.2.5)
+    triangles = canonicalise(vertices, triangles, None if segments is None else unit_steps(vertices, segments))
     if remember:
         _memo.entry = (vertices.copy(), None if segments is None else segments.copy(), triangles.copy())
     return triangles
@@ -157,3 +161,15 @@ def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[
         if len(run):
             out.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
     return out
+
+
+def unit_steps(vertices: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """The segments, each cut at the vertices lying inside it: the constraint edges a
+    triangulation has (only segments longer than one unit step can hold a vertex)."""
+    d = vertices[segments[:, 1]] - vertices[segments[:, 0]]
+    long = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1])) > 1
+    if not long.any():
+        return segments
+    shifted = vertices - vertices.min(axis=0)
+    pieces = split_at_vertices(shifted, segments[long], int(shifted[:, 0].max()) + 1)
+    return np.concatenate([segments[~long], pieces])

@@ -1,4 +1,4 @@
-"""Byte layout of .atm version 5 as `construct` declarations.
+"""Byte layout of .atm version 6 as `construct` declarations.
 
 Every multi-byte integer is little-endian. ATM.md (beside this file) is the normative
 description; the names here match its field names.
@@ -29,7 +29,7 @@ from construct import (
 )
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-VERSION = 5
+VERSION = 6
 
 #: Chunk types. An upper-case first letter marks a critical chunk.
 HEADER = b"AHDR"

@@ -122,7 +122,7 @@ def test_bytes_after_aend_are_ignored(sample_file):
     np.testing.assert_array_equal(codec.decode(sample_file + b"junk"), codec.decode(sample_file))
 
 
-@pytest.mark.parametrize("version", [1, 2, 3, 4, 6])
+@pytest.mark.parametrize("version", [1, 2, 3, 4, 5, 7])
 def test_other_versions_are_unsupported(sample_file, version):
     data = sample_file[:8] + struct.pack("<H", version) + sample_file[10:]
     with pytest.raises(UnsupportedError, match=f"version {version}; this codec reads version {schema.VERSION}"):

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 
 import codec
-from codec import encoder, synthetic
+from codec import canonical, container, encoder, synthetic
+from codec.coding import canonical_triangles
 from codec.files import write_image
-from codec.mesh import Mesh
+from codec.mesh import Mesh, segments
 from codec.triangulate import triangulate
 
 HERE = Path(__file__).resolve().parent
@@ -37,6 +38,92 @@ def walled_mesh() -> Mesh:
     triangles = triangulate(vertices, segments)
     values = image[vertices[:, 1], vertices[:, 0]]
     return Mesh(vertices, values, triangles, w, h, walls)
+
+
+def lattice_mesh(w: int, h: int, step: int, values, walls=(), extra=()) -> Mesh:
+    """A mesh of every `step`-th pixel (and the last row and column) plus `extra`
+    points, its polylines `walls` given as point lists, gray values from values(x, y):
+    almost every free edge of such a mesh is a tie (its quadrilateral a rectangle)."""
+    gx, gy = np.meshgrid(np.r_[0:w:step, w - 1], np.r_[0:h:step, h - 1])
+    points = [np.stack([gx.ravel(), gy.ravel()], 1), np.asarray(list(extra), np.int64).reshape(-1, 2)]
+    points += [np.asarray(line, np.int64) for line in walls]
+    vertices = np.unique(np.concatenate(points), axis=0)
+    index = {tuple(p): i for i, p in enumerate(vertices.tolist())}
+    lines = [np.array([index[tuple(p)] for p in line]) for line in walls]
+    triangles = triangulate(vertices, segments(lines) if lines else None)
+    v = np.clip(np.rint(values(vertices[:, 0], vertices[:, 1])), 0, 255).astype(np.uint8)
+    return Mesh(vertices, v, triangles, w, h, lines)
+
+
+def saddle(x, y):
+    """Values that are not planar over a lattice square, so its diagonal shows."""
+    return 128 + 0.09 * (x - 20.0) * (y - 14.0) + 30 * np.sin(x * 0.7) * np.cos(y * 0.5)
+
+
+def rings_mesh() -> Mesh:
+    """96x96 gray: concentric rings of lattice points that are exactly cocircular
+    (x^2 + y^2 = r^2 around (48, 48) has 12 to 32 integer solutions for these r^2), the
+    centre and the corners: ties of many points at once, not just of four."""
+    c = 48
+    ring = [
+        (x, y)
+        for r2 in (25, 100, 325, 625, 1105, 2025)
+        for x in range(-47, 48)
+        for y in range(-47, 48)
+        if x * x + y * y == r2
+    ]
+    points = np.array(ring + [(0, 0)]) + c
+    corners = np.array([[0, 0], [95, 0], [0, 95], [95, 95]])
+    vertices = np.unique(np.concatenate([points, corners]), axis=0)
+    triangles = triangulate(vertices)
+    x, y = vertices[:, 0] - c, vertices[:, 1] - c
+    v = 120 + 0.04 * (x * x - y * y) + 40 * np.sign(x * y) * np.sqrt(np.abs(x * y)) / 10
+    return Mesh(vertices, np.clip(np.rint(v), 0, 255).astype(np.uint8), triangles, 96, 96)
+
+
+def walls_in_ties() -> Mesh:
+    """48x32 gray: a lattice of step 2 with walls through its ties: a vertical wall
+    (x = 20 | x = 21, so 1x2 rectangles beside it tie too), a wall along the lattice
+    diagonal that the tie rule would not choose, and one of (4, 2) steps."""
+    left = [(20, y) for y in range(0, 32, 2)]
+    right = [(21, y) for y in range(0, 32, 2)]
+    diagonal = [(24 + k, 2 + k) for k in range(0, 20, 2)]
+    knight = [(26, 30), (30, 28), (34, 26), (38, 24), (42, 22), (46, 20)]
+    step = lambda x, y: np.where(x <= 20, saddle(x, y), 60 + 2 * y + 0.5 * x)
+    return lattice_mesh(48, 32, 2, step, walls=[left, right, diagonal, knight])
+
+
+def flipped(mesh: Mesh, rng: np.random.Generator, delaunay: bool) -> Mesh:
+    """The mesh with a set of non-adjacent free edges flipped where their quadrilateral
+    is strictly convex: ties only (delaunay=True: another Delaunay tiling, just not the
+    one of the tie rule) or any (a tiling that is not Delaunay). Listed in its file."""
+    v, tris = mesh.vertices, mesh.triangles.copy()
+    e = canonical.free_edges(tris, len(v), canonical.constraint_keys(segments(mesh.constraints), len(v)))
+    a, b, c, d = (v[p] for p in e[:4])
+    ok = (canonical.orient2d(a, d, c) > 0) & (canonical.orient2d(d, b, c) > 0)
+    if delaunay:
+        ok &= canonical.incircle_sign(a, b, c, d) == 0
+    used = np.zeros(len(tris), bool)
+    for j in rng.permutation(np.flatnonzero(ok)).tolist():
+        if not used[e.t1[j]] and not used[e.t2[j]] and rng.random() < 0.7:
+            used[[e.t1[j], e.t2[j]]] = True
+            tris[e.t1[j]] = [e.a[j], e.d[j], e.c[j]]
+            tris[e.t2[j]] = [e.d[j], e.b[j], e.c[j]]
+    return Mesh(v, mesh.values, tris, mesh.width, mesh.height, mesh.constraints)
+
+
+def describe(data: bytes) -> str:
+    """Per file: free edges, exact ties among them, and bands whose triangles are not
+    the canonical triangulation (so listed)."""
+    listed = free = ties = 0
+    for _, m in container.unpack(data)[1]:
+        walls = segments(m.constraints) if m.constraints else None
+        f, t = canonical.tie_count(m.vertices, m.triangles, walls)
+        free, ties = free + f, ties + t
+        ours = canonical_triangles(m.triangles)
+        rebuilt = canonical_triangles(triangulate(m.vertices, walls))
+        listed += ours.shape != rebuilt.shape or bool((ours != rebuilt).any())
+    return f"{free} free edges, {ties} exact ties, {listed} listed bands"
 
 
 def main() -> None:
@@ -68,6 +155,14 @@ def main() -> None:
     cases["holes_float"] = codec.encode(
         depth, mesher="uniform", points=120, band_height=12, metadata={"units": "m"}
     )
+    lattice = lattice_mesh(41, 31, 2, saddle)
+    rng = np.random.default_rng(19)
+    cases["lattice_ties"] = encoder.pack(lattice)
+    cases["rings_ties"] = encoder.pack(rings_mesh())
+    cases["walls_ties"] = encoder.pack(walls_in_ties())
+    cases["listed_ties"] = encoder.pack(flipped(lattice, rng, delaunay=True))
+    scene = codec.mesh(synthetic.range_scene(64, 48, seed=11), points=160)
+    cases["listed_not_delaunay"] = encoder.pack(flipped(scene, rng, delaunay=False))
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
@@ -75,7 +170,7 @@ def main() -> None:
             np.save(HERE / f"{name}.npy", image)
         else:
             write_image(HERE / f"{name}.png", image)
-        print(name, codec.info(data))
+        print(name, codec.info(data), describe(data), sep="\n  ")
 
 
 if __name__ == "__main__":
