@@ -30,7 +30,6 @@ VERSION = 6
 MAX_SIDE = 1 << 20
 MAX_PIXELS = 1 << 28
 MAX_CHUNK = (1 << 31) - 1
-MAX_META = 1 << 20
 
 
 class DecodeError(Exception):
@@ -66,9 +65,6 @@ class Reader:
 
     def u32(self) -> int:
         return struct.unpack("<I", self.take(4))[0]
-
-    def f64(self) -> float:
-        return struct.unpack("<d", self.take(8))[0]
 
     def varints(self, n: int, name: str) -> list[int]:
         """§4.2.1: a u32 byte count, then exactly `n` LEB128 numbers of at most 5 bytes."""
@@ -530,10 +526,13 @@ def parse_nodata(payload: bytes, header: Header) -> None:
     header.nodata = value
 
 
-def parse_mask(data: bytes, width: int) -> tuple[int, int, np.ndarray]:
+def parse_mask(data: bytes, header: Header) -> tuple[int, int, np.ndarray]:
     """§4.6: (y0, rows, holes) with holes a rows x width bool array."""
     r = Reader(data, "MASK")
     y0, rows, count = r.u32(), r.u32(), r.u32()
+    width = header.width
+    if rows < 1 or y0 + rows > header.height:
+        raise DecodeError(f"MASK: rows {y0}..{y0 + rows - 1} in an image of {header.height} rows")
     if count > width * rows + 1:
         raise DecodeError(f"MASK: {count} runs in a band of {width * rows} pixels")
     runs = r.varints(count, "runs")
@@ -667,16 +666,14 @@ def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
     packed = r.take(r.u32())
     if len(packed) != (n_free * bits + 7) // 8:
         raise DecodeError(f"MESH: position_bits holds {len(packed)} bytes, not {(n_free * bits + 7) // 8}")
-    stream = int.from_bytes(packed, "big") if packed else 0
-    spare = 8 * len(packed) - n_free * bits
-    if stream & ((1 << spare) - 1):
+    stream = "".join(f"{byte:08b}" for byte in packed)  # most significant bit first
+    if "1" in stream[n_free * bits :]:
         raise DecodeError("MESH: a padding bit of position_bits is 1")
-    stream >>= spare
     n = hilbert_side(width, rows)
     free: list[tuple[int, int]] = []  # (pixel index, Hilbert distance)
     key = -1
     for i, h in enumerate(high):
-        low = (stream >> ((n_free - 1 - i) * bits)) & ((1 << bits) - 1)
+        low = int(stream[i * bits : (i + 1) * bits] or "0", 2)
         key += (h << bits) + low + 1
         if position_order == 0:
             if key >= pixels:
@@ -910,10 +907,12 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
     expect_qunt, have_ndat, mask, complete = header.sample_type == 2, False, None, False
     for kind, payload in chunks[1:]:
         name = kind.decode()
+        # §4 "a QUNT chunk follows it directly": not even an ancillary chunk comes
+        # between (the codec reads it so; §4 also lets ancillary chunks be "anywhere").
+        if expect_qunt and kind != b"QUNT":
+            raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type 2)")
         if kind[0] & 0x20:  # ancillary (lower-case first letter): nothing here needs one
             continue
-        if expect_qunt and kind != b"QUNT":
-            raise DecodeError(f"{name} where QUNT must follow AHDR (sample_type 2)")
         if kind == b"QUNT":
             if not expect_qunt:
                 raise DecodeError("QUNT chunk out of place (only directly after AHDR, for sample_type 2)")
@@ -930,7 +929,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
             if mask is not None:
                 raise DecodeError("two MASK chunks before one MESH")
             limit = 16 + 5 * (header.width * header.height + 1)
-            mask = parse_mask(decompress(payload, limit, "MASK"), header.width)
+            mask = parse_mask(decompress(payload, limit, "MASK"), header)
         elif kind == b"MESH":
             if complete:
                 raise DecodeError("a MESH chunk after the band that ends on the last row")

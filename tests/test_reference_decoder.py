@@ -399,7 +399,8 @@ def test_refuses_damaged_files_with_its_own_error():
         "bytes after the last field": with_mesh(raw + b"\0"),
         "connectivity 2": with_mesh(raw[:24] + b"\x02" + raw[25:]),
         "triangle_crc": with_mesh(raw[:26] + bytes([raw[26] ^ 1]) + raw[27:]),
-        "unknown critical chunk": good[:10] + good[10:offset] + make_chunk(b"ZZZZ", b"") + good[offset:],
+        "unknown critical chunk": good[:offset] + make_chunk(b"ZZZZ", b"") + good[offset:],
+        "a chunk between AHDR and QUNT": good[:32] + make_chunk(b"zzzz", b"") + good[32:],
     }
     for what, data in cases.items():
         with pytest.raises(ref.DecodeError):
