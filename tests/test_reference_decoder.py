@@ -414,6 +414,48 @@ def test_refuses_damaged_files_with_its_own_error():
     assert_same_image(ref.decode(good[:offset] + make_chunk(b"zzzz", b"?") + good[offset:]), ref.decode(good))
 
 
+def test_walls_of_a_one_pixel_band_join_neighbouring_vertices():
+    """In a band one pixel high there are no triangle edges; constraint 6 read on the
+    line: a wall segment may not skip a vertex (the codec reads it so too)."""
+    v, values = np.array([[0, 0], [3, 0], [9, 0]]), np.array([10, 200, 30], np.uint8)
+    ok = container.pack(Mesh(v, values, np.zeros((0, 3), np.int64), 10, 1, [np.array([0, 1, 2, 1])]))
+    assert_same_image(ref.decode(ok), codec.decode(ok))
+    bad = container.pack(Mesh(v, values, np.zeros((0, 3), np.int64), 10, 1, [np.array([0, 2])]))
+    with pytest.raises(ref.DecodeError, match="skips a vertex"):
+        ref.decode(bad)
+
+
+def run_lengths(holes: np.ndarray) -> list[int]:
+    """§4.6's runs: data first (maybe 0 long), then holes, alternating."""
+    flat = holes.ravel()
+    edges = np.flatnonzero(flat[1:] != flat[:-1]) + 1
+    bounds = np.r_[0, edges, flat.size]
+    runs = np.diff(bounds).tolist()
+    return ([0] if flat[0] else []) + runs
+
+
+def test_the_row_two_bands_share_has_one_mask():
+    """§4.6: the shared row has the same mask in both bands; a file whose second MASK
+    says otherwise is refused (the codec takes the later band's mask today)."""
+    from codec.coding import varints
+
+    rng = np.random.default_rng(0)
+    image = (rng.normal(size=(12, 10)).cumsum(0).cumsum(1) * 10 + 128).clip(1, 255).astype(np.uint8)
+    image[rng.random(image.shape) < 0.2] = 0
+    data = codec.encode(image, nodata=0, band_height=6)
+    offset, _, payload = [p for p in chunks(data) if p[1] == b"MASK"][1]
+    y0, rows = struct.unpack_from("<II", zstandard.ZstdDecompressor().decompress(payload))
+    holes = image[y0 : y0 + rows] == 0
+    assert_same_image(ref.decode(data), codec.decode(data))
+    holes[0, np.flatnonzero(~holes[0])[0]] = True  # one more hole on the shared row only
+    runs = run_lengths(holes)
+    body = bytes(varints(np.array(runs)))
+    raw = struct.pack("<IIII", y0, rows, len(runs), len(body)) + body
+    bad = data[:offset] + make_chunk(b"MASK", zstandard.ZstdCompressor().compress(raw)) + data[offset + 12 + len(payload):]
+    with pytest.raises(ref.DecodeError, match="shared by two bands"):
+        ref.decode(bad)
+
+
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(CASES), st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 255)), min_size=1, max_size=4))
 def test_damaged_mesh_payloads_give_its_own_error_or_an_image(name, edits):
