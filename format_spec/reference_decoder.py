@@ -14,6 +14,7 @@ Section numbers (§) refer to ATM.md.
 from __future__ import annotations
 
 import math
+import os
 import struct
 import sys
 import zlib
@@ -985,16 +986,29 @@ def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarr
 
 
 def main(argv: list[str]) -> int:
+    """`reference_decoder.py in.atm out.npy`: the decoded image as a NumPy file."""
     if len(argv) != 3:
         print("usage: reference_decoder.py in.atm out.npy", file=sys.stderr)
         return 2
+    source, target = argv[1], argv[2]
     try:
-        with open(argv[1], "rb") as f:
+        if os.path.exists(target) and os.path.samefile(source, target):
+            raise DecodeError("the output would overwrite the input")
+        with open(source, "rb") as f:
             image = decode(f.read())
+        # Written beside the target and renamed over it, so that an interrupted run
+        # leaves no half-written file under the name asked for.
+        partial = f"{target}.partial-{os.getpid()}"
+        try:
+            with open(partial, "wb") as f:
+                np.save(f, image)
+            os.replace(partial, target)
+        finally:
+            if os.path.exists(partial):
+                os.remove(partial)
     except (OSError, DecodeError) as exc:
-        print(f"reference_decoder: {argv[1]}: {exc}", file=sys.stderr)
+        print(f"reference_decoder: {source}: {exc}", file=sys.stderr)
         return 1
-    np.save(argv[2], image)
     return 0
 
 

@@ -135,6 +135,14 @@ def test_runs_standalone(tmp_path):
     run = subprocess.run([sys.executable, str(REFERENCE), str(bad), str(tmp_path / "x.npy")], capture_output=True, text=True)
     assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1 and "truncated" in run.stderr
     assert not (tmp_path / "x.npy").exists()
+    copy = tmp_path / "copy.atm"
+    copy.write_bytes(src.read_bytes())
+    run = subprocess.run([sys.executable, str(REFERENCE), str(copy), str(copy)], capture_output=True, text=True)
+    assert run.returncode == 1 and "overwrite the input" in run.stderr
+    assert copy.read_bytes() == src.read_bytes()
+    named = tmp_path / "image.data"  # written under the name given, no .npy added
+    assert subprocess.run([sys.executable, str(REFERENCE), str(src), str(named)]).returncode == 0
+    assert_same_image(np.load(named), np.load(out))
     probe = (f"import importlib.util, sys; s = importlib.util.spec_from_file_location('r', {str(REFERENCE)!r}); "
              "m = importlib.util.module_from_spec(s); s.loader.exec_module(m); "
              "print(sorted({'codec', 'format_spec', 'triangle', 'scipy'} & set(sys.modules)))")
@@ -192,7 +200,7 @@ def test_cocircular_square_keeps_the_diagonal_away_from_its_first_corner():
 @st.composite
 def tie_scenes(draw):
     """Points full of exact ties (a lattice, concentric rings of lattice points on one
-    circle each, a few random ones) and segments taken from a triangulation that the
+    circle each, a few random ones), at small and large scales, and segments taken from a triangulation that the
     rule would not choose (random convex flips of it), so they constrain it."""
     w, h = draw(st.integers(3, 30)), draw(st.integers(3, 30))
     pts = {(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)}
@@ -204,7 +212,10 @@ def tie_scenes(draw):
                 if dx * dx + dy * dy == r2 and 0 <= cx + dx < w and 0 <= cy + dy < h}
     for _ in range(draw(st.integers(0, 6))):
         pts.add((draw(st.integers(0, w - 1)), draw(st.integers(0, h - 1))))
-    pts = sorted(pts, key=lambda p: (p[1], p[0]))
+    # Scaling keeps every tie; large extents take the predicates past binary64's exact
+    # range (products of coordinate differences beyond 2^53), up to the format's 2^20.
+    scale = draw(st.sampled_from([1, 1, 3, 4099, 33000]))
+    pts = sorted(((x * scale, y * scale) for x, y in pts), key=lambda p: (p[1], p[0]))
     tris = [list(t) for t in ref.delaunay([p[0] for p in pts], [p[1] for p in pts], [])]
     for _ in range(draw(st.integers(0, 30))):
         k = draw(st.integers(0, len(tris) - 1))
