@@ -569,6 +569,7 @@ class Band:
         self.values = np.zeros((0, 1), np.int64)
         self.holes: np.ndarray | None = None
         self.base_step = 1
+        self.listed = False  # connectivity 0: the triangles were stored, not built
 
 
 def quadrant(a: int, b: int) -> int:
@@ -708,6 +709,7 @@ def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
     index = {k: i for i, k in enumerate(pixel_ids)}
     band = Band(y0, rows)
     band.base_step = base_step
+    band.listed = connectivity == 0
     band.xs = [k % width for k in pixel_ids]
     band.ys = [k // width for k in pixel_ids]
     band.polylines = [[index[k] for k in line] for line in pixel_lines]
