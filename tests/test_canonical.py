@@ -257,6 +257,23 @@ def test_the_pass_ends_locally_delaunay_on_random_walled_lattices():
         np.testing.assert_array_equal(canonical_triangles(out), canonical_triangles(mesh.triangles))
 
 
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_conformance_files_decode_alike_by_any_triangle_call(monkeypatch, algorithm):
+    """Every conformance file (ties in all its two-dimensional Delaunay bands) decodes to
+    its stored image with Triangle's input shuffled and by each of its algorithms."""
+    from pathlib import Path
+
+    from codec.files import read_image
+
+    here = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
+    monkeypatch.setattr(triangulate_module.triangle, "triangulate",
+                        shuffled_triangle(np.random.default_rng(len(algorithm)), algorithm))
+    for path in sorted(here.glob("*.atm")):
+        npy = path.with_suffix(".npy")
+        expected = np.load(npy) if npy.exists() else read_image(path.with_suffix(".png"))
+        np.testing.assert_array_equal(codec.decode(path.read_bytes()), expected)
+
+
 def test_version_5_files_are_refused_naming_both_versions():
     """Version 5 has version 6's bytes but Triangle's tie-breaking: not decoded."""
     data = codec.encode(np.arange(64, dtype=np.uint8).reshape(8, 8), points=10)
