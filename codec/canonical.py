@@ -5,7 +5,8 @@ any of its algorithms) differs from the canonical one only where four vertices a
 exactly cocircular. Lawson flips with the perturbed predicate (lifts raised by
 infinitesimals that decrease in raster order) turn any triangulation of the vertices
 and constraints into the unique one: this module makes them in rounds of independent
-flips, each round vectorised over all free edges.
+flips, vectorised: the first round tests every free edge, later ones only the edges
+around the last round's flips. verify() checks the result from scratch.
 """
 
 from __future__ import annotations
