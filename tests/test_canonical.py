@@ -25,8 +25,8 @@ from codec.triangulate import triangulate
 def shuffled_triangle(rng: np.random.Generator, algorithm: str):
     """triangle.triangulate as called with the vertices and segments in a random order,
     each segment in a random direction, by one of Triangle's algorithms ('' divide and
-    conquer, 'i' incremental, 'F' sweepline; 'l' vertical cuts only): the triangles come
-    back in the caller's numbering."""
+    conquer, 'i' incremental, 'F' sweepline; 'l' vertical cuts only): the triangles and
+    segments come back in the caller's numbering."""
     plain = triangle.triangulate
 
     def call(data: dict, switches: str) -> dict:
@@ -41,8 +41,9 @@ def shuffled_triangle(rng: np.random.Generator, algorithm: str):
             seg[flip] = seg[flip][:, ::-1]
             moved["segments"] = seg.astype(np.int32)
         out = dict(plain(moved, switches + algorithm))
-        if "triangles" in out:
-            out["triangles"] = perm[np.asarray(out["triangles"], np.int64)]
+        for key in ("triangles", "segments"):
+            if key in out:
+                out[key] = perm[np.asarray(out[key], np.int64)]
         return out
 
     return call
