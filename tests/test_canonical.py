@@ -275,6 +275,26 @@ def test_conformance_files_decode_alike_by_any_triangle_call(monkeypatch, algori
         np.testing.assert_array_equal(codec.decode(path.read_bytes()), expected)
 
 
+def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
+    """ATM.md §9: on every conformance file with a two-dimensional Delaunay band, the
+    triangles of Triangle alone (input in file order) fail the CRC; listed and
+    one-pixel files decode as before."""
+    from pathlib import Path
+
+    from codec.errors import CorruptError
+
+    here = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
+    monkeypatch.setattr(triangulate_module, "canonicalise", lambda v, t, c: np.asarray(t, np.int64))
+    caught = set()
+    for path in sorted(here.glob("*.atm")):
+        try:
+            codec.decode(path.read_bytes())
+        except CorruptError as exc:
+            assert "CRC mismatch" in str(exc)
+            caught.add(path.stem)
+    assert caught == {p.stem for p in here.glob("*.atm")} - {"line_1x9", "listed_ties", "listed_not_delaunay"}
+
+
 def test_version_5_files_are_refused_naming_both_versions():
     """Version 5 has version 6's bytes but Triangle's tie-breaking: not decoded."""
     data = codec.encode(np.arange(64, dtype=np.uint8).reshape(8, 8), points=10)
