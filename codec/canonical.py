@@ -5,7 +5,8 @@ any of its algorithms) differs from the canonical one only where four vertices a
 exactly cocircular. Lawson flips with the perturbed predicate (lifts raised by
 infinitesimals that decrease in raster order) turn any triangulation of the vertices
 and constraints into the unique one: this module makes them in rounds of independent
-flips, each round vectorised over all free edges.
+flips, vectorised: the first round tests every free edge, later ones only the edges
+around the last round's flips. verify() checks the result from scratch.
 """
 
 from __future__ import annotations
@@ -57,31 +58,83 @@ def canonicalise(vertices: np.ndarray, triangles: np.ndarray,
 
 def flip_to_canonical(vertices: np.ndarray, triangles: np.ndarray,
                       constraints: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """canonicalise's triangles and the number of flips it made to reach them."""
+    """canonicalise's triangles and the number of flips it made to reach them.
+
+    Side i of triangle t (number 3t + i) is the edge from its corner i to corner
+    i + 1; `twin` holds the number of the same edge's side in the neighbouring
+    triangle (-1 on the border). The first round tests every free edge; a flip can
+    make only the four outer edges of its quadrilateral illegal, so later rounds test
+    just those."""
     vertices = np.asarray(vertices, dtype=np.int64)
     tris = np.array(triangles, dtype=np.int64).reshape(-1, 3)
     n, flips = len(vertices), 0
     if len(tris) < 2:
         return tris, flips
-    rank = raster_rank(vertices)
-    fixed = constraint_keys(constraints, n)
-    while True:
-        edges = free_edges(tris, n, fixed)
-        bad = _not_locally_delaunay(vertices, rank, edges)
-        if not bad.any():
+    x, y = vertices[:, 0], vertices[:, 1]
+    corner = tris.ravel()  # a view: corner[s] is the first end of side s
+    # the side after and before each side in its triangle (the first end of the one
+    # before is the corner opposite): side numbers never change, only what they hold
+    nxt = np.arange(len(corner)).reshape(-1, 3)[:, [1, 2, 0]].ravel()
+    prv = np.arange(len(corner)).reshape(-1, 3)[:, [2, 0, 1]].ravel()
+    keys = _edge_keys(corner, corner[nxt], n)
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    at = np.flatnonzero(sorted_keys[1:] == sorted_keys[:-1])
+    one, other = order[at], order[at + 1]
+    twin = np.full(len(corner), -1, np.int64)
+    twin[one], twin[other] = other, one
+    # only shared edges can be constraints that matter: the border is never flipped
+    fixed = np.zeros(len(corner), bool)
+    constrained = constraint_keys(constraints, n)
+    if len(constrained) and len(at):
+        # each constraint looked up among the shared edges' sorted keys
+        shared = sorted_keys[at]
+        hit = np.minimum(np.searchsorted(shared, constrained), len(shared) - 1)
+        hit = hit[shared[hit] == constrained]
+        fixed[one[hit]] = fixed[other[hit]] = True
+    sides = one[~fixed[one]]
+    while len(sides):
+        across = twin[sides]
+        a, b, c = corner[sides], corner[nxt[sides]], corner[prv[sides]]
+        d = corner[prv[across]]
+        bad = np.flatnonzero(_flips(x, y, a, b, c, d))
+        if len(bad) == 0:
             break
-        # an independent set: an edge is flipped this round if it has the smallest
-        # number among the bad edges of both its triangles (the smallest overall always
+        # an independent set: a side is flipped this round if it has the smallest
+        # number among the bad ones of both its triangles (the smallest overall always
         # has), so no triangle takes part in two flips
-        j = np.flatnonzero(bad)
-        owner = np.full(len(tris), len(bad), np.int64)
-        np.minimum.at(owner, edges.t1[j], j)
-        np.minimum.at(owner, edges.t2[j], j)
-        j = j[(owner[edges.t1[j]] == j) & (owner[edges.t2[j]] == j)]
-        a, b, c, d = edges.a[j], edges.b[j], edges.c[j], edges.d[j]
-        tris[edges.t1[j]] = np.stack([a, d, c], 1)
-        tris[edges.t2[j]] = np.stack([d, b, c], 1)
+        t1, t2 = sides[bad] // 3, across[bad] // 3
+        owner = np.full(len(tris), len(sides), np.int64)
+        np.minimum.at(owner, t1, bad)
+        np.minimum.at(owner, t2, bad)
+        chosen = (owner[t1] == bad) & (owner[t2] == bad)
+        moved = np.zeros(len(tris), bool)
+        moved[t1[chosen]] = moved[t2[chosen]] = True
+        # bad sides left for a later round keep their numbers unless a flip moved them
+        # (then they are outer sides of that flip, tested anyway)
+        waiting = sides[bad[~chosen & ~moved[t1] & ~moved[t2]]]
+        j = bad[chosen]
+        s1, s2, t1, t2 = sides[j], across[j], t1[chosen], t2[chosen]
+        a, b, c, d = a[j], b[j], c[j], d[j]
+        # (a, b, c) and (b, a, d) become (a, d, c) and (d, b, c); each outer side keeps
+        # its edge, so its twin and mark, under a new number
+        old = np.stack([nxt[s2], prv[s1], prv[s2], nxt[s1]], 1).ravel()
+        new = np.stack([3 * t1, 3 * t1 + 2, 3 * t2, 3 * t2 + 1], 1).ravel()
+        renumber = np.arange(len(twin))
+        renumber[old] = new
+        outer, outer_fixed = twin[old], fixed[old]
+        outer = np.where(outer >= 0, renumber[np.maximum(outer, 0)], -1)
+        tris[t1] = np.stack([a, d, c], 1)
+        tris[t2] = np.stack([d, b, c], 1)
+        twin[new], fixed[new] = outer, outer_fixed
+        twin[outer[outer >= 0]] = new[outer >= 0]
+        twin[3 * t1 + 1], twin[3 * t2 + 2] = 3 * t2 + 2, 3 * t1 + 1
+        fixed[3 * t1 + 1] = fixed[3 * t2 + 2] = False
         flips += len(j)
+        # the flipped diagonal is legal (the rule is antisymmetric); test the outer
+        # sides that are free edges, each once
+        free = (outer >= 0) & ~outer_fixed
+        sides = np.unique(np.concatenate([np.minimum(new[free], outer[free]), waiting]))
     return tris, flips
 
 
@@ -94,7 +147,7 @@ def verify(vertices: np.ndarray, triangles: np.ndarray, constraints: np.ndarray 
     if len(tris) and (orient2d(*(vertices[tris[:, i]] for i in range(3))) <= 0).any():
         raise ATMError("a triangle of the canonical pass is not positively oriented")
     edges = free_edges(tris, n, constraint_keys(constraints, n))
-    bad = _not_locally_delaunay(vertices, raster_rank(vertices), edges)
+    bad = _flips(vertices[:, 0], vertices[:, 1], *edges[:4])
     if bad.any():
         raise ATMError(f"{int(bad.sum())} free edges are not locally Delaunay after the canonical pass")
 
@@ -105,15 +158,8 @@ def tie_count(vertices: np.ndarray, triangles: np.ndarray,
     vertices = np.asarray(vertices, dtype=np.int64)
     tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     edges = free_edges(tris, len(vertices), constraint_keys(constraints, len(vertices)))
-    s = incircle_sign(*(vertices[p] for p in edges[:4]))
+    s = _incircle_sign(vertices[:, 0], vertices[:, 1], *edges[:4])
     return len(s), int(np.count_nonzero(s == 0))
-
-
-def raster_rank(vertices: np.ndarray) -> np.ndarray:
-    """Each vertex's place in raster order (smallest y, then smallest x, first)."""
-    rank = np.empty(len(vertices), np.int64)
-    rank[np.lexsort((vertices[:, 0], vertices[:, 1]))] = np.arange(len(vertices))
-    return rank
 
 
 def constraint_keys(constraints: np.ndarray | None, n: int) -> np.ndarray:
@@ -142,16 +188,19 @@ def free_edges(triangles: np.ndarray, n: int, fixed: np.ndarray) -> FreeEdges:
     return FreeEdges(src[e1], dst[e1], opp[e1], opp[e2], e1 // 3, e2 // 3)
 
 
-def _not_locally_delaunay(vertices: np.ndarray, rank: np.ndarray, edges: FreeEdges) -> np.ndarray:
-    """Per free edge ab: whether the perturbed rule flips it (incircle > 0, or = 0 with
-    a or b the first of the four corners in raster order)."""
-    s = incircle_sign(*(vertices[p] for p in edges[:4]))
+def _flips(x: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+           d: np.ndarray) -> np.ndarray:
+    """Per edge ab of triangles (a, b, c) and (b, a, d), vertex coordinates x, y:
+    whether the perturbed rule flips it (incircle > 0, or = 0 with a or b the first of
+    the four corners in raster order)."""
+    s = _incircle_sign(x, y, a, b, c, d)
     tie = np.flatnonzero(s == 0)
     flip = s > 0
     if len(tie):
-        on_edge = np.minimum(rank[edges.a[tie]], rank[edges.b[tie]])
-        off_edge = np.minimum(rank[edges.c[tie]], rank[edges.d[tie]])
-        flip[tie] = on_edge < off_edge
+        # raster order compares (y, x); a key y * width + x over the span does it
+        width = int(x.max() - x.min()) + 1
+        key = lambda v: y[v[tie]] * width + x[v[tie]]  # noqa: E731
+        flip[tie] = np.minimum(key(a), key(b)) < np.minimum(key(c), key(d))
     return flip
 
 
@@ -161,28 +210,42 @@ def orient2d(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 def incircle_sign(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """The exact sign (-1, 0, 1) of incircle(a, b, c, d) per row of integer points:
-    positive iff d is inside the circle through a, b, c when abc is positively oriented.
+    """The exact sign (-1, 0, 1) of incircle(a, b, c, d) per row of integer points (K x
+    2 each): positive iff d is inside the circle through a, b, c when abc is positively
+    oriented."""
+    xy = np.concatenate([a, b, c, d]).astype(np.int64)
+    k = np.arange(len(a))
+    return _incircle_sign(xy[:, 0], xy[:, 1], k, k + len(a), k + 2 * len(a), k + 3 * len(a))
+
+
+def _incircle_sign(x: np.ndarray, y: np.ndarray, a: np.ndarray, b: np.ndarray,
+                   c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """incircle_sign of the vertices numbered a, b, c, d, with coordinates x, y.
 
     binary64 is exact for small extents; larger ones are decided by it where its error
     bound allows and by Python integers on the rest, which are few (ties among them)."""
-    ad, bd, cd = a - d, b - d, c - d
-    extent = np.abs(np.concatenate([ad, bd, cd], 1)).max(1)
-    adx, ady, bdx, bdy, cdx, cdy = (v.astype(np.float64) for v in (ad[:, 0], ad[:, 1], bd[:, 0], bd[:, 1], cd[:, 0], cd[:, 1]))
+    xf, yf = x.astype(np.float64), y.astype(np.float64)
+    # differences of integers below 2^53 are exact in binary64
+    adx, ady = xf[a] - xf[d], yf[a] - yf[d]
+    bdx, bdy = xf[b] - xf[d], yf[b] - yf[d]
+    cdx, cdy = xf[c] - xf[d], yf[c] - yf[d]
     alift, blift, clift = adx * adx + ady * ady, bdx * bdx + bdy * bdy, cdx * cdx + cdy * cdy
     bc, ca, ab = bdx * cdy - bdy * cdx, cdx * ady - cdy * adx, adx * bdy - ady * bdx
     det = alift * bc + blift * ca + clift * ab
     sign = np.sign(det).astype(np.int64)
+    if len(x) == 0 or max(np.ptp(x), np.ptp(y)) <= FLOAT_EXACT:
+        return sign
+    extent = np.max(np.abs([adx, ady, bdx, bdy, cdx, cdy]), axis=0)
     unsure = extent > FLOAT_EXACT
-    if unsure.any():
-        bound = _ERROR * (alift * np.abs(bc) + blift * np.abs(ca) + clift * np.abs(ab))
-        unsure &= (np.abs(det) <= bound) | (extent > _FILTERED)
-        for i in np.flatnonzero(unsure).tolist():
-            sign[i] = _exact_incircle_sign(ad[i].tolist(), bd[i].tolist(), cd[i].tolist())
+    bound = _ERROR * (alift * np.abs(bc) + blift * np.abs(ca) + clift * np.abs(ab))
+    unsure &= (np.abs(det) <= bound) | (extent > _FILTERED)
+    for i in np.flatnonzero(unsure).tolist():
+        p = [(int(x[v[i]]) - int(x[d[i]]), int(y[v[i]]) - int(y[d[i]])) for v in (a, b, c)]
+        sign[i] = _exact_incircle_sign(*p)
     return sign
 
 
-def _exact_incircle_sign(ad: list[int], bd: list[int], cd: list[int]) -> int:
+def _exact_incircle_sign(ad: tuple[int, int], bd: tuple[int, int], cd: tuple[int, int]) -> int:
     """incircle's sign in Python integers, from the differences to d."""
     (adx, ady), (bdx, bdy), (cdx, cdy) = ad, bd, cd
     det = (

@@ -262,7 +262,7 @@ class Reader:
         if version != schema.VERSION:
             # version 5 has version 6's bytes, but its implicit triangles were one
             # library's tie-breaking (ATM.md section 7)
-            why = "; version 5 files are re-encoded from their source images" if version == 5 else ""
+            why = " (version 5 left ties to one library: re-encode the source image)" if version == 5 else ""
             raise UnsupportedError(
                 f"this file is .atm version {version}; this codec reads version {schema.VERSION}{why}"
             )

@@ -29,3 +29,17 @@ def test_speed_benchmark_prints_its_table() -> None:
     figures = dict(zip(head[3:], map(float, row[3:])))
     assert {"jpeg ms", "render ms", "decode ms", "triangulate ms", "render / jpeg"} <= figures.keys()
     assert all(f > 0 for f in figures.values())
+
+
+def test_canonical_benchmark_prints_its_tables() -> None:
+    run = subprocess.run(
+        [sys.executable, "benchmarks/canonical.py", "--images", "text", "--timed", "text", "--repeat", "1"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, rule, text, total, head2, rule2, timed = _table(run.stdout)
+    assert text[0] == "text" and total[0] == "all" and timed[0] == "text"
+    figures = dict(zip(head[1:], (float(f.replace(",", "")) for f in text[1:])))
+    assert figures["free edges"] > 0 and 0 < figures["uniform ties %"] < 100
+    assert abs(figures["change %"]) < 5
+    assert float(timed[3]) > 0
