@@ -740,8 +740,7 @@ def band_triangles(band: Band, width: int, connectivity: int, listed: list[int],
         positions = band.ys if width == 1 else band.xs
         if positions[0] != 0 or positions[-1] != max(width, band.rows) - 1:
             raise DecodeError("MESH: a one-pixel band needs a vertex at each end (§4.2.3, constraint 5)")
-        # Constraint 6 in one dimension (ATM.md only speaks of triangle edges): a wall
-        # segment joins two vertices with none between them on the line.
+        # Constraint 6 on a line: a wall segment joins neighbours, no vertex between.
         for line in band.polylines:
             for a, b in zip(line, line[1:]):
                 if abs(a - b) != 1:
@@ -925,8 +924,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
     expect_qunt, have_ndat, mask, complete = header.sample_type == 2, False, None, False
     for kind, payload in chunks[1:]:
         name = kind.decode()
-        # §4 "a QUNT chunk follows it directly": not even an ancillary chunk comes
-        # between (the codec reads it so; §4 also lets ancillary chunks be "anywhere").
+        # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
             raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type 2)")
         if kind[0] & 0x20:  # ancillary (lower-case first letter): nothing here needs one

@@ -439,8 +439,8 @@ def test_refuses_damaged_files_with_its_own_error():
 
 
 def test_walls_of_a_one_pixel_band_join_neighbouring_vertices():
-    """In a band one pixel high there are no triangle edges; constraint 6 read on the
-    line: a wall segment may not skip a vertex (the codec reads it so too)."""
+    """In a band one pixel high there are no triangle edges; constraint 6 on the line:
+    a wall segment may not skip a vertex."""
     v, values = np.array([[0, 0], [3, 0], [9, 0]]), np.array([10, 200, 30], np.uint8)
     ok = container.pack(Mesh(v, values, np.zeros((0, 3), np.int64), 10, 1, [np.array([0, 1, 2, 1])]))
     assert_same_image(ref.decode(ok), codec.decode(ok))
@@ -459,8 +459,9 @@ def run_lengths(holes: np.ndarray) -> list[int]:
 
 
 def test_the_row_two_bands_share_has_one_mask():
-    """§4.6: the shared row has the same mask in both bands; a file whose second MASK
-    says otherwise is refused (the codec takes the later band's mask today)."""
+    """§4.6: the shared row MUST have the same mask in both bands; a file whose second
+    MASK says otherwise is refused (as a decoder SHOULD; the codec takes the later
+    band's mask, as one that does not refuse must)."""
     from codec.coding import varints
 
     rng = np.random.default_rng(0)
