@@ -23,6 +23,7 @@ import codec
 from codec import container
 from codec.files import read_image
 from codec.mesh import Mesh
+from codec.synthetic import range_scene
 from codec.triangulate import triangulate
 from format_spec import schema
 from tests.conftest import chunks, random_mesh
@@ -300,9 +301,13 @@ def test_hilbert_point_inverts_the_distance_of_the_spec():
 @st.composite
 def images(draw) -> tuple[np.ndarray, dict]:
     """Small images of every kind the format stores, with steps (walls) and noise."""
-    kind = draw(st.sampled_from(["gray8", "gray16", "rgb8", "rgb16", "float", "float_holes", "int_holes"]))
+    kind = draw(st.sampled_from(["gray8", "gray16", "rgb8", "rgb16", "float", "float_holes", "int_holes", "scene"]))
     h, w = draw(st.integers(1, 28)), draw(st.integers(1, 28))
-    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    seed = draw(st.integers(0, 2**32 - 1))
+    if kind == "scene":  # range data: objects with walls, at sizes where walls pay
+        h, w = draw(st.integers(40, 56)), draw(st.integers(56, 72))
+        return range_scene(w, h, seed=seed, dtype=draw(st.sampled_from([np.uint8, np.uint16]))), {}
+    rng = np.random.default_rng(seed)
     surface = rng.normal(size=(h, w)).cumsum(0).cumsum(1)
     surface += np.where(np.arange(w) >= draw(st.integers(0, w)), draw(st.floats(-40, 40)), 0)
     unit = (surface - surface.min()) / max(np.ptp(surface), 1e-9)
