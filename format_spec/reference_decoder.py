@@ -6,9 +6,12 @@ with exact integer predicates (Python ints), so that ATM.md can be checked to be
 implementable by a stranger. It is plain and slow on purpose: readable first.
 
     decode(data: bytes) -> numpy.ndarray   # the image, as codec.decode returns it
+    read(data: bytes) -> (Header, [Band])  # the checked bands: vertices, walls, triangles
+    delaunay(xs, ys, segments)             # the triangulation of §4.2.5 alone
 
-Run standalone: ``python reference_decoder.py in.atm out.npy``.
-Section numbers (§) refer to ATM.md.
+Anything but a valid file raises DecodeError (UnsupportedError for a version or a
+reserved value it does not implement). Standalone: ``python reference_decoder.py
+in.atm out.npy``. Section numbers (§) refer to ATM.md.
 """
 
 from __future__ import annotations
@@ -230,7 +233,8 @@ class Triangulation:
 
     def incircle(self, a: int, b: int, c: int, d: int) -> int:
         """> 0 when d is inside the circle through a, b, c (taken with D > 0), < 0 when
-        outside, 0 when the four are cocircular."""
+        outside, 0 when the four are cocircular. Up to 85 bits for the format's largest
+        bands (§4.2.5): Python ints, never floats."""
         x, y = self.x, self.y
         adx, ady = x[a] - x[d], y[a] - y[d]
         bdx, bdy = x[b] - x[d], y[b] - y[d]
