@@ -74,8 +74,9 @@ def flip_to_canonical(vertices: np.ndarray, triangles: np.ndarray,
     corner = tris.ravel()  # a view: corner[s] is the first end of side s
     # the side after and before each side in its triangle (the first end of the one
     # before is the corner opposite): side numbers never change, only what they hold
-    nxt = np.arange(len(corner)).reshape(-1, 3)[:, [1, 2, 0]].ravel()
-    prv = np.arange(len(corner)).reshape(-1, 3)[:, [2, 0, 1]].ravel()
+    first = 3 * np.arange(len(tris))[:, None]
+    nxt = (first + np.array([1, 2, 0])).ravel()
+    prv = (first + np.array([2, 0, 1])).ravel()
     keys = _edge_keys(corner, corner[nxt], n)
     order = np.argsort(keys)
     sorted_keys = keys[order]
@@ -163,11 +164,12 @@ def tie_count(vertices: np.ndarray, triangles: np.ndarray,
 
 
 def constraint_keys(constraints: np.ndarray | None, n: int) -> np.ndarray:
-    """The sorted undirected keys of the constraint edges (none if there are none)."""
+    """The sorted undirected keys of the constraint edges (none if there are none; a
+    repeated one is harmless to the look-ups)."""
     if constraints is None:
         return np.zeros(0, np.int64)
     c = np.asarray(constraints, dtype=np.int64).reshape(-1, 2)
-    return np.unique(_edge_keys(c[:, 0], c[:, 1], n))
+    return np.sort(_edge_keys(c[:, 0], c[:, 1], n))
 
 
 def free_edges(triangles: np.ndarray, n: int, fixed: np.ndarray) -> FreeEdges:
