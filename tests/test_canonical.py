@@ -275,6 +275,25 @@ def test_conformance_files_decode_alike_by_any_triangle_call(monkeypatch, algori
         np.testing.assert_array_equal(codec.decode(path.read_bytes()), expected)
 
 
+@pytest.mark.parametrize("mesher", ["adaptive", "uniform"])
+def test_a_corpus_image_decodes_alike_by_any_triangle_call(monkeypatch, mesher):
+    """skimage's text image at the default density (walls, thousands of ties): the
+    same pixels, and the self-check holds, whichever way Triangle is called."""
+    from tests.corpus import load_corpus
+
+    data = codec.encode(load_corpus()["text"], mesher=mesher)
+    expected = codec.decode(data)
+    mesh = codec.decode_mesh(data)
+    walls = segments(mesh.constraints) if mesh.constraints else None
+    assert canonical.tie_count(mesh.vertices, mesh.triangles, walls)[1] > 100
+    for k, algorithm in enumerate(ALGORITHMS):
+        call = shuffled_triangle(np.random.default_rng(k), algorithm)
+        monkeypatch.setattr(triangulate_module.triangle, "triangulate", call)
+        np.testing.assert_array_equal(codec.decode(data), expected)
+        raw = raw_triangle(mesh.vertices, walls, np.random.default_rng(k), algorithm)
+        canonical.canonicalise(mesh.vertices, raw, walls, check=True)
+
+
 def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
     """ATM.md §9: on every conformance file with a two-dimensional Delaunay band, the
     triangles of Triangle alone (input in file order) fail the CRC; listed and
