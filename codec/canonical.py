@@ -153,6 +153,28 @@ def verify(vertices: np.ndarray, triangles: np.ndarray, constraints: np.ndarray 
         raise ATMError(f"{int(bad.sum())} free edges are not locally Delaunay after the canonical pass")
 
 
+def random_flips(vertices: np.ndarray, triangles: np.ndarray, constraints: np.ndarray | None,
+                 rng: np.random.Generator, share: float, ties_only: bool = False) -> np.ndarray:
+    """Another triangulation of the same vertices with the same constraints as edges,
+    for tests and conformance files: of the free edges whose quadrilateral is strictly
+    convex (only exact ties if ties_only), about `share` flipped, no two in one
+    triangle."""
+    vertices = np.asarray(vertices, dtype=np.int64)
+    tris = np.array(triangles, dtype=np.int64).reshape(-1, 3)
+    e = free_edges(tris, len(vertices), constraint_keys(constraints, len(vertices)))
+    a, b, c, d = (vertices[p] for p in e[:4])
+    ok = (orient2d(a, d, c) > 0) & (orient2d(d, b, c) > 0)
+    if ties_only:
+        ok &= incircle_sign(a, b, c, d) == 0
+    used = np.zeros(len(tris), bool)
+    for j in rng.permutation(np.flatnonzero(ok)).tolist():
+        if not used[e.t1[j]] and not used[e.t2[j]] and rng.random() < share:
+            used[[e.t1[j], e.t2[j]]] = True
+            tris[e.t1[j]] = [e.a[j], e.d[j], e.c[j]]
+            tris[e.t2[j]] = [e.d[j], e.b[j], e.c[j]]
+    return tris
+
+
 def tie_count(vertices: np.ndarray, triangles: np.ndarray,
               constraints: np.ndarray | None = None) -> tuple[int, int]:
     """(free edges, those whose quadrilateral is exactly cocircular) of a triangulation."""

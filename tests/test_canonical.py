@@ -314,6 +314,22 @@ def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
     assert caught == {p.stem for p in here.glob("*.atm")} - {"line_1x9", "listed_ties", "listed_not_delaunay"}
 
 
+def test_the_pass_reaches_the_one_answer_from_any_triangulation():
+    """ATM.md §4.2.5, construction: flips from any triangulation with the walls as
+    edges, not only from a constrained Delaunay one, end at the same triangles."""
+    cols, rows = [0, 2, 4, 6, 8, 10, 12, 14, 16, 17], [0, 2, 4, 6, 8, 10, 12, 13]
+    rng = np.random.default_rng(6)
+    for _ in range(40):
+        mesh = _mesh_with_wall(cols, rows, list(rng.random(80) < 0.6), cols[rng.integers(1, 8)], 0)
+        walls = segments(mesh.constraints)
+        start = mesh.triangles
+        for _ in range(6):
+            start = canonical.random_flips(mesh.vertices, start, walls, rng, 0.5)
+        assert not local_rule_holds(mesh.vertices, start, walls)
+        out = canonical.canonicalise(mesh.vertices, start, walls, check=True)
+        np.testing.assert_array_equal(canonical_triangles(out), canonical_triangles(mesh.triangles))
+
+
 def test_version_5_files_are_refused_naming_both_versions():
     """Version 5 has version 6's bytes but Triangle's tie-breaking: not decoded."""
     data = codec.encode(np.arange(64, dtype=np.uint8).reshape(8, 8), points=10)
