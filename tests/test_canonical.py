@@ -275,6 +275,25 @@ def test_conformance_files_decode_alike_by_any_triangle_call(monkeypatch, algori
         np.testing.assert_array_equal(codec.decode(path.read_bytes()), expected)
 
 
+@pytest.mark.parametrize("mesher", ["adaptive", "uniform"])
+def test_a_corpus_image_decodes_alike_by_any_triangle_call(monkeypatch, mesher):
+    """skimage's text image at the default density (walls, thousands of ties): the
+    same pixels, and the self-check holds, whichever way Triangle is called."""
+    from tests.corpus import load_corpus
+
+    data = codec.encode(load_corpus()["text"], mesher=mesher)
+    expected = codec.decode(data)
+    mesh = codec.decode_mesh(data)
+    walls = segments(mesh.constraints) if mesh.constraints else None
+    assert canonical.tie_count(mesh.vertices, mesh.triangles, walls)[1] > 100
+    for k, algorithm in enumerate(ALGORITHMS):
+        call = shuffled_triangle(np.random.default_rng(k), algorithm)
+        monkeypatch.setattr(triangulate_module.triangle, "triangulate", call)
+        np.testing.assert_array_equal(codec.decode(data), expected)
+        raw = raw_triangle(mesh.vertices, walls, np.random.default_rng(k), algorithm)
+        canonical.canonicalise(mesh.vertices, raw, walls, check=True)
+
+
 def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
     """ATM.md §9: on every conformance file with a two-dimensional Delaunay band, the
     triangles of Triangle alone (input in file order) fail the CRC; listed and
@@ -293,6 +312,22 @@ def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
             assert "CRC mismatch" in str(exc)
             caught.add(path.stem)
     assert caught == {p.stem for p in here.glob("*.atm")} - {"line_1x9", "listed_ties", "listed_not_delaunay"}
+
+
+def test_the_pass_reaches_the_one_answer_from_any_triangulation():
+    """ATM.md §4.2.5, construction: flips from any triangulation with the walls as
+    edges, not only from a constrained Delaunay one, end at the same triangles."""
+    cols, rows = [0, 2, 4, 6, 8, 10, 12, 14, 16, 17], [0, 2, 4, 6, 8, 10, 12, 13]
+    rng = np.random.default_rng(6)
+    for _ in range(40):
+        mesh = _mesh_with_wall(cols, rows, list(rng.random(80) < 0.6), cols[rng.integers(1, 8)], 0)
+        walls = segments(mesh.constraints)
+        start = mesh.triangles
+        for _ in range(6):
+            start = canonical.random_flips(mesh.vertices, start, walls, rng, 0.5)
+        assert not local_rule_holds(mesh.vertices, start, walls)
+        out = canonical.canonicalise(mesh.vertices, start, walls, check=True)
+        np.testing.assert_array_equal(canonical_triangles(out), canonical_triangles(mesh.triangles))
 
 
 def test_version_5_files_are_refused_naming_both_versions():
