@@ -101,12 +101,13 @@ def decode_mesh(data: bytes) -> Mesh:
 
 def info(data: bytes) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
-    vertices, triangles, constraints, bytes, nodata, metadata."""
+    vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
+    each band's count fields (checksums and limits checked, no mesh decoded)."""
     from . import container
 
     data = _as_bytes(data)
     reader = container.Reader(io.BytesIO(data))
-    bands = list(reader)
+    counts = container.summarise(reader)
     header = reader.header
     return {
         "version": header.version,
@@ -114,10 +115,10 @@ def info(data: bytes) -> dict:
         "height": header.height,
         "dtype": str(header.dtype),
         "channels": header.channels,
-        "bands": len(bands),
-        "vertices": sum(len(m.vertices) for _, m in bands),
-        "triangles": sum(len(m.triangles) for _, m in bands),
-        "constraints": sum(len(m.constraints) for _, m in bands),
+        "bands": counts.bands,
+        "vertices": counts.vertices,
+        "triangles": counts.triangles,
+        "constraints": counts.polylines,
         "bytes": len(data),
         "nodata": header.nodata,
         "metadata": header.metadata or {},

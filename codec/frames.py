@@ -57,14 +57,30 @@ def compress_parts(parts: list[bytes]) -> bytes:
     return min(candidates, key=len)
 
 
-def decompress(frame: bytes, limit: int, what: str) -> bytes:
-    """The data of one zstd frame that declares a size of at most `limit` bytes."""
+def declared_size(frame: bytes, what: str) -> int:
+    """The decompressed size a zstd frame declares (nothing is decompressed)."""
     try:
         size = zstandard.frame_content_size(frame)
     except zstandard.ZstdError as exc:
         raise CorruptError(f"{what} is not a zstd frame: {exc}") from None
     if size < 0:
         raise CorruptError(f"{what}'s zstd frame does not declare its size")
+    return size
+
+
+def head(frame: bytes, n: int, what: str) -> bytes:
+    """The first n bytes of a frame's data (or all, if fewer), decompressing no more
+    than the blocks that hold them."""
+    try:
+        with zstandard.ZstdDecompressor().stream_reader(frame) as reader:
+            return reader.read(n)
+    except zstandard.ZstdError as exc:
+        raise CorruptError(f"{what} does not decompress: {exc}") from None
+
+
+def decompress(frame: bytes, limit: int, what: str) -> bytes:
+    """The data of one zstd frame that declares a size of at most `limit` bytes."""
+    size = declared_size(frame, what)
     if size > min(limit, limits.MAX_PAYLOAD_BYTES):
         raise LimitError(
             f"{what} would decompress to {size:,} bytes, more than its image can need "

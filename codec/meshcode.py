@@ -318,9 +318,10 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     return Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
 
 
-def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
+def encode_band(y0: int, mesh: Mesh, step: int = 1, rebuild: bool = True) -> dict:
     """The MeshPayload fields for a validated band mesh whose samples are as
-    quantise(mesh, step, y0 > 0) left them (any samples with step 1)."""
+    quantise(mesh, step, y0 > 0) left them (any samples with step 1). rebuild=False
+    lists the triangles even where a decoder could rebuild them (codec.limits)."""
     n = len(mesh.vertices)
     order, inverse, sorted_keys, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
@@ -331,8 +332,8 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     walls = chain_steps(flat, lengths)
 
     try:
-        rebuilt = canonical_triangles(triangulate(vertices, walls))
-        delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
+        rebuilt = canonical_triangles(triangulate(vertices, walls)) if rebuild else None
+        delaunay = rebuild and rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
     except ATMError:
         delaunay = False
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]

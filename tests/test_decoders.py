@@ -69,7 +69,7 @@ def _corners(w: int, h: int) -> list[tuple[int, int]]:
 @st.composite
 def meshes(draw) -> Mesh:
     """Valid meshes that stress the decoders' edge cases."""
-    kind = draw(st.sampled_from(["random", "sliver", "walls", "line", "tiny"]))
+    kind = draw(st.sampled_from(["random", "sliver", "walls", "line", "tiny", "wide"]))
     dtype = draw(st.sampled_from([np.uint8, np.uint16]))
     channels = draw(st.sampled_from([1, 3]))
     if kind == "line":
@@ -77,12 +77,17 @@ def meshes(draw) -> Mesh:
         w, h = draw(st.sampled_from([(1, n), (n, 1)]))
     elif kind == "tiny":
         w, h = draw(st.sampled_from([(2, 2), (2, 3), (3, 2), (2, 17), (13, 2)]))
+    elif kind == "wide":
+        # a few pixels across and tens of thousands along: triangles reach far beyond
+        # any GL tile and viewport, where the rasteriser's clipping is inexact
+        across, length = draw(st.integers(2, 6)), draw(st.integers(2049, 70000))
+        w, h = draw(st.sampled_from([(across, length), (length, across)]))
     else:
         w, h = draw(st.integers(2, 41)), draw(st.integers(2, 41))
     pts = set(_corners(w, h))
     walls: list[list[tuple[int, int]]] = []
-    if kind in ("random", "tiny", "line"):
-        for _ in range(min(draw(st.integers(0, w * h)), 60)):
+    if kind in ("random", "tiny", "line", "wide"):
+        for _ in range(min(draw(st.integers(0, w * h)), 12 if kind == "wide" else 60)):
             pts.add((draw(st.integers(0, w - 1)), draw(st.integers(0, h - 1))))
     elif kind == "sliver":
         # points on long, nearly flat lines give triangles thinner than a pixel
@@ -311,8 +316,9 @@ def test_gl_agrees_with_cpu(gl, mesh: Mesh) -> None:
 
 
 def test_gl_covers_border_pixels(gl) -> None:
-    """A naive render leaves two sides of the border empty; the skirt fills them with
-    the mesh's own values (a ramp makes a wrong source visible)."""
+    """The rasteriser's fill rule leaves two sides of the border empty; the exact
+    coverage test includes them, with the mesh's own values (a ramp makes a wrong
+    source visible)."""
     w, h = 17, 11
     vertices = np.array(_corners(w, h))
     values = np.array([0, 160, 40, 250], np.uint8)
@@ -320,6 +326,22 @@ def test_gl_covers_border_pixels(gl) -> None:
     out = decoder_gl.render(mesh)
     assert np.array_equal(out, decoder_cpu.render(mesh))
     assert np.array_equal(out, reference(mesh))
+
+
+@pytest.mark.parametrize("w, h", [(4, 65536), (65536, 4), (20000, 300), (4097, 4097)])
+def test_gl_agrees_on_triangles_far_larger_than_a_tile(gl, w: int, h: int) -> None:
+    """A few vertices make triangles that reach far beyond the viewport, where GL clips
+    them in floating point; before coverage was decided in integers, pixels a
+    thousandth of a pixel inside one triangle went to its neighbour."""
+    rng = np.random.default_rng(w * h)
+    pts = set(_corners(w, h))
+    while len(pts) < 10:
+        pts.add((int(rng.integers(0, w)), int(rng.integers(0, h))))
+    vertices = np.array(sorted(pts), dtype=np.int64)
+    values = rng.integers(0, 65536, len(vertices)).astype(np.uint16)
+    mesh = Mesh(vertices, values, triangulate(vertices), w, h)
+    validate(mesh)
+    assert np.array_equal(decoder_gl.render(mesh), decoder_cpu.render(mesh))
 
 
 def test_gl_tiles(gl, monkeypatch) -> None:
