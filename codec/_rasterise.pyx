@@ -7,7 +7,6 @@ row and pixel to pixel as quotient and remainder (one division per triangle edge
 per span, none per pixel). Bounds: with W*H <= 2**32 and samples below 2**16, every
 numerator is below 2**53 (see _plane)."""
 
-from libc.math cimport floor
 from libc.stdint cimport int64_t, uint8_t, uint16_t
 
 ctypedef fused sample_t:
@@ -23,23 +22,18 @@ cpdef enum Status:
     TWICE = 4           # detail: the first pixel written twice or more
 
 
-cdef inline int64_t _floor_div(int64_t a, int64_t b) noexcept nogil:
-    """floor(a / b) for b > 0 (C's division truncates)."""
-    cdef int64_t q = a // b
-    if a % b != 0 and a < 0:
-        q -= 1
-    return q
-
-
 cdef inline int64_t _floor_div_fast(int64_t a, int64_t b) noexcept nogil:
-    """floor(a / b) for b > 0 and |a| < 2**53: a float64 quotient (no integer
-    division, which costs several times more), corrected to the exact floor."""
-    cdef int64_t q = <int64_t>floor(<double>a / <double>b)
+    """floor(a / b) for b > 0 and |a| < 2**53: the float64 quotient truncated (no
+    integer division, which costs several times more), then corrected to the exact
+    floor (the truncation and the rounding are each off by at most one)."""
+    cdef int64_t q = <int64_t>(<double>a / <double>b)
     cdef int64_t r = a - q * b
-    if r < 0:
+    while r < 0:
         q -= 1
-    elif r >= b:
+        r += b
+    while r >= b:
         q += 1
+        r -= b
     return q
 
 
@@ -51,9 +45,9 @@ cdef struct Walk:
 
 cdef inline void _walk_init(Walk* w, int64_t num, int64_t den, int64_t step) noexcept nogil:
     w.den = den
-    w.q = _floor_div(num, den)
+    w.q = _floor_div_fast(num, den)
     w.r = num - w.q * den
-    w.dq = _floor_div(step, den)
+    w.dq = _floor_div_fast(step, den)
     w.dr = step - w.dq * den
 
 
@@ -133,7 +127,7 @@ cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
             gc[ch] = (2 * vt + 1) * d - ga[ch] * tx - gb[ch] * ty
             if d < 0:
                 ga[ch] = -ga[ch]; gb[ch] = -gb[ch]; gc[ch] = -gc[ch]
-            qa[ch] = _floor_div(ga[ch], d2)
+            qa[ch] = _floor_div_fast(ga[ch], d2)
             ra[ch] = ga[ch] - qa[ch] * d2
         # Rows ty .. by - 1, and by too on the image's last row. The long edge T -> B
         # (dyb > 0, as the triangle has area); the short one T -> M above M's row (and
