@@ -13,7 +13,7 @@ import pytest
 
 import codec
 from codec.files import read_image, write_image
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 from tests.test_cli import atm
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from codec.files import read_image, write_image
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 

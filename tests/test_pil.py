@@ -12,7 +12,7 @@ from PIL import Image
 
 import codec
 import codec.pil  # noqa: F401  (registers the plugin)
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 KINDS = [
     ("L", range_scene(40, 30, seed=1)),

@@ -6,15 +6,20 @@ conforming decoder must produce. Run this only when the format version changes.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
 
 import codec
-from codec import encoder, synthetic
+from codec import encoder
 from codec.files import write_image
 from codec.mesh import Mesh
 from codec.triangulate import triangulate
+
+# the test scenes live with the tests, in the repository only
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from tests import synthetic  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 
