@@ -16,7 +16,7 @@ from typing import BinaryIO, Iterator
 import numpy as np
 from construct import ChecksumError, ConstructError
 
-from format_spec import schema
+from .format_spec import schema
 
 from . import coding, frames, limits, meshcode
 from .errors import CorruptError, FormatError, LimitError, OptionError, TruncatedError, UnsupportedError

@@ -309,7 +309,7 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
     then needs no second run of Triangle."""
     from codec import meshcode, triangulate as tri
     from codec.mesh import segments
-    from format_spec import schema
+    from codec.format_spec import schema
 
     img = corpus["camera"][:200, :300]
     m = codec.build_mesh(img, points=1500)
