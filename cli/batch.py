@@ -19,8 +19,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
-from cli import convert
-from cli.progress import Progress
+from . import convert
+from .progress import Progress
 from codec.errors import ATMError
 
 #: What a directory's images are recognised by (encode); .atm for decode.

@@ -14,7 +14,7 @@ from typing import BinaryIO
 import numpy as np
 
 import codec
-from cli import rowio
+from . import rowio
 from codec.errors import ATMError, UnsupportedError
 
 

@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 import codec
-from cli import batch, convert, tools
-from cli.progress import Progress
+from . import batch, convert, tools
+from .progress import Progress
 from codec.errors import ATMError
 
 EPILOG = "Use - for standard input or output. Run 'atm COMMAND --help' for a command's options."

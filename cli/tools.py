@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import codec
-from cli import convert
+from . import convert
 from codec.errors import ATMError, UnsupportedError
 
 MESH_FORMATS = ("obj", "ply", "svg", "png")

@@ -3,7 +3,7 @@
     import codec
     data = codec.encode(image, points=4000)   # bytes
     image2 = codec.decode(data)               # same shape and dtype
-    m = codec.mesh(image)                     # the mesh itself: vertices, triangles, ...
+    m = codec.build_mesh(image)               # the mesh itself: vertices, triangles, ...
 
 Heavy modules (OpenCV, triangle, OpenGL) load on first use, not at import.
 """
@@ -55,7 +55,7 @@ def encode(
     channel, in sample units, guaranteed by refinement.
     mesher: "adaptive" (default: walls along discontinuities, curvature sampling,
     least-squares values) or "uniform" (the grid baseline); further options go to
-    the mesher (see codec.adaptive.build).
+    the mesher (see codec.mesher.adaptive.build).
     band_height: rows per band (default: about a megapixel per band); images are coded
     band by band so that StreamEncoder/StreamDecoder can work in bounded memory.
     """
@@ -70,7 +70,7 @@ def encode(
     )
 
 
-def mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
+def build_mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
     """Build the mesh `encode` would store, without packing it."""
     from . import encoder
 
@@ -164,10 +164,10 @@ __all__ = [
     "TruncatedError",
     "UnsupportedError",
     "decode",
+    "build_mesh",
     "decode_mesh",
     "encode",
     "info",
-    "mesh",
     "read",
     "write",
 ]

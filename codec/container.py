@@ -16,7 +16,7 @@ from typing import BinaryIO, Iterator
 import numpy as np
 from construct import ChecksumError, ConstructError
 
-from format_spec import schema
+from .format_spec import schema
 
 from . import coding, frames, limits, meshcode
 from . import metadata as meta_json

@@ -15,7 +15,7 @@ from .image import as_image
 from .mesh import Mesh
 
 #: Mesher name -> module with a `build(image, points, **options) -> Mesh` function.
-MESHERS = {"adaptive": "codec.adaptive", "uniform": "codec.uniform"}
+MESHERS = {"adaptive": "codec.mesher.adaptive", "uniform": "codec.mesher.uniform"}
 DEFAULT_MESHER = "adaptive"
 #: Vertex density used when no size is asked for (the seed's Lenna setting, 2.8 %).
 DEFAULT_DENSITY = 0.028

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from format_spec import schema
+from .format_spec import schema
 
 from . import _fields, frames, limits
 from .coding import (

@@ -123,7 +123,7 @@ def _band(v: list[tuple[int, int]], width: int, rows: int, y0: int, rng: random.
     from codec.errors import ATMError
     from codec.mesh import Mesh
     from codec.triangulate import triangulate
-    from format_spec import schema
+    from codec.format_spec import schema
 
     vertices = np.array(sorted(set(v), key=lambda p: (p[1], p[0])), np.int64)
     try:
@@ -138,7 +138,7 @@ def _band(v: list[tuple[int, int]], width: int, rows: int, y0: int, rng: random.
 def hostile_file(rng: random.Random) -> bytes:
     """A whole file of a class the decoder must refuse or bound: an all-pixel mesh,
     many one-row bands, a wide image with huge triangles (for the GL differential)."""
-    from format_spec import schema
+    from codec.format_spec import schema
 
     kind = rng.randrange(3)
     if kind == 0:  # every pixel a vertex: zero gaps and samples

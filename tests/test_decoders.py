@@ -180,7 +180,7 @@ def test_cpu_threads() -> None:
     rng = np.random.default_rng(11)
     sizes = ((37, 61), (80, 23), (16, 300))
     imgs = [rng.integers(0, 256, (h, w)).astype(np.uint8) for h, w in sizes]
-    meshes = [codec.mesh(img) for img in imgs] + [codec.mesh(imgs[0].astype(np.uint16) * 257)]
+    meshes = [codec.build_mesh(img) for img in imgs] + [codec.build_mesh(imgs[0].astype(np.uint16) * 257)]
     expected = [reference(m) for m in meshes]
     with ThreadPoolExecutor(4) as pool:
         got = list(pool.map(decoder_cpu.render, meshes * 6))
@@ -367,7 +367,7 @@ def test_gl_agrees_on_triangles_far_larger_than_a_tile(gl, w: int, h: int) -> No
 
 
 def test_gl_tiles(gl, monkeypatch) -> None:
-    mesh = codec.mesh(np.random.default_rng(5).integers(0, 256, (45, 70, 3)).astype(np.uint8))
+    mesh = codec.build_mesh(np.random.default_rng(5).integers(0, 256, (45, 70, 3)).astype(np.uint8))
     whole = decoder_gl.render(mesh)
     monkeypatch.setattr(decoder_gl.context(), "tile", 16)
     assert np.array_equal(decoder_gl.render(mesh), whole)
@@ -390,12 +390,12 @@ def test_gl_without_context_raises_backend_error(no_gl) -> None:
 
 @pytest.fixture(scope="module")
 def corpus_meshes(corpus) -> dict[str, Mesh]:
-    meshes = {name: codec.mesh(img) for name, img in corpus.items()}
+    meshes = {name: codec.build_mesh(img) for name, img in corpus.items()}
     from skimage import data
 
     rgb = data.astronaut()[::2, ::2]
-    meshes["astronaut_rgb"] = codec.mesh(rgb)
-    meshes["camera_16bit"] = codec.mesh(data.camera().astype(np.uint16) * 257 + 3)
+    meshes["astronaut_rgb"] = codec.build_mesh(rgb)
+    meshes["camera_16bit"] = codec.build_mesh(data.camera().astype(np.uint16) * 257 + 3)
     return meshes
 
 

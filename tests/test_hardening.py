@@ -18,7 +18,7 @@ import codec.pil  # noqa: F401  (registers the plugin)
 from codec import container, frames, limits
 from codec.mesh import Mesh
 from codec.triangulate import triangulate
-from format_spec import schema
+from codec.format_spec import schema
 
 
 def _chunk(ctype: bytes, payload: bytes) -> bytes:
@@ -118,12 +118,12 @@ def test_encoder_refuses_what_the_decoder_would():
 def test_atm_info_json_is_valid_and_errors_are_one_line(tmp_path):
     good = tmp_path / "good.atm"
     good.write_bytes(_file(8, 8, _meta(b'{"a": "\\u00e9"}')))
-    out = subprocess.run([sys.executable, "-m", "cli.main", "info", "--json", str(good)], capture_output=True)
+    out = subprocess.run([sys.executable, "-m", "codec", "info", "--json", str(good)], capture_output=True)
     assert out.returncode == 0 and json.loads(out.stdout)["metadata"] == {"a": "\u00e9"}
     for text in (b'{"a": "\\ud800"}', b'{"a": NaN}'):
         bad = tmp_path / "bad.atm"
         bad.write_bytes(_file(8, 8, _meta(text)))
-        out = subprocess.run([sys.executable, "-m", "cli.main", "info", "--json", str(bad)], capture_output=True)
+        out = subprocess.run([sys.executable, "-m", "codec", "info", "--json", str(bad)], capture_output=True)
         assert out.returncode != 0 and out.stdout == b""
         assert len(out.stderr.decode().strip().splitlines()) == 1
 

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import codec
 from codec.errors import ATMError, OptionError
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 masks = st.sampled_from(["random", "border", "pixel", "all", "none", "blobs"])
 

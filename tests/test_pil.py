@@ -13,7 +13,7 @@ from PIL import Image
 import codec
 import codec.stream
 import codec.pil  # noqa: F401  (registers the plugin)
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 KINDS = [
     ("L", range_scene(40, 30, seed=1)),
