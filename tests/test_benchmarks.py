@@ -1,11 +1,14 @@
-"""Smoke runs of the benchmark scripts that need nothing beyond the test extra: they
-must keep running and print their table (their figures are measurements, not checked)."""
+"""Smoke runs of the benchmark scripts: they must keep running and print their table
+(their figures are measurements, not checked). Those that need the bench extra skip
+without it."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -29,3 +32,33 @@ def test_speed_benchmark_prints_its_table() -> None:
     figures = dict(zip(head[3:], map(float, row[3:])))
     assert {"jpeg ms", "render ms", "decode ms", "triangulate ms", "render / jpeg"} <= figures.keys()
     assert all(f > 0 for f in figures.values())
+
+
+def test_range_benchmark_quick_run_meets_its_own_bounds(tmp_path: Path) -> None:
+    """benchmarks/range.py on a crop of the corpus disparity map: every row present, the
+    quantiser peer within its bound (it holds by construction) and every lossless peer
+    exact, so a broken error measurement or hole check shows here."""
+    pytest.importorskip("imagecodecs")
+    pytest.importorskip("tifffile")
+    pytest.importorskip("matplotlib")
+    run = subprocess.run(
+        [sys.executable, "benchmarks/range.py", "--quick", "--repeat", "1",
+         "--images", "motorcycle_disp", "--errors", "0.5", "2", "--plot", str(tmp_path / "range.png")],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    bounded, times, lossless = (_table(t) for t in run.stdout.split("## ")[1:])
+    head, _, *rows = bounded
+    assert [r[1].split(" %")[0] for r in rows] == ["0.5", "2"]
+    for row in rows:
+        cells = dict(zip(head, row))
+        bound = float(cells["E"].split("= ")[1])
+        size, err = cells["q2E+jxl (err)"].replace(",", "").rstrip(")").split(" (")
+        assert int(size) > 0 and float(err) <= bound
+        assert "!" not in cells["q2E+jxl (err)"]
+    assert len(times) == 2 + len(rows)
+    head, _, row = lossless
+    cells = dict(zip(head, row))
+    for peer in ("png", "jpegls", "jxl"):
+        assert cells[f"{peer} bytes (err)"].endswith("(0)")
+    assert (tmp_path / "range.png").stat().st_size > 0
