@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -62,3 +63,41 @@ def test_range_benchmark_quick_run_meets_its_own_bounds(tmp_path: Path) -> None:
     for peer in ("png", "jpegls", "jxl"):
         assert cells[f"{peer} bytes (err)"].endswith("(0)")
     assert (tmp_path / "range.png").stat().st_size > 0
+
+
+def _study():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import range_study
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    return range_study
+
+
+def test_study_code_length_is_the_sequential_adaptive_one() -> None:
+    """range_study.adaptive_bits (vectorised) equals the code length of adaptive counts
+    updated symbol by symbol, as an arithmetic coder would."""
+    study = _study()
+    rng = np.random.default_rng(3)
+    ctx = rng.integers(0, 4, 500)
+    sym = np.minimum(rng.geometric(0.4, 500) - 1, 5) * (ctx % 2) + rng.integers(0, 2, 500)
+    alphabet = int(sym.max()) + 1
+    counts = np.zeros((4, alphabet))
+    bits = 0.0
+    for c, s in zip(ctx, sym):
+        bits -= np.log2((counts[c, s] + study.KT) / (counts[c].sum() + study.KT * alphabet))
+        counts[c, s] += 1
+    assert study.adaptive_bits(ctx, sym, alphabet) == pytest.approx(bits, rel=1e-12)
+
+
+def test_study_cover_quantiser_keeps_the_bound_with_fewest_levels() -> None:
+    """Sparse values (a sensor's depth steps) get one level per cluster and every value
+    lies within E of its level's middle; dense values get the uniform step 2E + 1."""
+    study = _study()
+    values = np.array([100, 101, 103, 140, 141, 300, 5000, 5003, 5004], dtype=np.float64)
+    starts, index = study.cover_quantiser(values, 2.5, integer=True)
+    assert starts.tolist() == [100, 140, 300, 5000]
+    assert np.abs(starts[index] + 2 - values).max() <= 2
+    dense = np.arange(0, 1000, dtype=np.float64)
+    starts, index = study.cover_quantiser(dense, 3.0, integer=True)
+    assert np.all(np.diff(starts) == 7) and np.abs(starts[index] + 3 - dense).max() <= 3
