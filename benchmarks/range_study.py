@@ -20,8 +20,11 @@ b. "mesh": the mesh as predictor. An .atm file at a coarse vertex count (real by
    (.atm with nodata) or is made of the image with its holes filled (push-pull) and
    the hole mask is coded apart (ESTIMATE, JBIG-like contexts). The vertex count is
    swept per image and bound and the best total kept, mesh bytes included.
-   "WP+wallctx": variant c's residual with the mesh's wall distance as one more
-   context (mesh bytes included), to see what the mesh adds as side information.
+   "MED+walls" / "WP+walls": variant c's predictors made wall-aware. The mesh's walls
+   (its constraint polylines; hole edges too) cut the image into regions, and a
+   predictor reads only neighbours in the pixel's own region (W where none is). Only
+   the walls are paid for: their polylines coded alone (ESTIMATE),
+   the mesh's other vertices and values are not stored.
 c. a plain causal predictor on the cover levels: "MED" (LOCO-I, as JPEG-LS) and "WP"
    (a blend of four predictors weighted by their recent errors, after JPEG XL's
    weighted predictor); contexts: neighbour residuals x local gradient; plus the hole
@@ -107,16 +110,27 @@ def residual_bits(r: np.ndarray, ctx: np.ndarray, sign_ctx: np.ndarray) -> float
             + float(raw.sum()))
 
 
+JBIG_TEMPLATE = ((0, -1), (0, -2), (-1, -2), (-1, -1), (-1, 0), (-1, 1), (-1, 2), (-2, -1), (-2, 0), (-2, 1))
+
+
 def mask_bits(holes: np.ndarray) -> float:
-    """Estimated bits of the hole mask, each pixel in the context of its four causal
-    neighbours and the two beyond W and N (as JBIG's template, smaller)."""
+    """Estimated bits of the hole mask, each pixel in the context of its ten causal
+    neighbours of JBIG's three-line template."""
     if not holes.any():
         return 0.0
-    p = np.pad(holes, 2).astype(np.int64)
-    h, w = holes.shape
-    at = lambda dy, dx: p[2 + dy : 2 + dy + h, 2 + dx : 2 + dx + w]  # noqa: E731
-    ctx = at(0, -1) + 2 * at(-1, 0) + 4 * at(-1, -1) + 8 * at(-1, 1) + 16 * at(0, -2) + 32 * at(-2, 0)
+    ctx = sum((1 << i) * shifted(holes.astype(np.int64), dy, dx) for i, (dy, dx) in enumerate(JBIG_TEMPLATE))
     return adaptive_bits(ctx.ravel(), holes.ravel().astype(np.int64), 2)
+
+
+def polyline_bits(lines: list[np.ndarray], width: int, height: int) -> float:
+    """Estimated bits of wall polylines alone (no mesh): a count and start per line,
+    then each vertex's step (dx, dy) as residuals of the context model."""
+    if not lines:
+        return 16.0
+    start = math.ceil(math.log2(width)) + math.ceil(math.log2(height)) + 16
+    steps = np.concatenate([np.diff(line, axis=0).ravel() for line in lines])
+    zero = np.zeros(len(steps), np.int64)
+    return 16 + start * len(lines) + residual_bits(steps, zero, zero)
 
 
 # ---------------------------------------------------------------- predictors and contexts
@@ -169,6 +183,49 @@ def weighted_prediction(a: np.ndarray) -> np.ndarray:
         num += weight * p
         den += weight
     return np.rint(num / den).astype(np.int64)
+
+
+def _same_region(regions: np.ndarray):
+    lab = regions + 2  # padding (0) is no region
+
+    def same(dy: int, dx: int) -> np.ndarray:
+        return shifted(lab, dy, dx) == lab
+
+    return same
+
+
+def wall_aware_med(a: np.ndarray, regions: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """MED where W, N and NW lie in the pixel's own region (walls and holes separate
+    regions); else the mean of W and N, or the one of W, N, NW, NE that does; where
+    none does, the fallback."""
+    same = _same_region(regions)
+    w_, n_, nw, ne = shifted(a, 0, -1), shifted(a, -1, 0), shifted(a, -1, -1), shifted(a, -1, 1)
+    sw, sn, snw, sne = same(0, -1), same(-1, 0), same(-1, -1), same(-1, 1)
+    out = np.rint(fallback).astype(np.int64)
+    for ok, value in ((sne, ne), (snw, nw), (sn, n_), (sw, w_), (sw & sn, (w_ + n_) // 2),
+                      (sw & sn & snw, med(a))):
+        out = np.where(ok, value, out)  # later lines take precedence
+    return out
+
+
+def wall_aware_wp(a: np.ndarray, regions: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """weighted_prediction with each of its predictors used only where all the
+    neighbours it reads lie in the pixel's own region; where none does, the fallback."""
+    same = _same_region(regions)
+    a = a.astype(np.float64)
+    w_, n_, nw, ne, nne = (shifted(a, 0, -1), shifted(a, -1, 0), shifted(a, -1, -1),
+                           shifted(a, -1, 1), shifted(a, -2, 1))
+    usable = [same(0, -1), same(-1, 0), same(0, -1) & same(-1, 0) & same(-1, -1),
+              same(-1, 0) & same(-1, 1) & same(-2, 1)]
+    num = np.zeros_like(a)
+    den = np.zeros_like(a)
+    for p, ok in zip([w_, n_, w_ + n_ - nw, n_ + ne - nne], usable):
+        err = np.abs(a - p)
+        near = shifted(err, 0, -1) + shifted(err, -1, 0) + shifted(err, -1, -1) + shifted(err, -1, 1)
+        weight = np.where(ok, 1.0 / (0.5 + near) ** 2, 0.0)
+        num += weight * p
+        den += weight
+    return np.where(den > 0, np.rint(num / np.maximum(den, 1e-300)), np.rint(fallback)).astype(np.int64)
 
 
 def push_pull_fill(image: np.ndarray, holes: np.ndarray) -> np.ndarray:
@@ -290,6 +347,8 @@ class MeshSide:
     prediction: np.ndarray
     wall_distance: np.ndarray
     slope: np.ndarray
+    regions: np.ndarray  # connected parts between walls (wall pixels join the nearest); holes -1
+    wall_bits: float  # estimate of the walls' polylines coded alone
 
     @property
     def contexts(self) -> np.ndarray:
@@ -297,16 +356,13 @@ class MeshSide:
         (4 buckets)."""
         return bucket(self.wall_distance, WALL_EDGES) * 4 + bucket(self.slope, SLOPE_EDGES)
 
-    @property
-    def wall_contexts(self) -> np.ndarray:
-        return bucket(self.wall_distance, WALL_EDGES)
-
 
 def mesh_side(lv: Levels, density: float, filled: bool) -> MeshSide | None:
     """The .atm mesh at `density` vertices per pixel (asked for), of the image with its
     holes (the mesh then carries them) or of the image push-pull filled (holes coded
     apart). None when the mesh with holes does not give them back exactly."""
     import cv2
+    from scipy import ndimage
 
     case = lv.case
     h, w = case.image.shape
@@ -323,12 +379,19 @@ def mesh_side(lv: Levels, density: float, filled: bool) -> MeshSide | None:
     walls = np.zeros((h, w), np.uint8)
     for line in m.constraints:
         cv2.polylines(walls, [m.vertices[line].astype(np.int32).reshape(-1, 1, 2)], False, 1)
+    free = (walls == 0) & ~holes
+    _, regions = cv2.connectedComponents(free.astype(np.uint8), connectivity=4)
+    nearest = ndimage.distance_transform_edt(~free, return_distances=False, return_indices=True)
+    regions = regions[nearest[0], nearest[1]]
+    regions[holes] = -1
     walls[holes] = 1
     distance = cv2.distanceTransform((walls == 0).astype(np.uint8), cv2.DIST_L2, 3)
     pred = lv.level_of(decoded)
     pred[holes] = 0
     gy, gx = np.gradient(pred)
-    return MeshSide(len(data), len(m.vertices), pred, distance, np.abs(gx) + np.abs(gy))
+    lines = [m.vertices[line] for line in m.constraints]
+    return MeshSide(len(data), len(m.vertices), pred, distance, np.abs(gx) + np.abs(gy), regions,
+                    polyline_bits(lines, w, h))
 
 
 # ---------------------------------------------------------------- the variants
@@ -393,23 +456,25 @@ def study(case: bench.Case, e: float, densities: tuple[float, ...]) -> dict[str,
             side = mesh_side(lv, density, filled)
             if side is None:
                 continue
-            fixed = side.size + lv.table + (mask if filled else 0)
+            extra = lv.table + (mask if filled else 0)
+            walls = side.wall_bits / 8
+            what = "holes in mesh" if not filled else "filled, mask apart"
             tries = {
-                "mesh": coded_bytes(mesh_plus_causal(lv, side), lv, side.contexts, gradient=False),
-                # the mesh as side information only: which contexts it adds to WP
-                "WP+wallctx": coded_bytes(r_wp, lv, side.wall_contexts),
+                "mesh": (side.size, coded_bytes(mesh_plus_causal(lv, side), lv, side.contexts, gradient=False),
+                         f"mesh {side.size:,}"),
             }
-            for name, residual in tries.items():
-                total = residual + fixed
+            for name, predict in (("MED+walls", wall_aware_med), ("WP+walls", wall_aware_wp)):
+                # the walls alone are paid for: the fallback is W, not the mesh's values
+                r = np.where(valid, lv.levels - predict(lv.filled, side.regions, shifted(lv.filled, 0, -1)), 0)
+                tries[name] = (walls, coded_bytes(r, lv), f"walls {walls:,.0f}")
+            for name, (side_bytes, residual, note) in tries.items():
+                total = side_bytes + residual + extra
                 if name not in out or total < out[name][0]:
-                    what = "holes in mesh" if not filled else "filled, mask apart"
-                    out[name] = (total, f"{side.vertices:,} v ({what}): mesh {side.size:,} + residual {residual:,.0f} B")
-                if name == "WP+wallctx" and residual < out.get("wallctx gain", (math.inf,))[0]:
-                    out["wallctx gain"] = (residual, f"{residual / wp:.3f}")
+                    out[name] = (total, f"{side.vertices:,} v ({what}): {note} + residual {residual:,.0f} B")
     return out
 
 
-VARIANTS = ("q+zstd", "q+jxl", "cover+jxl", "MED", "WP", "mesh", "WP+wallctx")
+VARIANTS = ("q+zstd", "q+jxl", "cover+jxl", "MED", "WP", "mesh", "MED+walls", "WP+walls")
 
 
 def best_peers(case: bench.Case, e: float) -> tuple[str, int]:
@@ -443,7 +508,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"no range image {', '.join(unknown)}; choose from {', '.join(loaders)}")
     head = (["image", "E", "best peer (bytes)"] + [f"{v} ÷ peer" for v in VARIANTS]
-            + ["WP bytes", "best mesh split", "WP residual with wall ctx ÷ without"])
+            + ["WP split", "mesh split", "MED+walls split"])
     rows = []
     for name in names:
         case = loaders[name]()
@@ -457,7 +522,7 @@ def main(argv: list[str] | None = None) -> int:
             got = study(case, e, tuple(args.densities))
             rows.append([f"{name} {w}x{h}", "lossless" if e == 0 else f"{pct:g} % = {e:.4g}", f"{peer} {size:,}"]
                         + [f"{got[v][0] / size:.2f}" if v in got else "-" for v in VARIANTS]
-                        + [got[v][1] if v in got else "-" for v in ("WP", "mesh", "wallctx gain")])
+                        + [got[v][1] if v in got else "-" for v in ("WP", "mesh", "MED+walls")])
             print(f"done {name} at {pct:g} %", file=sys.stderr, flush=True)
     print(bench.markdown(head, rows))
     return 0

@@ -101,3 +101,18 @@ def test_study_cover_quantiser_keeps_the_bound_with_fewest_levels() -> None:
     dense = np.arange(0, 1000, dtype=np.float64)
     starts, index = study.cover_quantiser(dense, 3.0, integer=True)
     assert np.all(np.diff(starts) == 7) and np.abs(starts[index] + 3 - dense).max() <= 3
+
+
+def test_study_quick_run_prints_every_variant() -> None:
+    """range_study.py --quick on the disparity crop: one row, every variant a ratio."""
+    pytest.importorskip("imagecodecs")
+    study = _study()
+    run = subprocess.run(
+        [sys.executable, "benchmarks/range_study.py", "--quick", "--images", "motorcycle_disp",
+         "--errors", "2", "--densities", "0.01"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, row = _table(run.stdout)
+    cells = dict(zip(head, row))
+    assert all(float(cells[f"{v} ÷ peer"]) > 0 for v in study.VARIANTS)
