@@ -425,8 +425,12 @@ def best_peer(results: dict[str, Result], e: float, among: tuple[str, ...]) -> s
 
 def markdown(head: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" if i < 2 else "---:" for i in range(len(head))) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    lines += [markdown_row(r) for r in rows]
     return "\n".join(lines)
+
+
+def markdown_row(cells: list[str]) -> str:
+    return "| " + " | ".join(cells) + " |"
 
 
 def plot(points: dict[str, list[tuple[float, float, dict[str, Result]]]], path: Path) -> None:
@@ -487,10 +491,11 @@ def main(argv: list[str] | None = None) -> int:
     peers = [n for n in bounded_codecs(1.0) if n != "atm"]
     head = ["image", "E", "atm (err)"] + [f"{p} (err)" for p in peers] + ["best", "atm / best"]
     time_head = ["image", "E"] + [f"enc / {p}" for p in peers] + [f"dec / {p}" for p in peers]
-    rows: list[list[str]] = []
     time_rows: list[list[str]] = []
     lossless_rows: list[list[str]] = []
     points: dict[str, list[tuple[float, float, dict[str, Result]]]] = {}
+    print("## Bytes at max error E on valid pixels (measured max error in brackets; ! = bound missed or holes lost)\n")
+    print(markdown(head, []), flush=True)
     for name in names:
         case = loaders[name]()
         if args.quick:
@@ -503,13 +508,12 @@ def main(argv: list[str] | None = None) -> int:
             results, enc_r, dec_r = measure(case, bounded_codecs(e), e, args.repeat)
             best = best_peer(results, e, CRITERION)
             ratio = f"{results['atm'].size / results[best].size:.2f}" if best and results["atm"].size else "-"
-            rows.append([label, f"{pct:g} % = {e:.4g}", results["atm"].cell(e)]
-                        + [results[p].cell(e) for p in peers] + [best or "-", ratio])
+            row = [label, f"{pct:g} % = {e:.4g}", results["atm"].cell(e)] + [results[p].cell(e) for p in peers]
+            print(markdown_row(row + [best or "-", ratio]), flush=True)  # as it comes: a long run shows progress
             time_rows.append([label, f"{pct:g} %"]
                              + [f"{enc_r[p]:.1f}" if p in enc_r else "-" for p in peers]
                              + [f"{dec_r[p]:.1f}" if p in dec_r else "-" for p in peers])
             points.setdefault(label, []).append((pct, e, results))
-            print(f"done {label} at {pct:g} %", file=sys.stderr, flush=True)
         if not args.no_lossless:
             results, enc_r, dec_r = measure(case, LOSSLESS, 0.0, args.repeat)
             lossless_rows.append(
@@ -518,8 +522,6 @@ def main(argv: list[str] | None = None) -> int:
                 + [f"{results['atm'].size / results[p].size:.2f}" if results[p].size else "-" for p in list(LOSSLESS)[1:]]
                 + [f"{enc_r.get(p, math.nan):.1f} / {dec_r.get(p, math.nan):.1f}" for p in list(LOSSLESS)[1:]]
             )
-    print("## Bytes at max error E on valid pixels (measured max error in brackets; ! = bound missed or holes lost)\n")
-    print(markdown(head, rows))
     if args.repeat > 0:
         print("\n## .atm time / peer time (median of per-round ratios)\n")
         print(markdown(time_head, time_rows))
