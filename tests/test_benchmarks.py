@@ -65,19 +65,21 @@ def test_range_benchmark_quick_run_meets_its_own_bounds(tmp_path: Path) -> None:
     assert (tmp_path / "range.png").stat().st_size > 0
 
 
-def _study():
+def _bench(name: str = "range_study"):
+    """A module of benchmarks/ (they import each other by their plain names)."""
+    import importlib
+
     sys.path.insert(0, str(ROOT / "benchmarks"))
     try:
-        import range_study
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(ROOT / "benchmarks"))
-    return range_study
 
 
 def test_study_code_length_is_the_sequential_adaptive_one() -> None:
     """range_study.adaptive_bits (vectorised) equals the code length of adaptive counts
     updated symbol by symbol, as an arithmetic coder would."""
-    study = _study()
+    study = _bench()
     rng = np.random.default_rng(3)
     ctx = rng.integers(0, 4, 500)
     sym = np.minimum(rng.geometric(0.4, 500) - 1, 5) * (ctx % 2) + rng.integers(0, 2, 500)
@@ -93,7 +95,7 @@ def test_study_code_length_is_the_sequential_adaptive_one() -> None:
 def test_study_cover_quantiser_keeps_the_bound_with_fewest_levels() -> None:
     """Sparse values (a sensor's depth steps) get one level per cluster and every value
     lies within E of its level's middle; dense values get the uniform step 2E + 1."""
-    study = _study()
+    study = _bench()
     values = np.array([100, 101, 103, 140, 141, 300, 5000, 5003, 5004], dtype=np.float64)
     starts, index = study.cover_quantiser(values, 2.5, integer=True)
     assert starts.tolist() == [100, 140, 300, 5000]
@@ -106,7 +108,7 @@ def test_study_cover_quantiser_keeps_the_bound_with_fewest_levels() -> None:
 def test_study_quick_run_prints_every_variant() -> None:
     """range_study.py --quick on the disparity crop: one row, every variant a ratio."""
     pytest.importorskip("imagecodecs")
-    study = _study()
+    study = _bench()
     run = subprocess.run(
         [sys.executable, "benchmarks/range_study.py", "--quick", "--images", "motorcycle_disp",
          "--errors", "2", "--densities", "0.01"],
@@ -116,3 +118,22 @@ def test_study_quick_run_prints_every_variant() -> None:
     head, _, row = _table(run.stdout)
     cells = dict(zip(head, row))
     assert all(float(cells[f"{v} ÷ peer"]) > 0 for v in study.VARIANTS)
+
+
+def test_range_coder_round_trips_at_the_estimated_length() -> None:
+    """benchmarks/range_coder.py gives its symbols back, in about the bytes the study's
+    adaptive estimate says (the estimate's claim to be reachable rests on this)."""
+    study = _bench()
+    range_coder = _bench("range_coder")
+    rng = np.random.default_rng(7)
+    ctx = rng.integers(0, 6, 20000)
+    sym = np.minimum(rng.geometric(0.25 + 0.1 * ctx) - 1, 11)
+    scale = round(1 / study.KT)
+
+    def models() -> dict:
+        return {c: range_coder.Model(12, scale) for c in range(6)}
+
+    data = range_coder.encode(zip(ctx.tolist(), sym.tolist()), models())
+    assert list(range_coder.decode(data, ctx.tolist(), models())) == sym.tolist()
+    estimate = study.adaptive_bits(ctx, sym, 12) / 8
+    assert estimate <= len(data) <= estimate * 1.01 + 8
