@@ -8,7 +8,8 @@ and lossless codecs users of depth maps and elevation models already have (issue
 Images: every file in the shared range-data folder (the SRTM DEM read with tifffile,
 its GDAL nodata tag honoured if any pixel has it; the 16-bit depth maps with their bit
 depth kept and 0 as "no reading"), the corpus disparity map (0 where unknown) and a
-synthetic 16-bit depth scene. E is a percentage of each image's value range over its
+synthetic 16-bit depth scene, and the DEM again as float32 (float data has no integer
+step for a codec to find). E is a percentage of each image's value range over its
 valid pixels; holes are kept.
 
 At each E, every codec is asked for a maximum error of E on valid pixels and its error
@@ -134,6 +135,11 @@ def load_cases(range_data: Path = RANGE_DATA) -> dict[str, Callable[[], Case]]:
 
     loaders["motorcycle_disp"] = disparity
     loaders["scene_u16"] = scene
+    dem = loaders.get("srtm_dem")
+    if dem is not None:
+        # the DEM as float32 metres: float data has no precision of its own for a codec
+        # to find (issue #21: max_error alone must choose the quantisation)
+        loaders["srtm_dem_f32"] = lambda: Case("srtm_dem_f32", dem().image.astype(np.float32), None)
     return loaders
 
 
@@ -398,7 +404,7 @@ def measure(
     for name, (enc, dec) in codecs.items():
         try:
             blobs[name] = enc(case)
-        except (ValueError, RuntimeError, TypeError) as exc:
+        except (ValueError, RuntimeError, TypeError, codec.ATMError) as exc:
             # the peer cannot take this image (dtype, range): say so, do not count it
             results[name] = Result(None, note=str(exc).splitlines()[0])
             continue
@@ -520,7 +526,7 @@ def main(argv: list[str] | None = None) -> int:
                 [label, "lossless" if results["atm"].error == 0 else f"NOT lossless (err {results['atm'].error:.3g})"]
                 + [results[c].cell(0.0) for c in LOSSLESS]
                 + [f"{results['atm'].size / results[p].size:.2f}" if results[p].size else "-" for p in list(LOSSLESS)[1:]]
-                + [f"{enc_r.get(p, math.nan):.1f} / {dec_r.get(p, math.nan):.1f}" for p in list(LOSSLESS)[1:]]
+                + [f"{enc_r[p]:.1f} / {dec_r[p]:.1f}" if p in enc_r else "-" for p in list(LOSSLESS)[1:]]
             )
     if args.repeat > 0:
         print("\n## .atm time / peer time (median of per-round ratios)\n")

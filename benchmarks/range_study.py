@@ -443,15 +443,14 @@ def quantiser_alone(case: bench.Case, lv: Levels) -> dict[str, float]:
     def jxl(q: np.ndarray) -> int:
         return len(imagecodecs.jpegxl_encode(q, lossless=True, bitspersample=max(1, int(q.max()).bit_length())))
 
-    q = bench.quantise(case, lv.e)
     cover = lv.levels + case.holes.any()
     cover[case.holes] = 0
-    cover = cover.astype(np.uint8 if cover.max() < 256 else np.uint16)
-    return {
-        "q+zstd": bench.SIDE_INFO + len(zstandard.ZstdCompressor(level=19).compress(q.tobytes())),
-        "q+jxl": bench.SIDE_INFO + jxl(q),
-        "cover+jxl": lv.table + jxl(cover),
-    }
+    out = {"cover+jxl": float(lv.table + jxl(cover.astype(np.uint8 if cover.max() < 256 else np.uint16)))}
+    if lv.e > 0 or case.integer:  # a uniform step of 2E is no quantiser at E = 0 on float data
+        q = bench.quantise(case, lv.e)
+        out["q+zstd"] = bench.SIDE_INFO + len(zstandard.ZstdCompressor(level=19).compress(q.tobytes()))
+        out["q+jxl"] = bench.SIDE_INFO + jxl(q)
+    return out
 
 
 def coded_bytes(r: np.ndarray, lv: Levels, extra: np.ndarray | None = None, gradient: bool = True,
