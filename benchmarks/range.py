@@ -499,6 +499,7 @@ def main(argv: list[str] | None = None) -> int:
     time_head = ["image", "E"] + [f"enc / {p}" for p in peers] + [f"dec / {p}" for p in peers]
     time_rows: list[list[str]] = []
     lossless_rows: list[list[str]] = []
+    refused: dict[str, str] = {}  # "codec on image" -> why it is n/a
     points: dict[str, list[tuple[float, float, dict[str, Result]]]] = {}
     print("## Bytes at max error E on valid pixels (measured max error in brackets; ! = bound missed or holes lost)\n")
     print(markdown(head, []), flush=True)
@@ -520,8 +521,10 @@ def main(argv: list[str] | None = None) -> int:
                              + [f"{enc_r[p]:.1f}" if p in enc_r else "-" for p in peers]
                              + [f"{dec_r[p]:.1f}" if p in dec_r else "-" for p in peers])
             points.setdefault(label, []).append((pct, e, results))
+            refused.update({f"{c} on {label}": r.note for c, r in results.items() if r.size is None})
         if not args.no_lossless:
             results, enc_r, dec_r = measure(case, LOSSLESS, 0.0, args.repeat)
+            refused.update({f"lossless {c} on {label}": r.note for c, r in results.items() if r.size is None})
             lossless_rows.append(
                 [label, "lossless" if results["atm"].error == 0 else f"NOT lossless (err {results['atm'].error:.3g})"]
                 + [results[c].cell(0.0) for c in LOSSLESS]
@@ -536,6 +539,10 @@ def main(argv: list[str] | None = None) -> int:
         print("\n## Lossless (atm at quality=100)\n")
         print(markdown(["image", "atm q=100"] + [f"{c} bytes (err)" for c in LOSSLESS]
                        + [f"atm / {p}" for p in others] + [f"enc / dec ÷ {p}" for p in others], lossless_rows))
+    if refused:
+        print()
+    for what, why in refused.items():
+        print(f"n/a: {what}: {why}")
     plot(points, args.plot)
     print(f"\nplot: {args.plot}")
     return 0
