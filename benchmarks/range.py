@@ -23,8 +23,10 @@ count as kept when thresholding |decoded - nodata| <= E gives back exactly the h
 Lossless: .atm at quality=100 against PNG, JPEG-LS and JPEG XL lossless.
 
 Times: encode and decode of every codec run in interleaved rounds (each codec once per
-round, after one untimed call), so load on a shared machine hits them alike; the table
-gives the median over rounds of .atm's time divided by each peer's in the same round.
+round; the first round's output is the one measured), so load on a shared machine hits
+them alike; the table gives the median over rounds of .atm's time divided by each
+peer's in the same round. There is no untimed warm-up round: .atm's encode takes
+seconds to a minute where the peers' first-call set-up is milliseconds.
 """
 
 from __future__ import annotations
@@ -397,28 +399,37 @@ def ratios(times: dict[str, list[float]], ours: str, peers: list[str]) -> dict[s
 def measure(
     case: Case, codecs: dict[str, tuple[Encoder, Decoder]], e: float, repeat: int
 ) -> tuple[dict[str, Result], dict[str, float], dict[str, float]]:
-    """Bytes and measured error of every codec, then .atm's encode and decode time
-    ratios to each peer (the first, untimed call is the one measured for bytes)."""
+    """Bytes and measured error of every codec, and .atm's encode and decode time ratios
+    to each peer over `repeat` interleaved rounds. The first round is the one whose
+    output is measured (an .atm encode of a whole DEM takes a minute: it runs `repeat`
+    times, not once more)."""
     results: dict[str, Result] = {}
     blobs: dict[str, bytes] = {}
+    first_enc: dict[str, float] = {}
+    first_dec: dict[str, float] = {}
     for name, (enc, dec) in codecs.items():
+        t0 = time.perf_counter()
         try:
             blobs[name] = enc(case)
         except (ValueError, RuntimeError, TypeError, codec.ATMError) as exc:
-            # the peer cannot take this image (dtype, range): say so, do not count it
+            # the codec cannot take this image (dtype, range): say so, do not count it
             results[name] = Result(None, note=str(exc).splitlines()[0])
             continue
+        first_enc[name] = time.perf_counter() - t0
+        t0 = time.perf_counter()
         decoded = dec(case, blobs[name])
+        first_dec[name] = time.perf_counter() - t0
         results[name] = Result(len(blobs[name]), max_error(case, decoded), holes_kept(case, decoded, e))
     ran = [n for n in codecs if n in blobs]
     peers = [n for n in ran if n != "atm"]
-    enc_ratio: dict[str, float] = {}
-    dec_ratio: dict[str, float] = {}
-    if repeat > 0 and "atm" in blobs and peers:
-        enc_t = interleaved({n: (lambda f=codecs[n][0]: f(case)) for n in ran}, repeat)
-        dec_t = interleaved({n: (lambda f=codecs[n][1], b=blobs[n]: f(case, b)) for n in ran}, repeat)
-        enc_ratio, dec_ratio = ratios(enc_t, "atm", peers), ratios(dec_t, "atm", peers)
-    return results, enc_ratio, dec_ratio
+    if repeat < 1 or "atm" not in blobs or not peers:
+        return results, {}, {}
+    enc_t = interleaved({n: (lambda f=codecs[n][0]: f(case)) for n in ran}, repeat - 1)
+    dec_t = interleaved({n: (lambda f=codecs[n][1], b=blobs[n]: f(case, b)) for n in ran}, repeat - 1)
+    for n in ran:
+        enc_t[n].insert(0, first_enc[n])
+        dec_t[n].insert(0, first_dec[n])
+    return results, ratios(enc_t, "atm", peers), ratios(dec_t, "atm", peers)
 
 
 def best_peer(results: dict[str, Result], e: float, among: tuple[str, ...]) -> str | None:
@@ -478,7 +489,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--images", nargs="*", help="images to measure (default: all)")
     parser.add_argument("--errors", nargs="*", type=float, default=list(ERRORS),
                         help="max errors in percent of the valid value range")
-    parser.add_argument("--repeat", type=int, default=3, help="timed rounds per codec (0: bytes only)")
+    parser.add_argument("--repeat", type=int, default=3, help="rounds per codec (0: bytes only, no times)")
     parser.add_argument("--quick", action="store_true", help=f"centre {QUICK}x{QUICK} crops (smoke test)")
     parser.add_argument("--no-lossless", action="store_true", help="skip the lossless comparison")
     parser.add_argument("--plot", type=Path, default=OUT / "range.png", help="where the plot goes")
