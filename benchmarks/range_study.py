@@ -20,6 +20,8 @@ b. "mesh": the mesh as predictor. An .atm file at a coarse vertex count (real by
    (.atm with nodata) or is made of the image with its holes filled (push-pull) and
    the hole mask is coded apart (ESTIMATE, JBIG-like contexts). The vertex count is
    swept per image and bound and the best total kept, mesh bytes included.
+   The last column: MED's residual (variant c) in its contexts x the mesh's, the mesh
+   not charged, against without: what the mesh's contexts are worth at most.
    "MED+walls" / "WP+walls": variant c's predictors made wall-aware. The mesh's walls
    (its constraint polylines; hole edges too) cut the image into regions, and a
    predictor reads only neighbours in the pixel's own region (W where none is). Only
@@ -511,6 +513,11 @@ def study(case: bench.Case, e: float, densities: tuple[float, ...]) -> dict[str,
                 total = side_bytes + residual + extra
                 if name not in out or total < out[name][0]:
                     out[name] = (total, f"{side.vertices:,} v ({what}): {note} + residual {residual:,.0f} B")
+            # what the mesh's contexts are worth with the mesh free: MED's residual in
+            # neighbour x gradient x (wall distance, slope) contexts, against without
+            with_mesh = coded_bytes(r_med, lv, side.contexts)
+            if with_mesh < out.get("meshctx", (math.inf,))[0]:
+                out["meshctx"] = (with_mesh, f"{with_mesh / med_bytes:.3f}")
     return out
 
 
@@ -548,7 +555,8 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"no range image {', '.join(unknown)}; choose from {', '.join(loaders)}")
     head = (["image", "E", "best peer (bytes)"] + [f"{v} ÷ peer" for v in VARIANTS]
-            + ["WP split", "mesh split", "MED+walls split", "MED residual range-coded ÷ estimate"])
+            + ["WP split", "mesh split", "MED+walls split", "MED residual range-coded ÷ estimate",
+               "MED residual with mesh contexts (mesh free) ÷ without"])
     print(bench.markdown(head, []), flush=True)
     for name in names:
         case = loaders[name]()
@@ -562,7 +570,7 @@ def main(argv: list[str] | None = None) -> int:
             got = study(case, e, tuple(args.densities))
             row = [f"{name} {w}x{h}", "lossless" if e == 0 else f"{pct:g} % = {e:.4g}", f"{peer} {size:,}"]
             row += [f"{got[v][0] / size:.2f}" if v in got else "-" for v in VARIANTS]
-            print(bench.markdown_row(row + [got[v][1] if v in got else "-" for v in ("WP", "mesh", "MED+walls", "MED")]),
+            print(bench.markdown_row(row + [got[v][1] if v in got else "-" for v in ("WP", "mesh", "MED+walls", "MED", "meshctx")]),
                   flush=True)
     return 0
 
