@@ -151,6 +151,8 @@ def _stop(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
 def run(args: argparse.Namespace, command: str) -> int:
     """Convert every input of a batch command; print failures, a summary, and return
     the exit status."""
+    if not args.output:
+        raise UsageError("the output directory name is empty")
     outdir = Path(args.output)
     if outdir.exists() and not outdir.is_dir():
         raise UsageError(f"{outdir} is a file; in batch mode the last argument is an output directory")

@@ -49,10 +49,12 @@ def refuse_misleading_name(output: str, writes_atm: bool, force: bool, what: str
     """UsageError if `output` is named as an image but gets .atm bytes, or named .atm but
     gets something else (`what`), unless `force`: such a file is opened with the wrong
     program, and the .atm name may be an encoded file the user means to keep."""
+    if not output:
+        raise UsageError("the output file name is empty")
     if force or output == "-":
         return
     suffix = Path(output).suffix.lower()
-    stem = Path(output).with_suffix("")
+    stem = output[: len(output) - len(suffix)]
     if writes_atm and suffix in IMAGE_SUFFIXES:
         raise UsageError(
             f"{output} is named as a {suffix} image, but the output is an .atm file: "

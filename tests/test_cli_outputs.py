@@ -74,6 +74,13 @@ def test_a_name_claiming_another_kind_of_file_needs_force(scene, tmp_path):
     assert r.returncode == 0 and (tmp_path / "keep.atm").read_bytes().startswith(b"\x89PNG")
 
 
+def test_an_empty_output_name_is_refused(scene, tmp_path):
+    refused(atm("encode", scene, "", cwd=tmp_path), "output file name is empty")
+    refused(atm("decode", scene, "", cwd=tmp_path), "output file name is empty")
+    refused(atm("encode", scene, scene, "", cwd=tmp_path), "output directory name is empty")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.png"]
+
+
 def test_batch_refuses_an_output_that_is_an_input_before_converting(tmp_path):
     # .atm data kept under a .png name (say, written with --force), decoded to PNG beside it
     (tmp_path / "kept.png").write_bytes(codec.encode(range_scene(48, 32, seed=3)))
