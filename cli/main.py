@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 from pathlib import Path
@@ -67,8 +68,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         data = f.read()
     i = codec.info(data)
     if args.json:
-        if i["nodata"] is not None and i["nodata"] != i["nodata"]:
-            i["nodata"] = "NaN"  # JSON has no NaN
+        if i["nodata"] is not None and not math.isfinite(i["nodata"]):
+            # JSON has no NaN or infinity: their JavaScript names, as strings
+            i["nodata"] = "NaN" if math.isnan(i["nodata"]) else ("Infinity" if i["nodata"] > 0 else "-Infinity")
         print(json.dumps(i, indent=2))
     else:
         kind = "gray" if i["channels"] == 1 else "RGB"
