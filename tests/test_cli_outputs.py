@@ -145,10 +145,12 @@ def test_sigterm_mid_write_removes_a_named_temporary(tmp_path):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses FIFOs and process groups")
-def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path):
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
     """Two workers are each mid-way through a file (FIFOs fed a header and some rows),
-    more files wait; Ctrl-C (SIGINT to the process group) must end the command promptly
-    and nothing may be written afterwards, not even once the stalled inputs end."""
+    more files wait; Ctrl-C (SIGINT to the process group) or SIGTERM (to the command
+    alone) must end the command promptly and nothing may be written afterwards, not even
+    once the stalled inputs end."""
     src, out = tmp_path / "in", tmp_path / "out"
     src.mkdir()
     fifos = [src / "f1.pgm", src / "f2.pgm"]
@@ -173,14 +175,18 @@ def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path):
                 time.sleep(0.05)
         os.write(writers[-1], b"P5\n64 64\n255\n" + bytes(64 * 10))
     try:
-        os.killpg(proc.pid, signal.SIGINT)
+        if how == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.terminate()
         try:
             code = proc.wait(20)
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
-            pytest.fail("the batch did not stop within 20 s of Ctrl-C")
-        assert code == 130 and b"interrupted" in proc.stderr.read()
+            pytest.fail(f"the batch did not stop within 20 s of {how}")
+        expected = (130, b"atm: interrupted") if how == "ctrl-c" else (143, b"atm: terminated")
+        assert (code, proc.stderr.read().strip()) == expected
         written = sorted(os.listdir(out))
     finally:
         for fd in writers:

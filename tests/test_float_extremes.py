@@ -3,6 +3,7 @@ its bound, or refuses with a message naming the fix; infinite holes come back.""
 
 from __future__ import annotations
 
+import json
 import math
 import re
 
@@ -101,6 +102,8 @@ def test_cli_names_the_fix_and_leaves_nodata_out_of_the_range(tmp_path):
     assert atm("encode", tmp_path / "inf.npy", tmp_path / "i.atm").returncode == 0
     assert atm("decode", tmp_path / "i.atm", tmp_path / "i.npy").returncode == 0
     assert (np.load(tmp_path / "i.npy")[np.isinf(z)] == np.inf).all()
+    info = atm("info", tmp_path / "i.atm", "--json")
+    assert json.loads(info.stdout)["nodata"] == "Infinity"  # strict JSON has no infinity
 
 
 EXTREMES = st.sampled_from(
