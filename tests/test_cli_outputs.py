@@ -16,7 +16,7 @@ import pytest
 
 import codec
 from codec.files import write_image
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 from tests.test_cli import ROOT, atm
 
 

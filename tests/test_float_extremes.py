@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import codec
 from codec.errors import ATMError, OptionError
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 from tests.test_cli import atm
 
 F32_MAX = float(np.finfo(np.float32).max)
