@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 import codec  # noqa: E402
 from codec.decoder_cpu import render  # noqa: E402
 from codec.mesh import Mesh  # noqa: E402
-from codec.synthetic import range_scene  # noqa: E402
+from tests.synthetic import range_scene  # noqa: E402
 from codec.triangulate import triangulate  # noqa: E402
 
 REFERENCE = ROOT.parent / "shared" / "reference-images"
@@ -172,7 +172,7 @@ def main(argv: list[str] | None = None) -> None:
         if not args.no_png:
             from codec.export import overlay_png, png_bytes
 
-            m = codec.mesh(img, points=n)
+            m = codec.build_mesh(img, points=n)
             scale = 2 if max(h, w) <= 512 else 1
             (out_dir / f"{name}_{n}.png").write_bytes(png_bytes(overlay_png(m, img, scale=scale)))
     print(

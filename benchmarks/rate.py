@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import codec  # noqa: E402
-from codec.synthetic import range_scene  # noqa: E402
+from tests.synthetic import range_scene  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "out"
 RANGE_IMAGES = {"motorcycle_disp", "scene0", "scene1", "scene2"}

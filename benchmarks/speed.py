@@ -1,22 +1,26 @@
-"""Decoder speed on the public corpus: .atm CPU and GL decoders against JPEG.
+"""Speed against the peers a user would pick instead, as ratios measured in one process.
 
-For each image, meshed at 2.8 % vertex density, in this process:
+Four tables, each measured in interleaved rounds (every round times each contender
+once, so that a burst of load on a shared machine hits all of them alike); a ratio is
+the median over the rounds of each round's own ratio, a time the median time.
 
-* jpeg: cv2.imdecode of the same image as JPEG quality 90;
-* render: the CPU decoder alone (decoder_cpu.render, mesh -> image), and the GL
-  decoder alone with a warm context (decoder_gl.render);
-* decode: codec.decode of the .atm bytes with backend="cpu" and "gl": container
-  parsing, the mesh decoding, the constrained Delaunay triangulation the format leaves
-  implicit, validation and the render;
-* triangulate: that triangulation alone (codec.triangulate on each band's vertices
-  and walls), the part of a whole decode no decoder can skip.
+1. Decode, for each corpus image meshed at 2.8 % vertex density: codec.decode of the
+   .atm bytes (backend="cpu", and "gl" when a context can be made) against JPEG
+   quality 90 and PNG (cv2.imdecode), and WebP, AVIF and JPEG XL at level 90
+   (imagecodecs, in the bench extra; left out when it is not installed; WebP codes a
+   gray image as three equal channels). Also the parts of a decode:
+   render (the rasteriser alone, mesh -> image) and triangulate (the constrained
+   Delaunay triangulation the format leaves implicit, which no decoder can skip).
+2. Threads: two threads decoding different files (the corpus files, each several
+   times) against one thread decoding them in turn: throughput ratio.
+3. Encode at equal vertex count: codec.encode(image, points=N) against pydelatin's
+   Delatin(image, max_points=N) (bench extra; left out without it).
+4. Encode at equal max error: codec.encode(dem, max_error=E) of a float DEM against
+   Delatin(dem, max_error=E), for each E.
 
-The measurements are interleaved: every round times each of them once, so that a
-burst of load on a shared machine hits all of them alike. The table gives the median
-time of each and, as the ratios, the median over the rounds of each round's own
-ratio to JPEG. Measures and prints; asserts nothing.
+Measures and prints; asserts nothing.
 
-    python benchmarks/speed.py [--repeat 31] [--images camera moon]
+    python benchmarks/speed.py [--repeat 31] [--images camera moon] [--dem-size 1024]
 """
 
 from __future__ import annotations
@@ -25,8 +29,11 @@ import argparse
 import statistics
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -53,54 +60,179 @@ def interleaved(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, 
     return times
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--repeat", type=int, default=31, help="timed rounds per image")
-    parser.add_argument("--images", nargs="*", help="corpus images to measure (default: all)")
-    args = parser.parse_args(argv)
+def ratio(times: dict[str, list[float]], a: str, b: str) -> float:
+    """Median over the rounds of time a / time b."""
+    return statistics.median(x / y for x, y in zip(times[a], times[b]))
+
+
+def print_table(head: list[str], rows: list[list[str]]) -> None:
+    print("| " + " | ".join(head) + " |")
+    print("|" + "|".join("---:" if i > 1 else "---" for i in range(len(head))) + "|")
+    for row in rows:
+        print("| " + " | ".join(row) + " |", flush=True)
+
+
+def peer_codecs(img: np.ndarray) -> dict[str, tuple[Callable, Callable]]:
+    """(encode, decode) of each peer that handles `img`: JPEG q90 and PNG through
+    OpenCV, WebP, AVIF and JPEG XL (lossy, quality 90) through imagecodecs if present."""
     import cv2
 
-    from tests.corpus import load_corpus
+    peers: dict[str, tuple[Callable, Callable]] = {
+        "jpeg": (lambda a: cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, 90])[1],
+                 lambda b: cv2.imdecode(b, cv2.IMREAD_UNCHANGED)),
+        "png": (lambda a: cv2.imencode(".png", a)[1],
+                lambda b: cv2.imdecode(b, cv2.IMREAD_UNCHANGED)),
+    }
+    try:
+        import imagecodecs as ic
+    except ImportError:
+        return peers
+    # libwebp codes colour only: a gray image goes in as three equal channels
+    rgb = (lambda a: np.dstack([a] * 3)) if img.ndim == 2 else (lambda a: a)
+    for name, enc, dec in (("webp", lambda a: ic.webp_encode(rgb(a), level=90), ic.webp_decode),
+                           ("avif", lambda a: ic.avif_encode(a, level=90), ic.avif_decode),
+                           ("jxl", lambda a: ic.jpegxl_encode(a, level=90), ic.jpegxl_decode)):
+        try:
+            dec(enc(img))
+        except Exception:  # a peer that cannot code this image is left out
+            continue
+        peers[name] = (enc, dec)
+    return peers
 
+
+def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int) -> dict[str, bytes]:
+    """Table 1; returns each image's .atm bytes."""
     try:
         decoder_gl.context()
         gl = True
     except BackendError as exc:
         print(f"GL decoder unavailable: {exc}")
         gl = False
+    files = {name: codec.encode(corpus[name], points=max(4, round(DENSITY * np.prod(corpus[name].shape[:2]))))
+             for name in names}
+    peers = list(peer_codecs(corpus[names[0]]))
+    parts = ["render", "decode", "triangulate"] + (["gl render", "gl decode"] if gl else [])
+    cols = peers + parts
+    head = ["image", "size", "triangles"] + [f"{c} ms" for c in cols]
+    head += [f"decode / {p}" for p in peers] + ["render / jpeg", "triangulate / jpeg"]
+    head += ["gl decode / jpeg"] if gl else []
+    rows = []
+    for name in names:
+        img, data = corpus[name], files[name]
+        h, w = img.shape[:2]
+        mesh = codec.decode_mesh(data)
+        bands = [(m.vertices, segments(m.constraints)) for _, m in container.unpack(data)[1]]
+        fns: dict[str, Callable[[], object]] = {}
+        for peer, (enc, dec) in peer_codecs(img).items():
+            if peer in peers:
+                fns[peer] = lambda dec=dec, b=enc(img): dec(b)
+        fns["render"] = lambda: decoder_cpu.render(mesh)
+        fns["decode"] = lambda: codec.decode(data, backend="cpu")
+        fns["triangulate"] = lambda: [triangulate(v, s) for v, s in bands]
+        if gl:
+            fns["gl render"] = lambda: decoder_gl.render(mesh)
+            fns["gl decode"] = lambda: codec.decode(data, backend="gl")
+        times = interleaved(fns, repeat)
+        row = [name, f"{w}x{h}", f"{len(mesh.triangles):,}"]
+        row += [f"{statistics.median(times[c]):.2f}" if c in times else "-" for c in cols]
+        row += [f"{ratio(times, 'decode', p):.1f}" if p in times else "-" for p in peers]
+        row += [f"{ratio(times, 'render', 'jpeg'):.1f}", f"{ratio(times, 'triangulate', 'jpeg'):.1f}"]
+        row += [f"{ratio(times, 'gl decode', 'jpeg'):.1f}"] if gl else []
+        rows.append(row)
+    print_table(head, rows)
+    return files
+
+
+def thread_table(files: dict[str, bytes], repeat: int) -> None:
+    """Table 2: throughput of two threads decoding different files over one."""
+    work = list(files.values()) * max(1, -(-8 // len(files)))  # at least 8 decodes a run
+    pool = ThreadPoolExecutor(2)
+
+    def one() -> None:
+        for data in work:
+            codec.decode(data)
+
+    def two() -> None:
+        list(pool.map(codec.decode, work))
+
+    times = interleaved({"one thread": one, "two threads": two}, repeat)
+    pool.shutdown()
+    print()
+    print_table(["decodes", "one thread ms", "two threads ms", "two threads / one thread throughput"],
+                [[str(len(work)), f"{statistics.median(times['one thread']):.1f}",
+                  f"{statistics.median(times['two threads']):.1f}",
+                  f"{ratio(times, 'one thread', 'two threads'):.2f}"]])
+
+
+def dem(size: int, seed: int = 1) -> np.ndarray:
+    """A size x size float32 terrain in metres (0 .. ~1500): octaves of smooth noise,
+    each twice as fine and half as high as the one before."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    out = np.zeros((size, size), np.float32)
+    cells, amp = 4, 800.0
+    while cells <= size:
+        coarse = rng.standard_normal((cells, cells)).astype(np.float32)
+        out += amp * cv2.resize(coarse, (size, size), interpolation=cv2.INTER_CUBIC)
+        cells, amp = cells * 2, amp / 2
+    return out - out.min()
+
+
+def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int,
+                  errors: list[float], repeat: int) -> None:
+    """Tables 3 and 4 (pydelatin, bench extra)."""
+    try:
+        from pydelatin import Delatin
+    except ImportError:
+        print("\npydelatin not installed (the bench extra): encode tables left out")
+        return
+    rows = []
+    for name in names:
+        img = corpus[name]
+        if img.ndim != 2:
+            continue
+        n = max(4, round(DENSITY * img.size))
+        heights = img.astype(np.float32)
+        times = interleaved({"atm": lambda: codec.encode(img, points=n),
+                             "delatin": lambda: Delatin(heights, max_points=n)}, repeat)
+        h, w = img.shape
+        rows.append([name, f"{w}x{h}", f"{n:,}", f"{statistics.median(times['atm']):.0f}",
+                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}"])
+    print()
+    print_table(["image", "size", "vertices", "atm encode ms", "delatin ms", "atm / delatin"], rows)
+    terrain = dem(dem_size)
+    rows = []
+    for e in errors:
+        times = interleaved({"atm": lambda: codec.encode(terrain, max_error=e),
+                             "delatin": lambda: Delatin(terrain, max_error=e)}, repeat)
+        rows.append([f"{dem_size}x{dem_size}", f"{e:g}", f"{statistics.median(times['atm']):.0f}",
+                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}"])
+    print()
+    print_table(["float DEM", "max error (m)", "atm encode ms", "delatin ms", "atm / delatin"], rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--repeat", type=int, default=31, help="timed rounds per decode table row")
+    parser.add_argument("--encode-repeat", type=int, default=3, help="timed rounds per encode row")
+    parser.add_argument("--images", nargs="*", help="corpus images to measure (default: all)")
+    parser.add_argument("--dem-size", type=int, default=1024, help="side of the float DEM (table 4)")
+    parser.add_argument("--max-errors", type=float, nargs="*", default=[0.5, 5.0, 50.0],
+                        help="max_error bounds in metres (table 4)")
+    parser.add_argument("--no-encode", action="store_true", help="decode and thread tables only")
+    args = parser.parse_args(argv)
+    from tests.corpus import load_corpus
+
     corpus = load_corpus()
     names = args.images or list(corpus)
     unknown = sorted(set(names) - set(corpus))
     if unknown:
         parser.error(f"no corpus image {', '.join(unknown)}; choose from {', '.join(corpus)}")
-    cols = ["jpeg", "render", "decode", "triangulate"] + (["gl render", "gl decode"] if gl else [])
-    head = ["image", "size", "triangles"] + [f"{c} ms" for c in cols]
-    head += [f"{c} / jpeg" for c in cols[1:]]
-    print("| " + " | ".join(head) + " |")
-    print("|" + "|".join("---:" if i > 1 else "---" for i in range(len(head))) + "|")
-    for name in names:
-        img = corpus[name]
-        h, w = img.shape[:2]
-        data = codec.encode(img, points=max(4, round(DENSITY * w * h)))
-        mesh = codec.decode_mesh(data)
-        bands = [(m.vertices, segments(m.constraints)) for _, m in container.unpack(data)[1]]
-        ok, jpeg = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 90])
-        assert ok
-        fns: dict[str, Callable[[], object]] = {
-            "jpeg": lambda: cv2.imdecode(jpeg, cv2.IMREAD_UNCHANGED),
-            "render": lambda: decoder_cpu.render(mesh),
-            "decode": lambda: codec.decode(data, backend="cpu"),
-            "triangulate": lambda: [triangulate(v, s) for v, s in bands],
-        }
-        if gl:
-            fns["gl render"] = lambda: decoder_gl.render(mesh)
-            fns["gl decode"] = lambda: codec.decode(data, backend="gl")
-        times = interleaved(fns, args.repeat)
-        medians = [statistics.median(times[c]) for c in cols]
-        ratios = [statistics.median(t / j for t, j in zip(times[c], times["jpeg"])) for c in cols[1:]]
-        row = [name, f"{w}x{h}", f"{len(mesh.triangles):,}"]
-        row += [f"{m:.2f}" for m in medians] + [f"{r:.1f}" for r in ratios]
-        print("| " + " | ".join(row) + " |", flush=True)
+    files = decode_table(corpus, names, args.repeat)
+    thread_table(files, max(3, args.repeat // 4))
+    if not args.no_encode:
+        encode_tables(corpus, names, args.dem_size, args.max_errors, args.encode_repeat)
     return 0
 
 

@@ -1,1 +1,1 @@
-"""The `atm` command line tool (also `python -m cli`)."""
+"""The `atm` command line tool, installed as codec.cli (also `python -m codec`)."""

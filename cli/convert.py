@@ -14,7 +14,7 @@ from typing import BinaryIO
 import numpy as np
 
 import codec
-from cli import rowio
+from . import rowio
 from codec.errors import ATMError, UnsupportedError
 
 
@@ -67,13 +67,13 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
     """Encode one image (a path or -) to one .atm output (a path or -), band by band.
     Returns the finished encoder (its statistics) and the bytes written."""
     src = rowio.open_rows(src_name)
-    if src.dtype.kind == "f" and "value_range" not in options:
-        if src.value_range is None:
+    if src.dtype.kind == "f":
+        if "value_range" not in options and src.scan is None:
             raise codec.OptionError(
                 f"{src_name}: float data from a stream needs --value-range LOW HIGH "
                 "(the header carries the quantisation before the rows arrive)"
             )
-        options = dict(options, value_range=src.value_range)
+        options = src.float_options(options)
     with open_output(dst_name) as f:
         out = _Counter(f)
         enc = codec.StreamEncoder(

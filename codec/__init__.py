@@ -3,7 +3,7 @@
     import codec
     data = codec.encode(image, points=4000)   # bytes
     image2 = codec.decode(data)               # same shape and dtype
-    m = codec.mesh(image)                     # the mesh itself: vertices, triangles, ...
+    m = codec.build_mesh(image)               # the mesh itself: vertices, triangles, ...
 
 Heavy modules (OpenCV, triangle, OpenGL) load on first use, not at import.
 """
@@ -55,7 +55,7 @@ def encode(
     channel, in sample units, guaranteed by refinement.
     mesher: "adaptive" (default: walls along discontinuities, curvature sampling,
     least-squares values) or "uniform" (the grid baseline); further options go to
-    the mesher (see codec.adaptive.build).
+    the mesher (see codec.mesher.adaptive.build).
     band_height: rows per band (default: about a megapixel per band); images are coded
     band by band so that StreamEncoder/StreamDecoder can work in bounded memory.
     """
@@ -70,7 +70,7 @@ def encode(
     )
 
 
-def mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
+def build_mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
     """Build the mesh `encode` would store, without packing it."""
     from . import encoder
 
@@ -101,12 +101,13 @@ def decode_mesh(data: bytes) -> Mesh:
 
 def info(data: bytes) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
-    vertices, triangles, constraints, bytes, nodata, metadata."""
+    vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
+    each band's count fields (checksums and limits checked, no mesh decoded)."""
     from . import container
 
     data = _as_bytes(data)
     reader = container.Reader(io.BytesIO(data))
-    bands = list(reader)
+    counts = container.summarise(reader)
     header = reader.header
     return {
         "version": header.version,
@@ -114,10 +115,10 @@ def info(data: bytes) -> dict:
         "height": header.height,
         "dtype": str(header.dtype),
         "channels": header.channels,
-        "bands": len(bands),
-        "vertices": sum(len(m.vertices) for _, m in bands),
-        "triangles": sum(len(m.triangles) for _, m in bands),
-        "constraints": sum(len(m.constraints) for _, m in bands),
+        "bands": counts.bands,
+        "vertices": counts.vertices,
+        "triangles": counts.triangles,
+        "constraints": counts.polylines,
         "bytes": len(data),
         "nodata": header.nodata,
         "metadata": header.metadata or {},
@@ -137,10 +138,14 @@ def read(path: str | os.PathLike, *, backend: str = "cpu", metadata: bool = Fals
     return (image, meta) if metadata else image
 
 
-def write(path: str | os.PathLike, image, **options) -> None:
-    """Encode `image` and write it to `path` atomically (options as for `encode`)."""
-    from .files import atomic_write
+def write(path: str | os.PathLike, image, *, force: bool = False, **options) -> None:
+    """Encode `image` and write it to `path` atomically (options as for `encode`).
+    A name with an image extension (x.png, x.tif, ...) is refused unless force=True:
+    .atm bytes there would be taken for that image format."""
+    from .files import atomic_write, refuse_image_name
 
+    if not force:
+        refuse_image_name(path)
     atomic_write(path, encode(image, **options))
 
 
@@ -163,10 +168,10 @@ __all__ = [
     "TruncatedError",
     "UnsupportedError",
     "decode",
+    "build_mesh",
     "decode_mesh",
     "encode",
     "info",
-    "mesh",
     "read",
     "write",
 ]

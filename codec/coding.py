@@ -8,6 +8,7 @@ import zlib
 
 import numpy as np
 
+from . import _fields
 from .errors import CorruptError
 
 #: Longest varint accepted: 5 bytes hold every value below 2**35.
@@ -34,23 +35,11 @@ def varints(values: np.ndarray) -> bytes:
 def unvarints(data: bytes, count: int, what: str) -> np.ndarray:
     """Decode exactly `count` varints that fill `data` (int64); CorruptError otherwise."""
     b = np.frombuffer(data, dtype=np.uint8)
-    last = b < 0x80
-    ends = np.flatnonzero(last)
-    if len(ends) != count or (count and not last[-1]) or (count == 0 and b.size):
+    status, out = _fields.unvarints(b, count, MAX_VARINT_BYTES)
+    if status == _fields.Varints.VARINTS_COUNT:
         raise CorruptError(f"{what}: {b.size} bytes do not hold {count} numbers")
-    # a number's last byte holds its top group (and no continuation bit); most numbers
-    # are one byte, so the few longer ones get their lower groups added on their own
-    out = b[ends].astype(np.int64)
-    if b.size == count:
-        return out
-    lengths = np.diff(ends, prepend=-1)
-    multi = np.flatnonzero(lengths > 1)
-    longest = int(lengths[multi].max())
-    if longest > MAX_VARINT_BYTES:
+    if status == _fields.Varints.VARINTS_LONG:
         raise CorruptError(f"{what}: a number is longer than {MAX_VARINT_BYTES} bytes")
-    for j in range(1, longest):  # a loop over byte positions (at most 4)
-        multi = multi[lengths[multi] > j]
-        out[multi] = (out[multi] << 7) | (b[ends[multi] - j] & 0x7F)
     return out
 
 

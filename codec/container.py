@@ -9,16 +9,17 @@ from __future__ import annotations
 
 import gc
 import io
-import json
+import struct
 from dataclasses import dataclass
 from typing import BinaryIO, Iterator
 
 import numpy as np
 from construct import ChecksumError, ConstructError
 
-from format_spec import schema
+from .format_spec import schema
 
 from . import coding, frames, limits, meshcode
+from . import metadata as meta_json
 from .errors import CorruptError, FormatError, LimitError, OptionError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
@@ -57,21 +58,20 @@ class Header:
         return dict(width=self.width, height=self.height, sample_type=code, channels=self.channels)
 
 
-#: Largest meta chunk, once decompressed.
-MAX_METADATA_BYTES = 1 << 20
-
-
 def encode_metadata(metadata: dict) -> bytes:
     """The meta chunk's JSON: an object, keys sorted (the same input gives the same bytes)."""
-    if not isinstance(metadata, dict) or not all(isinstance(k, str) for k in metadata):
-        raise OptionError("metadata must be a dict with string keys")
-    try:
-        data = json.dumps(metadata, sort_keys=True, ensure_ascii=False, allow_nan=False).encode("utf-8")
-    except (TypeError, ValueError) as exc:
-        raise OptionError(f"metadata must be JSON-serialisable: {exc}") from None
-    if len(data) > MAX_METADATA_BYTES:
-        raise OptionError(f"metadata is {len(data):,} bytes of JSON; at most {MAX_METADATA_BYTES:,}")
-    return data
+    return meta_json.encode(metadata)
+
+
+def _stored_bound(size: int) -> int:
+    """The most bytes zstd needs to store `size` bytes (its ZSTD_COMPRESSBOUND, rounded
+    up): a frame longer than that for the size it may declare is refused unread."""
+    return size + (size >> 7) + 1024
+
+
+#: The MESH payload's fixed fields (schema.MeshPayload up to sample_step), which say
+#: how large the rest can be.
+_MESH_FIXED = struct.Struct("<6IBBIH")
 
 
 def band_starts(height: int, band_height: int) -> list[int]:
@@ -105,6 +105,7 @@ class Writer:
 
     def __init__(self, stream: BinaryIO, header: Header):
         limits.check_image_size(header.width, header.height)
+        limits.check_image_bytes(header.width, header.height, header.channels, np.dtype(header.dtype).itemsize)
         self._stream = stream
         self.header = header
         self._next_y0 = 0
@@ -144,7 +145,19 @@ class Writer:
             raise ValueError("a band with holes needs a header with a nodata value")
         fields = meshcode.encode_band(y0, mesh, step)
         raw = schema.MeshPayload.build(fields, **h._fields())
-        self._stream.write(_chunk(schema.MESH, frames.compress_parts(meshcode.payload_parts(raw, fields))))
+        frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
+        if fields["connectivity"] == schema.DELAUNAY and len(mesh.vertices) > limits.max_rebuilt_vertices(len(frame)):
+            # too cheap to store for a decoder to rebuild: list the triangles
+            fields = meshcode.encode_band(y0, mesh, step, rebuild=False)
+            raw = schema.MeshPayload.build(fields, **h._fields())
+            frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
+        if len(raw) > limits.max_payload(len(frame)):
+            raise LimitError(
+                f"the band from row {y0} compresses {len(raw):,} bytes into {len(frame):,}, more "
+                "than decoders accept (raise codec.limits.MAX_PAYLOAD_EXPANSION when encoding and "
+                "decoding such files)"
+            )
+        self._stream.write(_chunk(schema.MESH, frame))
         _release_cycles(len(raw))
         self._next_y0 = y0 + mesh.height - 1
         self._rows_done = y0 + mesh.height
@@ -208,8 +221,12 @@ class Reader:
     read; a damaged or truncated file raises an ATMError after the intact bands.
     """
 
-    def __init__(self, stream: BinaryIO):
+    def __init__(self, stream: BinaryIO, metadata: bool = True):
+        """metadata=False skips the meta chunks before the first band unparsed (what
+        Pillow's Image.open wants: the size, and nothing that costs)."""
         self._stream = _Counted(stream)
+        #: metadata bytes (decompressed) still allowed in this file
+        self._meta_budget = limits.MAX_METADATA_BYTES
         self.version = self._read_signature()
         ctype, payload, offset = self._next_chunk()
         if ctype != schema.HEADER:
@@ -246,7 +263,7 @@ class Reader:
                 break
             if ctype == schema.NODATA:
                 self.header = self._parse_nodata(self.header, payload)
-            elif ctype == schema.META:
+            elif ctype == schema.META and metadata:
                 self._read_metadata(payload, offset)
         self._iterated = False
 
@@ -290,6 +307,11 @@ class Reader:
             raise LimitError(
                 f"chunk {ctype.decode('latin-1')} at byte {offset} declares {length:,} bytes, over the limit"
             )
+        if ctype == schema.META and length > _stored_bound(limits.MAX_METADATA_BYTES):
+            raise LimitError(
+                f"meta chunk at byte {offset} declares {length:,} bytes; metadata is at most "
+                f"{limits.MAX_METADATA_BYTES:,} bytes (codec.limits.MAX_METADATA_BYTES)"
+            )
         return ctype, raw, length, offset
 
     def _next_chunk(self) -> tuple[bytes, bytes, int]:
@@ -322,6 +344,7 @@ class Reader:
             raise UnsupportedError("quantised float data has one channel")
         limits.check_image_size(h.width, h.height)
         dtype = np.dtype(np.float32) if h.sample_type == schema.FLOAT16Q else DTYPES[h.sample_type]
+        limits.check_image_bytes(h.width, h.height, h.channels, dtype.itemsize)
         return _RawHeader(h.sample_type, Header(h.width, h.height, dtype, h.channels))
 
     @staticmethod
@@ -339,13 +362,15 @@ class Reader:
         return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
 
     def _read_metadata(self, payload: bytes, offset: int) -> None:
-        raw = frames.decompress(payload, MAX_METADATA_BYTES, f"meta chunk at byte {offset}")
-        try:
-            meta = json.loads(raw.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError):
-            raise CorruptError(f"meta chunk at byte {offset} is not UTF-8 JSON") from None
-        if not isinstance(meta, dict):
-            raise CorruptError(f"meta chunk at byte {offset} is not a JSON object")
+        where = f"meta chunk at byte {offset}"
+        size = frames.declared_size(payload, where)
+        if size > self._meta_budget:
+            raise LimitError(
+                f"{where} holds {size:,} bytes of metadata, which brings the file's over "
+                f"{limits.MAX_METADATA_BYTES:,} (codec.limits.MAX_METADATA_BYTES)"
+            )
+        self._meta_budget -= size
+        meta = meta_json.parse(frames.decompress(payload, size, where), where)
         h = self.header
         merged = dict(h.metadata or {}, **meta)
         self.header = Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, h.nodata, merged)
@@ -359,13 +384,15 @@ class Reader:
             info = np.iinfo(h.dtype)
             if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):
                 raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")
-        elif np.isinf(value) or (np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max)):
-            raise CorruptError(f"NDAT value {value!r} is not a finite float32 or NaN")
+        elif np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max):
+            raise CorruptError(f"NDAT value {value!r} is beyond float32's range")
         return Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, float(value), h.metadata)
 
     def _parse_mask(self, payload: bytes, offset: int, y0: int) -> np.ndarray:
         h = self.header
         where = f"MASK chunk at byte {offset}"
+        if frames.declared_size(payload, where) > limits.max_payload(len(payload)):
+            raise LimitError(f"{where} would decompress to more than {limits.MAX_PAYLOAD_EXPANSION} times its size")
         raw = frames.decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where)
         stream = io.BytesIO(raw)
         try:
@@ -393,9 +420,50 @@ class Reader:
         per_vertex = v + h.storage.itemsize * h.channels + 2 * (2 * v) + 2 * v
         return 65 + nv * per_vertex + nt * 3 * v
 
+    def _check_frame(self, payload: bytes, where: str, y0_expected: int) -> int:
+        """The size a MESH frame declares, once it is known to fit what the image, the
+        chunk's stored bytes and the band's own counts allow (all before decompressing
+        more than the counts)."""
+        h = self.header
+        size = frames.declared_size(payload, where)
+        if size > limits.max_payload(len(payload)):
+            raise LimitError(
+                f"{where} would decompress {len(payload):,} bytes to {size:,}, more than "
+                f"{limits.MAX_PAYLOAD_EXPANSION} times (a decompression bomb?; raise "
+                "codec.limits.MAX_PAYLOAD_EXPANSION to accept it)"
+            )
+        if size > min(self._payload_limit(), limits.MAX_PAYLOAD_BYTES):
+            raise LimitError(f"{where} would decompress to {size:,} bytes, more than its image can need")
+        fixed = frames.head(payload, _MESH_FIXED.size, where)
+        if len(fixed) < _MESH_FIXED.size:
+            raise CorruptError(f"{where} is malformed: it ends inside its fixed fields")
+        y0, rows, n, nt, lines, points, connectivity, _, _, _ = _MESH_FIXED.unpack(fixed)
+        if y0 != y0_expected or rows < min(2, h.height) or y0 + rows > h.height:
+            raise CorruptError(f"{where} has {rows} rows from row {y0}, expected a band from row {y0_expected}")
+        if n > limits.max_vertices(h.width, rows):
+            raise LimitError(f"{where}: {n:,} vertices is too many for {h.width}x{rows} pixels")
+        if nt > limits.max_triangles(h.width, rows):
+            raise LimitError(f"{where}: {nt:,} triangles is too many for {h.width}x{rows} pixels")
+        if points > 2 * limits.max_vertices(h.width, rows) or lines > points:
+            raise CorruptError(f"{where}: {lines:,} polylines of {points:,} points in all")
+        if connectivity == schema.DELAUNAY and n > limits.max_rebuilt_vertices(len(payload)):
+            raise LimitError(
+                f"{where} asks to rebuild the triangles of {n:,} vertices from {len(payload):,} "
+                "bytes (raise codec.limits.MAX_REBUILT_VERTICES_PER_BYTE to accept it)"
+            )
+        v = coding.MAX_VARINT_BYTES
+        # every section at its longest for these counts, with its length prefix
+        need = (_MESH_FIXED.size + 7 * 4 + v * (2 * lines + 2 * points + n + 1)
+                + (24 * n + 7) // 8 + v * n * h.channels + 3 * v * nt)
+        if size > need:
+            raise CorruptError(f"{where} declares {size:,} bytes; its counts can use at most {need:,}")
+        return size
+
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
         h = self.header
-        raw = frames.decompress(payload, self._payload_limit(), f"MESH chunk at byte {offset}")
+        where = f"MESH chunk at byte {offset}"
+        size = self._check_frame(payload, where, y0_expected)
+        raw = frames.decompress(payload, size, where)
         stream = io.BytesIO(raw)
         fields = h._fields()
         try:
@@ -461,9 +529,48 @@ class Reader:
             # ancillary chunks this version does not know are skipped, as PNG does
 
 
-def read_header(stream: BinaryIO) -> Header:
-    """Read the signature and the AHDR chunk, nothing more."""
-    return Reader(stream).header
+@dataclass(frozen=True)
+class Summary:
+    """What codec.info reports of a file's bands, from their chunks' count fields."""
+
+    bands: int
+    vertices: int
+    triangles: int
+    polylines: int
+
+
+def summarise(reader: Reader) -> Summary:
+    """Count a file's bands, vertices, triangles and polylines from each MESH chunk's
+    fixed fields, checking its CRC and frame limits but decoding no mesh (the cost is
+    the file's bytes, not its meshes')."""
+    h = reader.header
+    bands = vertices = triangles = polylines = 0
+    next_y0, finished = 0, False
+    while True:
+        ctype, payload, offset = reader._next_chunk()
+        if ctype == schema.MESH:
+            if finished:
+                raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
+            reader._check_frame(payload, f"MESH chunk at byte {offset}", next_y0)
+            y0, rows, n, nt, lines, *_ = _MESH_FIXED.unpack(frames.head(payload, _MESH_FIXED.size, ""))
+            bands, vertices, triangles, polylines = bands + 1, vertices + n, triangles + nt, polylines + lines
+            next_y0, finished = y0 + rows - 1, y0 + rows == h.height
+        elif ctype == schema.END:
+            if not finished:
+                raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
+            return Summary(bands, vertices, triangles, polylines)
+        elif ctype == schema.META:
+            reader._read_metadata(payload, offset)
+        elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA):
+            raise CorruptError(f"misplaced {ctype.decode('latin-1')} chunk at byte {offset}")
+        elif ctype[0] & 0x20 == 0 and ctype != schema.MASK:
+            raise UnsupportedError(f"unknown critical chunk {ctype.decode('latin-1')}; a newer codec wrote this file")
+
+
+def read_header(stream: BinaryIO, metadata: bool = True) -> Header:
+    """Read the signature and the chunks before the first band (metadata=False: the
+    meta chunks unparsed, the header's metadata None)."""
+    return Reader(stream, metadata).header
 
 
 def unpack(data: bytes | BinaryIO) -> tuple[Header, list[tuple[int, Mesh]]]:

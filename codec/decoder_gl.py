@@ -1,37 +1,39 @@
-"""OpenGL z-buffer decoder (the seed's §3.4.2): rasterise the mesh with moderngl.
+"""OpenGL decoder (the paper's §3.4.2, "Approximation of Digital Images with
+Discontinuity-Preserving Adaptive Triangular Meshes"): rasterise the mesh with moderngl.
 
 A headless context (EGL; Mesa's llvmpipe renders on machines without a GPU) is created
 on first use and kept; importing this module touches no GL.
 
 Geometry. Mesh point (x, y) maps to window point (x - x0 + 1/2, y - y0 + 1/2) of a tile
 whose first pixel is (x0, y0), so OpenGL's pixel centres fall on the integer points of
-the mesh: pixel (row y, column x) samples the mesh at (x, y), as in the CPU decoder. The
-viewport is a power of two wide and high (the framebuffer is only the tile's size), so
-every coordinate and transform step is exact in float32 and vertices land exactly on the
-rasteriser's sub-pixel grid. Window row 0 is image row y0, which is also the first row
-glReadPixels returns, so no flip is needed. Images larger than a tile (MAX_TILE, within
-the context's maximum viewport and renderbuffer size) are rendered tile by tile.
+the mesh: pixel (row y, column x) samples the mesh at (x, y), as in the CPU decoder.
+Window row 0 is image row y0, which is also the first row glReadPixels returns, so no
+flip is needed. Images larger than a tile (MAX_TILE, within the context's maximum
+viewport and renderbuffer size) are rendered tile by tile.
 
-Border. The outermost pixel centres lie exactly on the mesh's outer boundary, where the
-fill rule would drop those of two sides. A one-pixel skirt closes that gap: each
-boundary edge is extruded outwards into a quad whose values are constant across it
-(equal to the edge's linear interpolation along it) and each image corner gets a square
-of the corner's value. The boundary edges are then shared, watertight edges, so every
-border pixel is drawn exactly once, and on the boundary line the skirt's value is the
-mesh's own.
+Coverage is decided in integers, not by the rasteriser. The rasteriser's own edge tests
+cannot be trusted near long edges: a triangle reaching far outside the viewport (a wide
+image's band, a large triangle seen from a small tile) is clipped in floating point, and
+the clipped edges move by enough to hand pixels a thousandth of a pixel from an edge to
+the neighbouring triangle, whose plane then gives them a value thousands of levels off.
+So a geometry shader draws each triangle with its edges pushed out by MARGIN pixels and
+its sharp corners capped (a superset of its pixels whatever the clipping does), and the
+fragment shader keeps a pixel only if the triangle's exact integer edge weights are all
+non-negative (boundary included, which also covers the image's border). Pixels on a
+shared edge may be written by both triangles: the rule gives them the same value
+(ATM.md §5), so the order does not matter.
 
-Values (exact mode, the default; needs OpenGL 4.0 for double precision). A geometry
-shader hands each fragment its triangle's three integer corners and values; the fragment
+Values (exact mode, the default; needs OpenGL 4.0 for double precision). The fragment
 shader evaluates the CPU decoder's normative rule, floor((2 sum w_i v_i + D) / 2D), with
 the integer edge weights w_i in int32 (|w_i| <= 2 W H < 2**31) and the sums in double
 (< 2**53, exact), corrects the quotient by its exact remainder, and writes the integer
 into an R32F (gray) or RGBA32F (colour) target, which holds every 16-bit value exactly.
-On a shared edge both triangles give the same value, so GL and CPU images are identical.
+GL and CPU images are identical.
 
-Values (float mode, exact=False, and the fallback on contexts without doubles): vertex
-values as float32 interpolated by the rasteriser, rounded half up on read-back. float32
-interpolation is off by up to ~2e-3 for 8-bit and ~0.7 for 16-bit data here, so values
-whose exact fraction is one half may round either way: within 1 of the CPU decoder.
+Values (float mode, exact=False, and the fallback on contexts without doubles): the same
+weights, the interpolation sum w_i v_i / D in float32, rounded half up on read-back:
+values whose exact fraction is one half may round either way, so within 1 of the CPU
+decoder.
 
 A second R32I target records gl_PrimitiveID + 1 (0 where nothing drew): a pixel left at
 0 is a CorruptError, as in the CPU decoder.
@@ -44,95 +46,115 @@ import threading
 import numpy as np
 
 from .errors import BackendError, CorruptError, UnsupportedError
-from .mesh import Mesh, orient
+from .mesh import Mesh
 
 #: Largest tile side rendered at once; bounds the read-back memory (16 bytes a pixel).
 MAX_TILE = 2048
 #: The exact shader's int32 edge weights stay below 2**31 up to this many pixels.
 MAX_EXACT_PIXELS = 1 << 30
+#: Half-width in pixels of the rectangle drawn around each edge. The float32 window
+#: coordinates of the clipped geometry are off by at most MAX_DIMENSION * 2**-23 of a
+#: pixel (1/8 at the largest image side), well inside it.
+MARGIN = 0.75
+#: Corners whose pushed-out point would lie more than MARGIN * sqrt(2 / _MIN_K) away
+#: (angles under about 11 degrees) are capped instead, by a chord at least 0.9 MARGIN
+#: from them.
+_MIN_K = 0.02
 
 INSTALL_HINT = (
     "install Mesa's EGL and software renderer (Debian/Ubuntu: apt-get install libegl1 "
     "libegl-mesa0 libgl1-mesa-dri) or decode with backend='cpu'"
 )
 
-_FLOAT_VS = """
-#version 330
-uniform vec2 origin;   // the tile's first pixel, minus one half
-uniform vec2 scale;    // 2 / viewport size (a power of two: exact)
-in ivec2 pos;
-in vec3 val;
-out vec3 v_val;
-void main() {
-    gl_Position = vec4((vec2(pos) - origin) * scale - 1.0, 0.0, 1.0);
-    v_val = val;
-}
-"""
-
-_FLOAT_FS = """
-#version 330
-in vec3 v_val;
-layout(location = 0) out vec4 value;
-layout(location = 1) out int prim;
-void main() {
-    value = vec4(v_val, 1.0);
-    prim = gl_PrimitiveID + 1;
-}
-"""
-
-_EXACT_VS = """
-#version 400
-uniform vec2 origin;
-uniform vec2 scale;
+_VS = """
+#version {version}
 in ivec2 pos;
 in vec3 val;
 flat out ivec2 g_pos;
 flat out vec3 g_val;
-void main() {
-    gl_Position = vec4((vec2(pos) - origin) * scale - 1.0, 0.0, 1.0);
+void main() {{
+    gl_Position = vec4(0.0, 0.0, 0.0, 1.0);   // the geometry shader places the vertices
     g_pos = pos;
     g_val = val;
-}
+}}
 """
 
-# passes the whole triangle (corners and values) to every fragment, unchanged
-_EXACT_GS = """
-#version 400
+# draws a superset of the triangle's pixels, whatever the clipping: the triangle with its
+# edges pushed out by MARGIN, a convex polygon of 3 to 6 corners. Each vertex carries the
+# whole triangle (corners and values) to the fragment shader.
+_GS = """
+#version {version}
+uniform vec2 origin;   // the tile's first pixel, minus one half
+uniform vec2 scale;    // 2 / viewport size (a power of two: exact)
 layout(triangles) in;
-layout(triangle_strip, max_vertices = 3) out;
+layout(triangle_strip, max_vertices = 6) out;
 flat in ivec2 g_pos[];
 flat in vec3 g_val[];
 flat out ivec2 p0, p1, p2;
 flat out vec3 v0, v1, v2;
-void main() {
-    for (int i = 0; i < 3; i++) {
-        gl_Position = gl_in[i].gl_Position;
-        gl_PrimitiveID = gl_PrimitiveIDIn;
-        p0 = g_pos[0]; p1 = g_pos[1]; p2 = g_pos[2];
-        v0 = g_val[0]; v1 = g_val[1]; v2 = g_val[2];
-        EmitVertex();
-    }
+void emit(vec2 q) {{
+    gl_Position = vec4(q * scale - 1.0, 0.0, 1.0);
+    gl_PrimitiveID = gl_PrimitiveIDIn;
+    p0 = g_pos[0]; p1 = g_pos[1]; p2 = g_pos[2];
+    v0 = g_val[0]; v1 = g_val[1]; v2 = g_val[2];
+    EmitVertex();
+}}
+void main() {{
+    vec2 q[3];
+    for (int i = 0; i < 3; i++) q[i] = vec2(g_pos[i]) - origin;  // exact below 2**23
+    vec2 e = q[1] - q[0], f = q[2] - q[0];
+    if (e.x * f.y - e.y * f.x < 0.0) {{ vec2 s = q[1]; q[1] = q[2]; q[2] = s; }}
+    vec2 n[3];  // outward unit normal of the edge from corner i to corner i + 1
+    for (int i = 0; i < 3; i++) {{
+        vec2 d = normalize(q[(i + 1) % 3] - q[i]);
+        n[i] = vec2(d.y, -d.x);
+    }}
+    // the corners of the pushed-out triangle, in order: where a corner's two edges meet
+    // once pushed out (MARGIN / cos(half the angle between their normals) from it), or,
+    // at a sharp corner where that is far, two points capping it MARGIN beyond it
+    vec2 c[6];
+    int count = 0;
+    for (int i = 0; i < 3; i++) {{
+        vec2 a = n[(i + 2) % 3], b = n[i];
+        float k = 1.0 + dot(a, b);
+        if (k >= {min_k}) {{
+            c[count++] = q[i] + (a + b) * ({margin} / k);
+        }} else {{
+            c[count++] = q[i] + (a - vec2(a.y, -a.x)) * {margin};  // along the edge in, on
+            c[count++] = q[i] + (b + vec2(b.y, -b.x)) * {margin};  // back along the edge out
+        }}
+    }}
+    // a convex polygon as one strip: corners 0, 1, count - 1, 2, count - 2, ...
+    for (int j = 0; j < count; j++) {{
+        emit(c[(j & 1) == 1 ? (j + 1) / 2 : (count - j / 2) % count]);
+    }}
     EndPrimitive();
-}
+}}
 """
 
-_EXACT_FS = """
-#version 400
+# the triangle's integer edge weights at the pixel, positive inside; pixels outside
+# the closed triangle are discarded
+_FS_HEAD = """
+#version {version}
 uniform ivec2 first;   // the tile's first pixel
 flat in ivec2 p0, p1, p2;
 flat in vec3 v0, v1, v2;
 layout(location = 0) out vec4 value;
 layout(location = 1) out int prim;
-int weight(ivec2 a, ivec2 b, ivec2 p) {
+int weight(ivec2 a, ivec2 b, ivec2 p) {{
     return (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x);
-}
-void main() {
+}}
+void main() {{
     ivec2 p = ivec2(gl_FragCoord.xy) + first;   // centres are at i + 1/2: exact
     int w0 = weight(p1, p2, p);
     int w1 = weight(p2, p0, p);
     int w2 = weight(p0, p1, p);
     int d = w0 + w1 + w2;
-    if (d < 0) { w0 = -w0; w1 = -w1; w2 = -w2; d = -d; }
+    if (d < 0) {{ w0 = -w0; w1 = -w1; w2 = -w2; d = -d; }}
+    if (w0 < 0 || w1 < 0 || w2 < 0) discard;
+"""
+
+_EXACT_FS = _FS_HEAD + """
     dvec3 t = 2.0LF * (double(w0) * dvec3(v0) + double(w1) * dvec3(v1) + double(w2) * dvec3(v2))
               + double(d);
     double den = 2.0LF * double(d);
@@ -142,8 +164,22 @@ void main() {
     q += dvec3(greaterThanEqual(r, dvec3(den))) - dvec3(lessThan(r, dvec3(0.0LF)));
     value = vec4(vec3(q), 1.0);
     prim = gl_PrimitiveID + 1;
-}
+}}
 """
+
+_FLOAT_FS = _FS_HEAD + """
+    vec3 s = float(w0) * v0 + float(w1) * v1 + float(w2) * v2;
+    value = vec4(s / float(d), 1.0);
+    prim = gl_PrimitiveID + 1;
+}}
+"""
+
+
+def _program(ctx, version: int, fragment: str):
+    def source(text: str) -> str:
+        return text.format(version=version, margin=repr(MARGIN), min_k=repr(_MIN_K)).lstrip()
+
+    return ctx.program(vertex_shader=source(_VS), geometry_shader=source(_GS), fragment_shader=source(fragment))
 
 
 class _GL:
@@ -164,13 +200,9 @@ class _GL:
             version = self.ctx.version_code
             self.ctx.release()
             raise BackendError(f"OpenGL 3.3 is needed, this context has {version}; {INSTALL_HINT}")
-        self.float_program = self.ctx.program(vertex_shader=_FLOAT_VS, fragment_shader=_FLOAT_FS)
+        self.float_program = _program(self.ctx, 330, _FLOAT_FS)
         # doubles in shaders are core in OpenGL 4.0
-        self.exact_program = None
-        if self.ctx.version_code >= 400:
-            self.exact_program = self.ctx.program(
-                vertex_shader=_EXACT_VS, geometry_shader=_EXACT_GS, fragment_shader=_EXACT_FS
-            )
+        self.exact_program = _program(self.ctx, 400, _EXACT_FS) if self.ctx.version_code >= 400 else None
         vx, vy = self.ctx.info["GL_MAX_VIEWPORT_DIMS"]
         limit = min(vx, vy, int(self.ctx.info["GL_MAX_RENDERBUFFER_SIZE"]))
         # the viewport is the tile rounded up to a power of two, so keep that within limits
@@ -217,59 +249,6 @@ def available() -> bool:
     return True
 
 
-def _skirt(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Skirt geometry around the mesh: (vertices, values, triangles), the triangles
-    indexing the mesh's vertices followed by the skirt's own."""
-    w, h = mesh.width, mesh.height
-    v = mesh.vertices.astype(np.int64)
-    t = np.asarray(mesh.triangles, dtype=np.int64)
-    n = len(v)
-    vals = mesh.values.reshape(n, -1)
-    # boundary edges: in a mesh that tiles the image (what mesh.validate checks), each
-    # side of it is cut into edges by the vertices on it that triangles use
-    used = np.zeros(n, bool)
-    used[t.ravel()] = True
-    sides = []  # each side's used vertices in order along it: top, bottom, left, right
-    for on, along in ((v[:, 1] == 0, v[:, 0]), (v[:, 1] == h - 1, v[:, 0]),
-                      (v[:, 0] == 0, v[:, 1]), (v[:, 0] == w - 1, v[:, 1])):
-        side = np.flatnonzero(on & used)
-        sides.append(side[np.argsort(along[side])])
-    a = np.concatenate([side[:-1] for side in sides])
-    b = np.concatenate([side[1:] for side in sides])
-    # outward unit offset of each boundary edge, from the side it lies on
-    off = np.repeat(np.array([[0, -1], [0, 1], [-1, 0], [1, 0]], np.int64),
-                    [max(len(side) - 1, 0) for side in sides], axis=0)
-    m = len(a)
-    # quad a, b, b', a' as triangles (a, b, b') and (a, b', a'); a' = n + 2i, b' = n + 2i + 1
-    skirt_v = np.empty((2 * m, 2), np.int64)
-    skirt_v[0::2] = v[a] + off
-    skirt_v[1::2] = v[b] + off
-    skirt_vals = np.empty((2 * m, vals.shape[1]), vals.dtype)
-    skirt_vals[0::2] = vals[a]
-    skirt_vals[1::2] = vals[b]
-    ia = n + 2 * np.arange(m)
-    quads = np.concatenate([np.stack([a, b, ia + 1], 1), np.stack([a, ia + 1, ia], 1)])
-    # corner squares of the corner's value, outside each image corner
-    corners = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.int64)
-    out_dir = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.int64)
-    # the ends of the top and bottom sides, in the order of `corners`
-    top, bottom = sides[0], sides[1]
-    if len(top) == 0 or len(bottom) == 0:
-        raise CorruptError("the mesh lacks a vertex at an image corner")
-    corner_idx = np.array([top[0], top[-1], bottom[-1], bottom[0]])
-    if not np.array_equal(v[corner_idx], corners):
-        raise CorruptError("the mesh lacks a vertex at an image corner")
-    dx = out_dir * [1, 0]
-    dy = out_dir * [0, 1]
-    cv = np.stack([corners + dx, corners + out_dir, corners + dy], axis=1).reshape(-1, 2)
-    cvals = np.repeat(vals[corner_idx], 3, axis=0)
-    k = n + 2 * m + 3 * np.arange(4)
-    ctri = np.concatenate([np.stack([corner_idx, k, k + 1], 1), np.stack([corner_idx, k + 1, k + 2], 1)])
-    sv = np.concatenate([skirt_v, cv])
-    tris = orient(np.concatenate([v, sv]), np.concatenate([quads, ctri]))
-    return sv, np.concatenate([skirt_vals, cvals]), tris
-
-
 def render(mesh: Mesh, exact: bool = True) -> np.ndarray:
     """Decode a validated mesh with OpenGL to an image of its dtype and channels.
 
@@ -287,14 +266,12 @@ def render(mesh: Mesh, exact: bool = True) -> np.ndarray:
     if program is not None and w * h > MAX_EXACT_PIXELS:
         raise UnsupportedError(f"a {w}x{h} image is too large for the exact OpenGL decoder")
     program = program or gl.float_program
-    sv, svals, stri = _skirt(mesh)
-    t = np.asarray(mesh.triangles, dtype=np.int64)
-    tris = np.concatenate([t, stri]).astype(np.int32)
-    verts = np.concatenate([mesh.vertices.astype(np.int64), sv])
+    tris = np.asarray(mesh.triangles, dtype=np.int32)
+    verts = mesh.vertices
     # interleaved vertex data: x, y as int32, then three float32 value slots
     vdata = np.zeros(len(verts), dtype=[("pos", "<i4", 2), ("val", "<f4", 3)])
     vdata["pos"] = verts
-    vdata["val"][:, :c] = np.concatenate([mesh.values.reshape(len(mesh.vertices), c), svals])
+    vdata["val"][:, :c] = mesh.values.reshape(len(verts), c)
     value = np.empty((h, w, c), np.float32)
     drawn = np.empty((h, w), np.int32)
     tile = gl.tile
@@ -345,6 +322,7 @@ def _draw(gl: _GL, program, vbo, tris: np.ndarray, x0: int, y0: int, tw: int, th
         fbo.clear(0.0, 0.0, 0.0, 0.0)
         vw, vh = 1 << max(tw - 1, 1).bit_length(), 1 << max(th - 1, 1).bit_length()
         ctx.viewport = (0, 0, vw, vh)
+        ctx.scissor = (0, 0, tw, th)  # no fragment work beyond the tile
         ctx.disable(ctx.DEPTH_TEST | ctx.BLEND | ctx.CULL_FACE)
         program["origin"].value = (x0 - 0.5, y0 - 0.5)
         program["scale"].value = (2.0 / vw, 2.0 / vh)
@@ -356,5 +334,6 @@ def _draw(gl: _GL, program, vbo, tris: np.ndarray, x0: int, y0: int, tw: int, th
         raw = fbo.read(viewport=(0, 0, tw, th), components=1, dtype="i4", attachment=1)
         drawn[:] = np.frombuffer(raw, np.int32).reshape(th, tw)
     finally:
+        ctx.scissor = None
         for obj in (vao, ibo, fbo, rb_prim, rb_val):
             obj.release()

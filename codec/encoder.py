@@ -9,13 +9,13 @@ import numbers
 
 import numpy as np
 
-from . import container
+from . import container, quantise
 from .errors import OptionError
 from .image import as_image
 from .mesh import Mesh
 
 #: Mesher name -> module with a `build(image, points, **options) -> Mesh` function.
-MESHERS = {"adaptive": "codec.adaptive", "uniform": "codec.uniform"}
+MESHERS = {"adaptive": "codec.mesher.adaptive", "uniform": "codec.mesher.uniform"}
 DEFAULT_MESHER = "adaptive"
 #: Vertex density used when no size is asked for (the seed's Lenna setting, 2.8 %).
 DEFAULT_DENSITY = 0.028
@@ -104,14 +104,13 @@ def encode(
             raise OptionError(f"mask must have shape {(height, width)}, not {holes.shape}")
         if img.dtype.kind != "f" and options.get("nodata") is None:
             options["nodata"] = 0
-    if img.dtype.kind == "f" and "value_range" not in options:
-        valid = np.isfinite(img) if holes is None else np.isfinite(img) & ~holes
-        nodata = options.get("nodata")
-        if nodata is not None:
-            valid &= img != nodata
-        options["value_range"] = (
-            (float(img[valid].min()), float(img[valid].max())) if valid.any() else (0.0, 0.0)
-        )
+    if img.dtype.kind == "f":
+        # the header carries nodata and the quantisation: both come from the data here
+        if options.get("nodata") is None:
+            options["nodata"] = quantise.hole_value([img[~np.isfinite(img) | (False if holes is None else holes)]])
+        if "value_range" not in options:
+            nodata = quantise.check_nodata(options["nodata"])
+            options["value_range"] = quantise.data_range([img if holes is None else img[~holes]], nodata)
     out = io.BytesIO()
     enc = StreamEncoder(
         out,

@@ -12,12 +12,17 @@ from .errors import CorruptError, LimitError
 #: Compression level of every frame the encoder writes.
 ZSTD_LEVEL = 19
 
-_compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True)
+
+def compressor() -> zstandard.ZstdCompressor:
+    """A compressor for the encoder's frames. zstandard's compressors are not safe to
+    share between threads, so each call gets its own (making one costs about 20 us,
+    little beside a level-19 frame)."""
+    return zstandard.ZstdCompressor(level=ZSTD_LEVEL, write_content_size=True)
 
 
 def compress(data: bytes) -> bytes:
     """One zstd frame holding `data`, its size declared."""
-    return _compressor.compress(data)
+    return compressor().compress(data)
 
 
 #: A part shorter than this shares its block with the next part (the last with the one
@@ -25,10 +30,10 @@ def compress(data: bytes) -> bytes:
 SMALL_PART = 64
 
 
-def _blocks(parts: list[bytes], cuts: set[int]) -> bytes:
+def _blocks(zc: zstandard.ZstdCompressor, parts: list[bytes], cuts: set[int]) -> bytes:
     """One frame holding the parts, a block ending after each part whose index is in
     `cuts`."""
-    co = _compressor.compressobj(size=sum(len(p) for p in parts))
+    co = zc.compressobj(size=sum(len(p) for p in parts))
     out = []
     for i, part in enumerate(parts):
         out.append(co.compress(part))
@@ -44,27 +49,44 @@ def compress_parts(parts: list[bytes]) -> bytes:
     (or, for the last, before) parts of fewer than SMALL_PART bytes. Each block has
     its own entropy tables, which suits parts whose numbers have different statistics
     (5-7 % smaller for a large mesh); a small mesh does better with shared tables."""
-    plain = _compressor.compress(b"".join(parts))
+    zc = compressor()
+    plain = zc.compress(b"".join(parts))
     if len(parts) < 2:
         return plain
     every = set(range(len(parts) - 1))
     merged = every - {i for i, p in enumerate(parts[:-1]) if len(p) < SMALL_PART}
     if len(parts[-1]) < SMALL_PART:
         merged.discard(len(parts) - 2)
-    candidates = [plain, _blocks(parts, every)]
+    candidates = [plain, _blocks(zc, parts, every)]
     if merged != every:
-        candidates.append(_blocks(parts, merged))
+        candidates.append(_blocks(zc, parts, merged))
     return min(candidates, key=len)
 
 
-def decompress(frame: bytes, limit: int, what: str) -> bytes:
-    """The data of one zstd frame that declares a size of at most `limit` bytes."""
+def declared_size(frame: bytes, what: str) -> int:
+    """The decompressed size a zstd frame declares (nothing is decompressed)."""
     try:
         size = zstandard.frame_content_size(frame)
     except zstandard.ZstdError as exc:
         raise CorruptError(f"{what} is not a zstd frame: {exc}") from None
     if size < 0:
         raise CorruptError(f"{what}'s zstd frame does not declare its size")
+    return size
+
+
+def head(frame: bytes, n: int, what: str) -> bytes:
+    """The first n bytes of a frame's data (or all, if fewer), decompressing no more
+    than the blocks that hold them."""
+    try:
+        with zstandard.ZstdDecompressor().stream_reader(frame) as reader:
+            return reader.read(n)
+    except zstandard.ZstdError as exc:
+        raise CorruptError(f"{what} does not decompress: {exc}") from None
+
+
+def decompress(frame: bytes, limit: int, what: str) -> bytes:
+    """The data of one zstd frame that declares a size of at most `limit` bytes."""
+    size = declared_size(frame, what)
     if size > min(limit, limits.MAX_PAYLOAD_BYTES):
         raise LimitError(
             f"{what} would decompress to {size:,} bytes, more than its image can need "

@@ -25,6 +25,24 @@ MIN_TRIANGLE_ROWS: int = 1 << 20
 MAX_PAYLOAD_BYTES: int = 1 << 31
 #: Largest stored (compressed) chunk length, in bytes.
 MAX_CHUNK_BYTES: int = (1 << 31) - 1
+#: Largest decoded image, in bytes (width x height x channels x bytes per sample, float
+#: data counting 4): a gray float32 image at MAX_IMAGE_PIXELS.
+MAX_IMAGE_BYTES: int = 1 << 30
+#: Largest total of a file's metadata (all its meta chunks, decompressed), in bytes.
+MAX_METADATA_BYTES: int = 1 << 20
+#: Deepest nesting of arrays and objects in metadata JSON.
+MAX_METADATA_DEPTH: int = 64
+#: Largest decompressed size a MESH or MASK frame may declare relative to its stored
+#: (compressed) bytes, plus a floor. zstd lets a few hundred bytes declare gigabytes;
+#: this keeps a decoder's work proportional to the bytes it is given. The encoder
+#: refuses a band that would exceed it.
+MAX_PAYLOAD_EXPANSION: int = 1024
+MIN_PAYLOAD_LIMIT: int = 1 << 20
+#: Most vertices of a band whose triangles the decoder rebuilds (Delaunay connectivity),
+#: relative to its MESH chunk's stored bytes, plus a floor: rebuilding costs some 0.3 KB
+#: and 1 us per vertex. The encoder lists the triangles of a band beyond it.
+MAX_REBUILT_VERTICES_PER_BYTE: int = 64
+MIN_REBUILT_VERTICES: int = 1 << 16
 
 
 def check_image_size(width: int, height: int) -> None:
@@ -39,6 +57,25 @@ def check_image_size(width: int, height: int) -> None:
             f"image is {width}x{height} = {width * height:,} pixels, over the limit of "
             f"{MAX_IMAGE_PIXELS:,} (raise codec.limits.MAX_IMAGE_PIXELS to accept it)"
         )
+
+
+def check_image_bytes(width: int, height: int, channels: int, sample_bytes: int) -> None:
+    """Raise LimitError if the decoded image would take more than MAX_IMAGE_BYTES."""
+    size = width * height * channels * sample_bytes
+    if size > MAX_IMAGE_BYTES:
+        raise LimitError(
+            f"a {width}x{height} image of {channels} channel(s) of {sample_bytes}-byte samples "
+            f"takes {size:,} bytes, over the limit of {MAX_IMAGE_BYTES:,} "
+            "(raise codec.limits.MAX_IMAGE_BYTES to accept it)"
+        )
+
+
+def max_rebuilt_vertices(stored_bytes: int) -> int:
+    return MIN_REBUILT_VERTICES + MAX_REBUILT_VERTICES_PER_BYTE * stored_bytes
+
+
+def max_payload(stored_bytes: int) -> int:
+    return MIN_PAYLOAD_LIMIT + MAX_PAYLOAD_EXPANSION * stored_bytes
 
 
 def max_vertices(width: int, height: int) -> int:

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from format_spec import schema
+from .format_spec import schema
 
-from . import frames, limits
+from . import _fields, frames, limits
 from .coding import (
     canonical_triangles,
     hilbert_keys,
@@ -193,11 +193,11 @@ def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pin
     n = len(vertices)
     steps = np.full(n, step, dtype=np.int64)
     if step > 1 and len(triangles):
-        fan = np.bincount(
-            triangles.ravel(),
-            np.repeat(doubled_areas(vertices, triangles) if areas is None else areas, 3),
-            minlength=n,
-        )[:n].astype(np.int64)
+        fan = _fields.fan_areas(np.ascontiguousarray(triangles, dtype=np.int64),
+                                np.ascontiguousarray(doubled_areas(vertices, triangles) if areas is None else areas,
+                                                     dtype=np.int64), n)
+        if fan is None:
+            raise CorruptError(f"a triangle refers to a vertex beyond the {n} stored")
         some = fan > 0
         if some.any():
             mean = float(fan[some].sum()) / float(some.sum())
@@ -245,40 +245,24 @@ def sample_parents(triangles: np.ndarray, seq_order: np.ndarray) -> np.ndarray:
     before it, the last; j - 1 if none does (-1: predicted from 0). A neighbour lies on
     the same surface far more often than the previous vertex along the curve, which
     may be across the image."""
-    n = len(seq_order)
-    parent = np.arange(-1, n - 1, dtype=np.int64)
-    if len(triangles):
-        pos = np.empty(n, np.int64)
-        pos[seq_order] = np.arange(n)
-        a, b, c = (pos[np.ascontiguousarray(col)] for col in triangles.T)
-        # a triangle's corners by place: the last one's candidate is the middle one,
-        # the middle one's the first (strictly earlier: a listed triangle may repeat a
-        # corner, and a sample must not be its own parent)
-        lo = np.minimum(np.minimum(a, b), c)
-        hi = np.maximum(np.maximum(a, b), c)
-        mid = a + b + c - lo - hi
-        best = np.full(n, -1, np.int64)
-        np.maximum.at(best, hi, np.where(mid < hi, mid, -1))
-        np.maximum.at(best, mid, np.where(lo < mid, lo, -1))
-        np.copyto(parent, best, where=best >= 0)
+    parent = _fields.sample_parents(np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
+                                    np.ascontiguousarray(seq_order, dtype=np.int64))
+    if parent is None:
+        raise CorruptError("the sample order is no permutation of the vertices, or a triangle "
+                           "refers to a vertex beyond them")
     return parent
 
 
 def tree_sums(increments: np.ndarray, parent: np.ndarray) -> np.ndarray:
     """Each sample as its increment plus its parent's sample (parent[j] < j; -1: none),
-    summed along the tree by pointer jumping: each pass doubles the stretch of
-    ancestors a partial sum covers, so the passes are as many as the bits of the
-    deepest chain. A root's parent is a zero past the end."""
-    n = len(parent)
-    up = np.append(parent, n)
-    up[up < 0] = n
-    acc = np.concatenate([increments, np.zeros((1,) + increments.shape[1:], increments.dtype)])
-    one = acc.ndim == 2 and acc.shape[1] == 1
-    work = acc[:, 0] if one else acc  # a view: one channel sums as a flat array
-    while not (up == n).all():
-        work += work[up]
-        up = up[up]
-    return acc[:n]
+    in one pass in sequence order (a compiled kernel; CorruptError if a parent is not
+    earlier)."""
+    inc = np.asarray(increments, dtype=np.int64)
+    sums = _fields.tree_sums(np.ascontiguousarray(inc.reshape(len(inc), -1)),
+                             np.ascontiguousarray(parent, dtype=np.int64))
+    if sums is None:
+        raise CorruptError("a sample's parent does not come before it")
+    return sums.reshape(inc.shape)
 
 
 def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
@@ -318,9 +302,10 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     return Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
 
 
-def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
+def encode_band(y0: int, mesh: Mesh, step: int = 1, rebuild: bool = True) -> dict:
     """The MeshPayload fields for a validated band mesh whose samples are as
-    quantise(mesh, step, y0 > 0) left them (any samples with step 1)."""
+    quantise(mesh, step, y0 > 0) left them (any samples with step 1). rebuild=False
+    lists the triangles even where a decoder could rebuild them (codec.limits)."""
     n = len(mesh.vertices)
     order, inverse, sorted_keys, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
@@ -331,8 +316,8 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     walls = chain_steps(flat, lengths)
 
     try:
-        rebuilt = canonical_triangles(triangulate(vertices, walls))
-        delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
+        rebuilt = canonical_triangles(triangulate(vertices, walls)) if rebuild else None
+        delaunay = rebuild and rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
     except ATMError:
         delaunay = False
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]

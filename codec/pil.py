@@ -5,13 +5,19 @@
     im = Image.open("scene.atm")            # modes L, I;16, RGB (and F for float data)
     im.save("copy.atm", points=4000)        # options as for codec.encode
 
-`Image.open` reads only the signature and the header chunks, so Pillow's
-decompression-bomb check sees the declared size before anything is decoded; the mesh
-is decoded on `load()`. Pillow is needed only here: `import codec` never imports it.
+`Image.open` reads only the signature and the header chunks (metadata is skipped
+unparsed), so Pillow's decompression-bomb check sees the declared size before anything
+is decoded; the mesh and the metadata are decoded on `load()`, which then fills
+`im.info["metadata"]`. Every error Pillow's callers see is an OSError (they catch that):
+the codec's own errors are raised as classes deriving from both the ATMError subclass
+and OSError, so `except codec.CorruptError` works as well. Pillow is needed only here:
+`import codec` never imports it.
 """
 
 from __future__ import annotations
 
+import functools
+import io
 from typing import IO
 
 import numpy as np
@@ -19,7 +25,8 @@ from PIL import Image, ImageFile
 
 import codec
 from codec import container
-from codec.errors import UnsupportedError
+from codec.errors import ATMError, UnsupportedError
+from codec import stream
 
 FORMAT = "ATM"
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
@@ -38,6 +45,16 @@ MODES = {
 PILLOW_KEYS = frozenset({"append", "append_images"})
 
 
+@functools.cache
+def _os_class(cls: type) -> type:
+    """cls (an ATMError subclass) made an OSError as well, for Pillow's callers."""
+    return type(cls.__name__, (cls, OSError), {"__module__": cls.__module__})
+
+
+def _as_os_error(exc: ATMError) -> ATMError:
+    return exc if isinstance(exc, OSError) else _os_class(type(exc))(*exc.args)
+
+
 def _accept(prefix: bytes) -> bool:
     return prefix[: len(SIGNATURE)] == SIGNATURE
 
@@ -49,11 +66,17 @@ class AtmImageFile(ImageFile.ImageFile):
     format_description = ".atm adaptive triangular mesh"
 
     def _open(self) -> None:
+        try:
+            self._open_header()
+        except ATMError as exc:
+            raise _as_os_error(exc) from None
+
+    def _open_header(self) -> None:
         if not _accept(self.fp.read(len(SIGNATURE))):
             raise SyntaxError("not an .atm file")
         self.fp.seek(-len(SIGNATURE), 1)
         start = self.fp.tell()
-        header = container.read_header(self.fp)
+        header = container.read_header(self.fp, metadata=False)
         key = (np.dtype(header.dtype), header.channels)
         if key not in MODES:
             raise UnsupportedError(
@@ -63,11 +86,10 @@ class AtmImageFile(ImageFile.ImageFile):
         mode, rawmode = MODES[key]
         self._mode = mode
         self._size = (header.width, header.height)
-        if header.metadata:
-            self.info["metadata"] = dict(header.metadata)
         if header.nodata is not None:
             self.info["nodata"] = header.nodata
-        self.tile = [ImageFile._Tile(FORMAT, (0, 0) + self.size, start, (rawmode,))]
+        # the decoder puts the metadata into self.info once it has read the file
+        self.tile = [ImageFile._Tile(FORMAT, (0, 0) + self.size, start, (rawmode, self.info))]
 
 
 class AtmDecoder(ImageFile.PyDecoder):
@@ -77,10 +99,15 @@ class AtmDecoder(ImageFile.PyDecoder):
 
     def decode(self, buffer: bytes | Image.SupportsArrayInterface) -> tuple[int, int]:
         assert self.fd is not None
-        image = codec.decode(self.fd.read())
-        (rawmode,) = self.args
-        if image.shape[:2] != (self.state.ysize, self.state.xsize):
-            raise UnsupportedError("the .atm file decodes to another size than its header says")
+        rawmode, info = self.args
+        try:
+            image, metadata = stream.decode_all(io.BytesIO(self.fd.read()))
+            if image.shape[:2] != (self.state.ysize, self.state.xsize):
+                raise UnsupportedError("the .atm file decodes to another size than its header says")
+        except ATMError as exc:
+            raise _as_os_error(exc) from None
+        if metadata:
+            info["metadata"] = metadata
         self.set_as_raw(np.ascontiguousarray(image).tobytes(), rawmode)
         return -1, 0
 

@@ -12,8 +12,8 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder, holes, meshcode, quantise, refine
-from . import values as vertex_values
+from . import banding, container, encoder, error_bound, holes, meshcode, quantise
+from .mesher import values as vertex_values
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh
@@ -99,7 +99,7 @@ class StreamEncoder:
                 raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
         # float data always has a nodata value (NaN unless given), as NaN can turn up in
         # any row; integer data has one when the user names it
-        self._nodata = (float("nan") if nodata is None else float(nodata)) if self._quant else nodata
+        self._nodata = (float("nan") if nodata is None else quantise.check_nodata(nodata)) if self._quant else nodata
         if channels not in (1, 3):
             raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
         if band_height is None:
@@ -112,8 +112,8 @@ class StreamEncoder:
         if quality is not None:
             if max_rms is not None:
                 raise OptionError("give quality or max_rms, not both")
-            max_rms = refine.quality_rms(quality, storage)
-        self._bound = refine.Bound(max_rms=max_rms, max_error=max_error)
+            max_rms = error_bound.quality_rms(quality, storage)
+        self._bound = error_bound.Bound(max_rms=max_rms, max_error=max_error)
         if value_step != "auto" and (
             isinstance(value_step, bool) or not isinstance(value_step, numbers.Integral) or not 1 <= value_step <= 65535
         ):
@@ -225,7 +225,7 @@ class StreamEncoder:
                 fitted[top] = mesh.values[top]
             mesh.values = fitted
         mesh = self._quantise(mesh, band, band_holes if has_holes else None)
-        mesh = refine.refine(
+        mesh = error_bound.refine(
             mesh,
             band,
             self._bound,

@@ -1,3 +1,4 @@
+#!/usr/bin/env python3
 """Coverage-guided fuzzing of the .atm decoder with atheris.
 
     python fuzz/fuzz_decode.py -max_total_time=600         # or: fuzz/run.sh 600

@@ -85,12 +85,110 @@ def mutate_mesh_payload(raw: bytes, rng: random.Random) -> bytes:
     return mutate_bytes(bytes(b), rng)
 
 
+def _frame(data: bytes) -> bytes:
+    return zstandard.ZstdCompressor(level=1, write_content_size=True).compress(data)
+
+
+def lie_about_size(frame: bytes, rng: random.Random) -> bytes:
+    """The frame with its declared content size replaced (a decompression bomb's lie),
+    where the size field is 4 or 8 bytes."""
+    if len(frame) < 14 or frame[:4] != b"\x28\xb5\x2f\xfd" or frame[4] & 3:
+        return frame
+    fhd = frame[4]
+    width = {2: 4, 3: 8}.get(fhd >> 6)
+    if width is None:
+        return frame
+    at = 5 if fhd & 0x20 else 6
+    size = rng.choice([len(frame) * 2000, 1 << 20, (1 << 31) - 1, 0xFFFFFFFF, rng.randrange(1 << 32)])
+    return frame[:at] + (size % (1 << 8 * width)).to_bytes(width, "little") + frame[at + width :]
+
+
+def hostile_metadata(rng: random.Random) -> bytes:
+    """JSON text a meta chunk must not carry, or carry only within its limits."""
+    k = rng.choice([10, 63, 64, 65, 1000, 100_000])
+    return rng.choice([
+        b'{"a": ' + b"[" * k + b"]" * k + b"}",
+        b'{"a": ' + b'{"b": ' * k + b"1" + b"}" * k + b"}",
+        b'{"a": "\\ud800"}', b'{"a": NaN}', b'{"a": Infinity}', b'{"a": 1e999}',
+        b'{"a": 1, "a": 2}', b'{"a": "' + b"x" * rng.choice([1000, (1 << 20) - 9, 1 << 20]) + b'"}',
+        b'{"a": ' + b"9" * 5000 + b"}", b"[]", b"\xff\xfe",
+    ])
+
+
+def _band(v: list[tuple[int, int]], width: int, rows: int, y0: int, rng: random.Random) -> bytes | None:
+    """The MESH chunk payload of a Delaunay band with vertices v, or None."""
+    import numpy as np
+
+    from codec import meshcode
+    from codec.errors import ATMError
+    from codec.mesh import Mesh
+    from codec.triangulate import triangulate
+    from codec.format_spec import schema
+
+    vertices = np.array(sorted(set(v), key=lambda p: (p[1], p[0])), np.int64)
+    try:
+        tris = triangulate(vertices)
+        values = np.array([rng.randrange(256) for _ in range(len(vertices))], np.uint8)
+        fields = meshcode.encode_band(y0, Mesh(vertices, values, tris, width, rows, []))
+    except (ATMError, ValueError):
+        return None
+    return _frame(schema.MeshPayload.build(fields, sample_type=0, channels=1))
+
+
+def hostile_file(rng: random.Random) -> bytes:
+    """A whole file of a class the decoder must refuse or bound: an all-pixel mesh,
+    many one-row bands, a wide image with huge triangles (for the GL differential)."""
+    from codec.format_spec import schema
+
+    kind = rng.randrange(3)
+    if kind == 0:  # every pixel a vertex: zero gaps and samples
+        width, height = rng.choice([(64, 64), (300, 200), (1024, 1024)])
+        n = width * height
+        fields = dict(
+            y0=0, rows=height, vertex_count=n, triangle_count=2 * (width - 1) * (height - 1),
+            polyline_count=0, polyline_index_count=0, connectivity=1, position_order=0,
+            triangle_crc=rng.randrange(1 << 32), sample_step=1, polyline_lengths=b"", polyline_starts=b"",
+            polyline_steps=b"", positions=bytes(n + 1), position_bits=b"", samples=bytes(n), triangles=b"",
+        )
+        bands = [_frame(schema.MeshPayload.build(fields, sample_type=0, channels=1))]
+    elif kind == 1:  # many bands of one new row each
+        width, height = rng.choice([2, 7, 64]), rng.randint(3, 100)
+        bands = [_band([(0, 0), (width - 1, 0), (0, 1), (width - 1, 1)], width, 2, y0, rng) for y0 in range(height - 1)]
+    else:  # wide or tall, a few vertices: triangles far larger than a GL tile
+        across, length = rng.randint(2, 5), rng.choice([2049, 4097, 20000, 65536])
+        width, height = (length, across) if rng.random() < 0.5 else (across, length)
+        v = [(0, 0), (width - 1, 0), (0, height - 1), (width - 1, height - 1)]
+        v += [(rng.randrange(width), rng.randrange(height)) for _ in range(rng.randint(0, 8))]
+        bands = [_band(v, width, height, 0, rng)]
+    if any(b is None for b in bands):
+        return SIGNATURE + struct.pack("<H", 5)
+    chunks = [[b"AHDR", struct.pack("<IIBB", width, height, 0, 1)]] + [[b"MESH", b] for b in bands] + [[b"AEND", b""]]
+    return join(SIGNATURE + struct.pack("<H", schema.VERSION), chunks, random.Random(0))
+
+
 def mutate(data: bytes, rng: random.Random) -> bytes:
     """One structure-aware mutation of an .atm file."""
     parts = split(data)
     if parts is None or rng.random() < 0.05:
         return mutate_bytes(data, rng)
     head, chunks = parts
+    choice = rng.random()
+    if choice < 0.04:
+        return hostile_file(rng)
+    if choice < 0.12 and chunks:
+        # the new classes: hostile metadata (one chunk, or many of up to 1 MB), a frame
+        # that lies about its size
+        op = rng.randrange(3)
+        at = rng.randrange(1, len(chunks) + 1)
+        if op == 0:
+            chunks.insert(at, [b"meta", _frame(hostile_metadata(rng))])
+        elif op == 1:
+            big = _frame(b'{"k": "' + b"a" * rng.choice([1000, (1 << 20) - 9]) + b'"}')
+            chunks[at:at] = [[b"meta", big]] * rng.choice([2, 20, 3000])
+        else:
+            i = rng.randrange(len(chunks))
+            chunks[i][1] = lie_about_size(chunks[i][1], rng)
+        return join(head, chunks, rng)
     choice = rng.random()
     if chunks and choice < 0.45:
         target = rng.randrange(len(chunks))

@@ -36,4 +36,18 @@ def run_one(data: bytes) -> bool:
         raise AssertionError(f"decoded shape {image.shape}, header says {expected}")
     if not isinstance(image, np.ndarray):
         raise AssertionError("decode did not return an array")
+    if max(image.shape[:2]) > GL_DIFFERENTIAL_SIDE and _gl_available():
+        # wide and large images: triangles far beyond a GL tile (the differential target)
+        if not np.array_equal(codec.decode(data, backend="gl"), image):
+            raise AssertionError("the GL decoder differs from the CPU decoder")
     return True
+
+
+#: Decoded images with a side longer than this are also decoded with GL and compared.
+GL_DIFFERENTIAL_SIDE = 2048
+
+
+def _gl_available() -> bool:
+    from codec import decoder_gl
+
+    return decoder_gl.available()

@@ -75,7 +75,7 @@ def random_mesh(seed: int, width: int, height: int, *, dtype=np.uint8, channels:
 @pytest.fixture(scope="session")
 def corpus() -> dict[str, np.ndarray]:
     """The public test images named in DESIGN.md, as uint8 gray arrays."""
-    from codec.synthetic import range_scene
+    from tests.synthetic import range_scene
     from tests.corpus import load_corpus
 
     images = load_corpus()

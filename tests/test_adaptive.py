@@ -8,11 +8,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import codec
-from codec import adaptive
+from codec.mesher import adaptive
 from codec.decoder_cpu import render
 from codec.errors import OptionError
 from codec.mesh import doubled_areas, validate
-from codec.synthetic import planar_steps, range_scene
+from tests.synthetic import planar_steps, range_scene
 
 
 def segments_of(m) -> np.ndarray:
@@ -141,13 +141,13 @@ def test_planar_steps_are_walls_and_exact_away_from_them(seed):
     (the default: step pixels, which no wall can follow, do not pull the vertices
     beside them) as with the pixel values (the seed's)."""
     img = planar_steps(160, 120, seed=seed)
-    m = codec.mesh(img, points=600)
+    m = codec.build_mesh(img, points=600)
     check_tiling(m)
     assert m.constraints, "no walls on a piecewise-planar image"
     check_walls_are_edges(m)
     check_no_crossings(m)
     check_exact_away_from_steps(m, img)
-    sampled = codec.mesh(img, points=600, values="sample")
+    sampled = codec.build_mesh(img, points=600, values="sample")
     assert np.array_equal(sampled.vertices, m.vertices)
     check_exact_away_from_steps(sampled, img)
 
@@ -163,7 +163,7 @@ def test_piecewise_planar_images_are_exact_away_from_steps(kind, width, height, 
     """Straight steps crossing each other, or overlapping polygons and ellipses, at a
     vertex budget of 10 % of the pixels: exact (default values) away from the steps."""
     img = planar_steps(width, height, seed=seed) if kind == "steps" else planar_objects(width, height, seed)
-    m = codec.mesh(img, points=int(0.1 * width * height))
+    m = codec.build_mesh(img, points=int(0.1 * width * height))
     check_walls_are_edges(m)
     check_exact_away_from_steps(m, img)
 
@@ -171,7 +171,7 @@ def test_piecewise_planar_images_are_exact_away_from_steps(kind, width, height, 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 def test_range_scene_tiles_and_walls(dtype):
     img = range_scene(200, 150, seed=3, dtype=dtype)
-    m = codec.mesh(img, points=900)
+    m = codec.build_mesh(img, points=900)
     check_tiling(m)
     check_walls_are_edges(m)
     check_no_crossings(m)
@@ -180,7 +180,7 @@ def test_range_scene_tiles_and_walls(dtype):
 
 def test_same_image_same_mesh():
     img = range_scene(160, 128, seed=5)
-    a, b = codec.mesh(img, points=700), codec.mesh(img.copy(), points=700)
+    a, b = codec.build_mesh(img, points=700), codec.build_mesh(img.copy(), points=700)
     assert np.array_equal(a.vertices, b.vertices)
     assert np.array_equal(a.triangles, b.triangles)
     assert np.array_equal(a.values, b.values)
@@ -193,9 +193,9 @@ def test_same_image_same_mesh():
 def test_points_land_within_ten_percent(n, corpus):
     for name in ("camera", "coins"):
         img = corpus[name]
-        m = codec.mesh(img, points=n)
+        m = codec.build_mesh(img, points=n)
         assert abs(len(m.vertices) - n) <= 0.1 * n, (name, n, len(m.vertices))
-    m = codec.mesh(range_scene(256, 256, seed=2), points=n)
+    m = codec.build_mesh(range_scene(256, 256, seed=2), points=n)
     assert abs(len(m.vertices) - n) <= 0.1 * n
 
 
@@ -204,7 +204,7 @@ def test_least_squares_beats_samples_and_uniform(corpus):
     n = int(0.01 * img.size)
     rms = {}
     for key, kw in {"lsq": {}, "sample": {"values": "sample"}, "uniform": {"mesher": "uniform"}}.items():
-        out = render(codec.mesh(img, points=n, **kw)).astype(np.float64)
+        out = render(codec.build_mesh(img, points=n, **kw)).astype(np.float64)
         rms[key] = np.sqrt(np.mean((out - img) ** 2))
     assert rms["lsq"] < rms["sample"] < rms["uniform"]
     assert rms["lsq"] <= 0.75 * rms["uniform"]
@@ -213,7 +213,7 @@ def test_least_squares_beats_samples_and_uniform(corpus):
 def test_rgb_values_per_channel():
     gray = range_scene(96, 80, seed=1)
     rgb = np.stack([gray, 255 - gray, gray // 2], axis=2)
-    m = codec.mesh(rgb, points=400)
+    m = codec.build_mesh(rgb, points=400)
     assert m.values.shape == (len(m.vertices), 3)
     out = render(m).astype(np.float64)
     assert np.sqrt(np.mean((out - rgb) ** 2)) < 6
@@ -221,7 +221,7 @@ def test_rgb_values_per_channel():
 
 def test_seed_parameters_by_name():
     img = range_scene(128, 128, seed=4)
-    m = codec.mesh(img, points=10, tiles=(3, 3), per_tile=(4, 4), segment_length=6, segment_error=1.5, canny=(10, 30))
+    m = codec.build_mesh(img, points=10, tiles=(3, 3), per_tile=(4, 4), segment_length=6, segment_error=1.5, canny=(10, 30))
     validate(m)
     assert len(m.vertices) > 10 * 3  # explicit tiles and samples are honoured
 
@@ -243,7 +243,7 @@ def test_seed_parameters_by_name():
 )
 def test_bad_options_are_option_errors(opts):
     with pytest.raises(OptionError):
-        codec.mesh(np.zeros((16, 16), np.uint8), **opts)
+        codec.build_mesh(np.zeros((16, 16), np.uint8), **opts)
 
 
 def _images():
@@ -271,7 +271,7 @@ def test_any_image_gives_a_valid_mesh(args):
     img = img.astype(dtype)
     if rgb:
         img = np.stack([img, img[::-1], top - img], axis=2)
-    m = codec.mesh(img, points=int(rng.integers(1, h * w + 1)))
+    m = codec.build_mesh(img, points=int(rng.integers(1, h * w + 1)))
     validate(m)
     if m.width > 1 and m.height > 1:
         check_tiling(m)
@@ -309,10 +309,10 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
     then needs no second run of Triangle."""
     from codec import meshcode, triangulate as tri
     from codec.mesh import segments
-    from format_spec import schema
+    from codec.format_spec import schema
 
     img = corpus["camera"][:200, :300]
-    m = codec.mesh(img, points=1500)
+    m = codec.build_mesh(img, points=1500)
     keys = m.vertices[:, 1] * m.width + m.vertices[:, 0]
     assert (np.diff(keys) > 0).all()
     rebuilt = tri.triangulate(m.vertices, segments(m.constraints))  # the memo is spent
@@ -324,7 +324,7 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
         calls.append(1)
         return run(*args)
 
-    m = codec.mesh(img, points=1500)
+    m = codec.build_mesh(img, points=1500)
     try:
         tri.triangle.triangulate = counted
         fields = meshcode.encode_band(0, m)
@@ -338,7 +338,7 @@ def test_decoded_mse_matches_decoding(name, corpus):
     """The squared error the mesher reports (used for the automatic value step instead
     of decoding the band) is the decoded image's to within pixel rounding."""
     img = corpus[name]
-    m = codec.mesh(img, points=round(0.01 * img.size))
+    m = codec.build_mesh(img, points=round(0.01 * img.size))
     decoded = np.mean((render(m).astype(np.float64) - img) ** 2)
     assert abs(m.decoded_mse - decoded) <= 0.01 * decoded + 0.1, (m.decoded_mse, decoded)
 
@@ -352,13 +352,13 @@ def test_effort_trades_time_for_error():
     img = data.camera()
     errors = {}
     for effort in (1, 2, 3):
-        m = codec.mesh(img, points=2500, effort=effort)
+        m = codec.build_mesh(img, points=2500, effort=effort)
         assert abs(len(m.vertices) - 2500) <= 250
         errors[effort] = float(np.sqrt(np.mean((render(m).astype(float) - img) ** 2)))
     assert errors[3] < errors[2] < errors[1]
     for bad in (0, 4, 2.0, True, "3"):
         with pytest.raises(OptionError, match="effort"):
-            codec.mesh(img, points=500, effort=bad)
+            codec.build_mesh(img, points=500, effort=bad)
 
 
 def test_piecewise_smooth_images_are_told_from_photos():
@@ -366,7 +366,7 @@ def test_piecewise_smooth_images_are_told_from_photos():
     get the smaller region share by default."""
     from skimage import data
 
-    from codec import edges
+    from codec.mesher import edges
     from codec.image import structure
 
     def off_edges(img):

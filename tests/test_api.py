@@ -62,7 +62,7 @@ def test_encoding_is_deterministic(args):
 def test_points_lands_within_ten_percent_for_uniform():
     image = np.zeros((300, 200), np.uint8)
     for n in (10, 100, 1000, 4000, 20000):
-        got = len(codec.mesh(image, points=n, mesher="uniform").vertices)
+        got = len(codec.build_mesh(image, points=n, mesher="uniform").vertices)
         assert abs(got - n) <= 0.1 * n, (n, got)
 
 

@@ -13,7 +13,7 @@ import pytest
 
 import codec
 from codec.files import read_image, write_image
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 from tests.test_cli import atm
 
 
@@ -71,7 +71,7 @@ def test_batch_usage_errors(folder, tmp_path):
 def _on_a_terminal(*args) -> tuple[int, bytes]:
     """Run atm with its standard error on a pseudo-terminal; return (status, stderr)."""
     master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "cli", *map(str, args)], stderr=slave, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen([sys.executable, "-m", "codec", *map(str, args)], stderr=slave, stdout=subprocess.DEVNULL)
     os.close(slave)
     chunks = []
     while True:

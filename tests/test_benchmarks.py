@@ -1,11 +1,15 @@
-"""Smoke runs of the benchmark scripts that need nothing beyond the test extra: they
-must keep running and print their table (their figures are measurements, not checked)."""
+"""Smoke runs of the benchmark scripts: they must keep running and print their table
+(their figures are measurements, not checked). Those that need the bench extra skip
+without it."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 from pathlib import Path
+
+import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -17,18 +21,24 @@ def _table(stdout: str) -> list[list[str]]:
 
 def test_speed_benchmark_prints_its_table() -> None:
     run = subprocess.run(
-        [sys.executable, "benchmarks/speed.py", "--repeat", "1", "--images", "text"],
+        [sys.executable, "benchmarks/speed.py", "--repeat", "1", "--images", "text",
+         "--encode-repeat", "1", "--dem-size", "32", "--max-errors", "20"],
         cwd=ROOT, capture_output=True, text=True, timeout=600,
     )
     assert run.returncode == 0, run.stderr
-    head, rule, *rows = _table(run.stdout)
+    tables = run.stdout.split("\n\n")
+    head, rule, *rows = _table(tables[0])
     assert [r[0] for r in rows] == ["text"]
     row = rows[0]
     assert len(row) == len(head) == len(rule)
     assert row[1] == "448x172"
     figures = dict(zip(head[3:], map(float, row[3:])))
     assert {"jpeg ms", "render ms", "decode ms", "triangulate ms", "render / jpeg"} <= figures.keys()
+    assert {"png ms", "decode / jpeg", "decode / png"} <= figures.keys()
     assert all(f > 0 for f in figures.values())
+    # the thread scaling: one row, a positive throughput ratio
+    head, rule, row = _table(tables[1])
+    assert head[-1] == "two threads / one thread throughput" and float(row[-1]) > 0
 
 
 def test_canonical_benchmark_prints_its_tables() -> None:
@@ -43,3 +53,107 @@ def test_canonical_benchmark_prints_its_tables() -> None:
     assert figures["free edges"] > 0 and 0 < figures["uniform ties %"] < 100
     assert abs(figures["change %"]) < 5
     assert float(timed[3]) > 0
+
+
+def test_range_benchmark_quick_run_meets_its_own_bounds(tmp_path: Path) -> None:
+    """benchmarks/range.py on a crop of the corpus disparity map: every row present, the
+    quantiser peer within its bound (it holds by construction) and every lossless peer
+    exact, so a broken error measurement or hole check shows here."""
+    pytest.importorskip("imagecodecs")
+    pytest.importorskip("tifffile")
+    pytest.importorskip("matplotlib")
+    run = subprocess.run(
+        [sys.executable, "benchmarks/range.py", "--quick", "--repeat", "1",
+         "--images", "motorcycle_disp", "--errors", "0.5", "2", "--plot", str(tmp_path / "range.png")],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    bounded, times, lossless = (_table(t) for t in run.stdout.split("## ")[1:])
+    head, _, *rows = bounded
+    assert [r[1].split(" %")[0] for r in rows] == ["0.5", "2"]
+    for row in rows:
+        cells = dict(zip(head, row))
+        bound = float(cells["E"].split("= ")[1])
+        size, err = cells["q2E+jxl (err)"].replace(",", "").rstrip(")").split(" (")
+        assert int(size) > 0 and float(err) <= bound
+        assert "!" not in cells["q2E+jxl (err)"]
+    assert len(times) == 2 + len(rows)
+    head, _, row = lossless
+    cells = dict(zip(head, row))
+    for peer in ("png", "jpegls", "jxl"):
+        assert cells[f"{peer} bytes (err)"].endswith("(0)")
+    assert (tmp_path / "range.png").stat().st_size > 0
+
+
+def _bench(name: str = "range_study"):
+    """A module of benchmarks/ (they import each other by their plain names)."""
+    import importlib
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+
+
+def test_study_code_length_is_the_sequential_adaptive_one() -> None:
+    """range_study.adaptive_bits (vectorised) equals the code length of adaptive counts
+    updated symbol by symbol, as an arithmetic coder would."""
+    study = _bench()
+    rng = np.random.default_rng(3)
+    ctx = rng.integers(0, 4, 500)
+    sym = np.minimum(rng.geometric(0.4, 500) - 1, 5) * (ctx % 2) + rng.integers(0, 2, 500)
+    alphabet = int(sym.max()) + 1
+    counts = np.zeros((4, alphabet))
+    bits = 0.0
+    for c, s in zip(ctx, sym):
+        bits -= np.log2((counts[c, s] + study.KT) / (counts[c].sum() + study.KT * alphabet))
+        counts[c, s] += 1
+    assert study.adaptive_bits(ctx, sym, alphabet) == pytest.approx(bits, rel=1e-12)
+
+
+def test_study_cover_quantiser_keeps_the_bound_with_fewest_levels() -> None:
+    """Sparse values (a sensor's depth steps) get one level per cluster and every value
+    lies within E of its level's middle; dense values get the uniform step 2E + 1."""
+    study = _bench()
+    values = np.array([100, 101, 103, 140, 141, 300, 5000, 5003, 5004], dtype=np.float64)
+    starts, index = study.cover_quantiser(values, 2.5, integer=True)
+    assert starts.tolist() == [100, 140, 300, 5000]
+    assert np.abs(starts[index] + 2 - values).max() <= 2
+    dense = np.arange(0, 1000, dtype=np.float64)
+    starts, index = study.cover_quantiser(dense, 3.0, integer=True)
+    assert np.all(np.diff(starts) == 7) and np.abs(starts[index] + 3 - dense).max() <= 3
+
+
+def test_study_quick_run_prints_every_variant() -> None:
+    """range_study.py --quick on the disparity crop: one row, every variant a ratio."""
+    pytest.importorskip("imagecodecs")
+    study = _bench()
+    run = subprocess.run(
+        [sys.executable, "benchmarks/range_study.py", "--quick", "--images", "motorcycle_disp",
+         "--errors", "2", "--densities", "0.01"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, row = _table(run.stdout)
+    cells = dict(zip(head, row))
+    assert all(float(cells[f"{v} ÷ peer"]) > 0 for v in study.VARIANTS)
+
+
+def test_range_coder_round_trips_at_the_estimated_length() -> None:
+    """benchmarks/range_coder.py gives its symbols back, in about the bytes the study's
+    adaptive estimate says (the estimate's claim to be reachable rests on this)."""
+    study = _bench()
+    range_coder = _bench("range_coder")
+    rng = np.random.default_rng(7)
+    ctx = rng.integers(0, 6, 20000)
+    sym = np.minimum(rng.geometric(0.25 + 0.1 * ctx) - 1, 11)
+    scale = round(1 / study.KT)
+
+    def models() -> dict:
+        return {c: range_coder.Model(12, scale) for c in range(6)}
+
+    data = range_coder.encode(zip(ctx.tolist(), sym.tolist()), models())
+    assert list(range_coder.decode(data, ctx.tolist(), models())) == sym.tolist()
+    estimate = study.adaptive_bits(ctx, sym, 12) / 8
+    assert estimate <= len(data) <= estimate * 1.01 + 8

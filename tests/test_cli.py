@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 from codec.files import read_image, write_image
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def atm(*args, stdin: bytes | None = None, cwd=None) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "cli", *map(str, args)], input=stdin, capture_output=True, cwd=cwd
+        [sys.executable, "-m", "codec", *map(str, args)], input=stdin, capture_output=True, cwd=cwd
     )
 
 
@@ -231,7 +231,7 @@ def test_decode_backend_gl_gives_the_cpu_pixels(gl, png, tmp_path):
 
 
 def test_decode_backend_gl_without_context_is_one_line(no_gl, png, tmp_path, capsys):
-    from cli.main import main
+    from codec.cli.main import main
 
     data, out = tmp_path / "a.atm", tmp_path / "out.png"
     assert atm("encode", png, data).returncode == 0

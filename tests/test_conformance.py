@@ -10,7 +10,7 @@ import pytest
 import codec
 from codec import frames
 from codec.files import read_image
-from format_spec import schema
+from codec.format_spec import schema
 from tests.conftest import chunks
 
 VECTORS = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"

@@ -17,7 +17,7 @@ from codec import container
 from codec.coding import canonical_triangles
 from codec.errors import ATMError, CorruptError, FormatError, TruncatedError, UnsupportedError
 from codec.triangulate import triangulate
-from format_spec import schema
+from codec.format_spec import schema
 from tests.conftest import chunks, random_mesh
 
 mesh_args = st.tuples(

@@ -16,7 +16,7 @@ from tests.test_cli import atm
 
 @pytest.fixture(scope="module")
 def atm_file(tmp_path_factory):
-    from codec.synthetic import range_scene
+    from tests.synthetic import range_scene
 
     path = tmp_path_factory.mktemp("export") / "scene.atm"
     codec.write(path, range_scene(60, 40, seed=3), points=250)

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import codec
 from codec.errors import ATMError, OptionError
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 
 def elevation(seed: int, h: int, w: int, scale: float, base: float) -> np.ndarray:
@@ -81,7 +81,7 @@ def test_nan_and_infinity_are_holes_and_all_holes_works():
     assert np.isnan(out[2, 2]) and np.isnan(out[0, 4]) and np.count_nonzero(np.isnan(out)) == 2
     assert np.isnan(codec.decode(codec.encode(np.full((3, 4), np.nan)))).all()
     with pytest.raises(ATMError, match="NaN or infinite"):
-        codec.mesh(z)  # a bare mesh has no place for holes
+        codec.build_mesh(z)  # a bare mesh has no place for holes
 
 
 def test_constant_float_image():

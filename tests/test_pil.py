@@ -11,8 +11,9 @@ import pytest
 from PIL import Image
 
 import codec
+import codec.stream
 import codec.pil  # noqa: F401  (registers the plugin)
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 KINDS = [
     ("L", range_scene(40, 30, seed=1)),
@@ -67,7 +68,7 @@ def test_open_reads_only_the_header_and_decodes_on_load(tmp_path, monkeypatch):
     def refuse(data, **kw):
         raise AssertionError("decoded at open")
 
-    monkeypatch.setattr(codec, "decode", refuse)
+    monkeypatch.setattr(codec.stream, "decode_all", refuse)
     im = Image.open(path)
     assert im.size == (40, 30)
     with pytest.raises(AssertionError, match="decoded at open"):
@@ -77,7 +78,7 @@ def test_open_reads_only_the_header_and_decodes_on_load(tmp_path, monkeypatch):
 def test_decompression_bomb_check_runs_before_decoding(tmp_path, monkeypatch):
     path = tmp_path / "big.atm"
     codec.write(path, range_scene(40, 30, seed=9), points=100)
-    monkeypatch.setattr(codec, "decode", lambda *a, **k: pytest.fail("decoded a bomb"))
+    monkeypatch.setattr(codec.stream, "decode_all", lambda *a, **k: pytest.fail("decoded a bomb"))
     monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 500)  # 1,200 pixels is over twice that
     with pytest.raises(Image.DecompressionBombError):
         Image.open(path)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import codec
 from codec.errors import OptionError
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 kinds = st.sampled_from([(np.uint8, 1), (np.uint16, 1), (np.uint8, 3)])
 

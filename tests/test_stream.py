@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 import codec
 from codec.errors import ATMError, CorruptError, TruncatedError
-from codec.synthetic import range_scene
+from tests.synthetic import range_scene
 
 
 def stream_encode(image, band_height, step, **options) -> bytes:

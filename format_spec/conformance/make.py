@@ -6,16 +6,21 @@ conforming decoder must produce. Run this only when the format version changes.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
 
 import codec
-from codec import canonical, container, encoder, synthetic
+from codec import canonical, container, encoder
 from codec.coding import canonical_triangles
 from codec.files import write_image
 from codec.mesh import Mesh, segments
 from codec.triangulate import triangulate
+
+# the test scenes live with the tests, in the repository only
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from tests import synthetic  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 
@@ -151,7 +156,7 @@ def main() -> None:
     cases["rings_ties"] = encoder.pack(rings_mesh())
     cases["walls_ties"] = encoder.pack(walls_in_ties())
     cases["listed_ties"] = encoder.pack(flipped(lattice, rng, delaunay=True))
-    scene = codec.mesh(synthetic.range_scene(64, 48, seed=11), points=160)
+    scene = codec.build_mesh(synthetic.range_scene(64, 48, seed=11), points=160)
     cases["listed_not_delaunay"] = encoder.pack(flipped(scene, rng, delaunay=False))
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import OptionError
+from ..errors import OptionError
 
 METHODS = ("sample", "lsq")
 
@@ -137,7 +137,7 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
     the planar parts of the image. Elsewhere the first fit, the smaller squared error
     overall, stays.
     """
-    from .raster import squared_error
+    from .elements import squared_error
 
     e0, x0, y0 = pixels
     b0 = image[y0, x0].astype(np.float64)
@@ -172,7 +172,7 @@ def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.nda
     """Share of the pixels that the mesh through `values` reproduces to within rounding
     (elements with a mean squared error of at most PLANAR): most of a piecewise-planar
     image, hardly any of a photograph."""
-    from .raster import squared_error
+    from .elements import squared_error
 
     count = moments[:, 0]
     exact = squared_error(affine(values[:, 0]), moments, stats[:, layout.IMG]) <= PLANAR * count
@@ -182,7 +182,7 @@ def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.nda
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
                     pixels=None) -> np.ndarray:
     """Least-squares vertex values in the image's dtype from the elements of `raster`
-    and their statistics (`layout`: the codec.raster.Statistics that measured them).
+    and their statistics (`layout`: the codec.mesher.elements.Statistics that measured them).
 
     pixels: for single-channel images, a function giving (element, x, y) of every pixel;
     on an image that is mostly planar (PLANAR_SHARE) the values are fitted again
@@ -200,13 +200,13 @@ def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.n
 
 def least_squares(image: np.ndarray, vertices: np.ndarray, raster) -> np.ndarray:
     """Vertex values minimising the squared error over all pixels, for the decoder's
-    pixel weights (`raster`: a codec.raster.Raster of the mesh), in the image's dtype.
+    pixel weights (`raster`: a codec.mesher.elements.Raster of the mesh), in the image's dtype.
 
     The normal equations are assembled per element from closed-form and prefix sums
     over its row spans and solved by conjugate gradients from the sampled values.
     """
-    from .image import structure
-    from .raster import Statistics
+    from ..image import structure
+    from .elements import Statistics
 
     layout = Statistics(image, "structure") if image.ndim == 2 else Statistics(structure(image), image)
     return from_statistics(image, vertices, raster, layout(raster), layout)
@@ -217,7 +217,7 @@ def fit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, method: 
     if method == "sample":
         return sample(image, vertices)
     if method == "lsq":
-        from .raster import rasterize
+        from .elements import rasterize
 
         height, width = image.shape[:2]
         return least_squares(image, vertices, rasterize(vertices, triangles, width, height))

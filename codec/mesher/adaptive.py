@@ -1,15 +1,15 @@
 """The discontinuity-preserving adaptive mesher (the seed's §3.3.2), the default.
 
-Stages, each in its own module: Canny edges (codec.edges), edge polylines by the
-seed's segment rule (codec.polylines), their unfolding into parallel polylines that
-become the walls (codec.unfold), curvature-driven region sampling over tiles
-(codec.sampling), then a constrained Delaunay triangulation with the walls as
+Stages, each in its own module: Canny edges (codec.mesher.edges), edge polylines by the
+seed's segment rule (codec.mesher.polylines), their unfolding into parallel polylines that
+become the walls (codec.mesher.unfold), curvature-driven region sampling over tiles
+(codec.mesher.sampling), then a constrained Delaunay triangulation with the walls as
 constraint segments and the image corners included (codec.triangulate).
 
 Beyond the seed: a vertex budget (`points`) shared between the stages, error-driven
 refinement that spends what the edges and regions left over where the mesh is worst
 (the seed's coarse-to-fine refinement of §3.3.1, in batches), and least-squares
-vertex values (codec.values).
+vertex values (codec.mesher.values).
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ from . import edges as edge_stage
 from . import polylines as polyline_stage
 from . import sampling
 from . import values as vertex_values
-from .errors import OptionError
-from .image import structure
-from .mesh import MeasuredMesh, Mesh
-from .raster import Statistics, concat, element_sse, line_raster, triangle_raster
-from .triangulate import split_at_vertices, triangulate
+from ..errors import OptionError
+from ..image import structure
+from ..mesh import MeasuredMesh, Mesh
+from .elements import Statistics, concat, element_sse, line_raster, triangle_raster
+from ..triangulate import split_at_vertices, triangulate
 from .unfold import Walls, unfold
 
 #: Default shares of the vertex budget: at most EDGE_SHARE on walls, REGION_SHARE on

@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from . import values as vertex_values
-from .mesh import Mesh
-from .triangulate import triangulate
+from ..mesh import Mesh
+from ..triangulate import triangulate
 
 
 def grid_shape(width: int, height: int, points: int) -> tuple[int, int]:

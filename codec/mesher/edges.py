@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import OptionError
+from ..errors import OptionError
 
 #: Gaussian smoothing before differentiation; keeps texture and noise from breaking
 #: edges into fragments without moving sharp steps by more than a pixel.

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import OptionError
-from .raster import _segments
+from ..errors import OptionError
+from .elements import _segments
 
 # 8-neighbour offsets (dy, dx) in a fixed order; bit k of a pixel's code is neighbour k
 _OFFSETS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1)])

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import OptionError
+from ..errors import OptionError
 
 #: Smoothing of the image before its second derivatives are taken.
 SIGMA = 1.5

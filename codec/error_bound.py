@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import decoder_cpu
-from . import values as vertex_values
+from .mesher import values as vertex_values
 from .errors import OptionError
 from .mesh import Mesh, segments as wall_steps
 from .triangulate import triangulate

@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The decode tests once under AddressSanitizer: fuzz/asan.sh [extra pytest arguments]
+#
+# Builds the package, its compiled kernels with -fsanitize=address, from a copy of this
+# tree (tracked and new files, no build products) into a venv of its own (.venv-asan,
+# or $ASAN_VENV), then runs the decode tests there with the ASan runtime preloaded
+# (Python itself is not instrumented, so the runtime must come first). The working
+# tree, its .venv and its in-place kernels are left as they are. Needs gcc (or clang
+# as CC) with libasan.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+venv=${ASAN_VENV:-$root/.venv-asan}
+cc=${CC:-gcc}
+runtime=$("$cc" -print-file-name=libasan.so)
+if [ ! -e "$runtime" ]; then
+  echo "fuzz/asan.sh: $cc has no AddressSanitizer runtime (libasan.so)" >&2
+  exit 1
+fi
+src=$(mktemp -d)
+trap 'rm -rf "$src"' EXIT
+git ls-files -z --cached --others --exclude-standard | tar -c --null -T - -f - | tar -x -C "$src" -f -
+
+[ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+"$venv/bin/pip" install -q --disable-pip-version-check --upgrade pip
+"$venv/bin/pip" install -q --disable-pip-version-check "$src[test]"
+# then the package again, instrumented; not editable, so the kernels live in the venv
+# and not beside the sources
+CC="$cc" CFLAGS="-fsanitize=address -fno-omit-frame-pointer -g -O1" LDFLAGS="-fsanitize=address" \
+  "$venv/bin/pip" install -q --disable-pip-version-check --no-cache-dir --force-reinstall --no-deps "$src"
+# The kernels the tests will import must be the instrumented ones, in the venv (from
+# /, so that the import cannot find the sources instead).
+# detect_leaks=0: CPython keeps objects until exit, which LeakSanitizer reports.
+export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_init_order=1"
+kernels=$(cd / && LD_PRELOAD="$runtime" "$venv/bin/python" -c \
+  "import codec._rasterise as r, codec._fields as f; print(r.__file__, f.__file__)")
+[ -n "$kernels" ] || { echo "fuzz/asan.sh: the kernels do not import" >&2; exit 1; }
+for kernel in $kernels; do
+  case $kernel in "$venv"/*) ;; *) echo "fuzz/asan.sh: $kernel is not the venv's" >&2; exit 1 ;; esac
+  if ! nm -D "$kernel" 2>/dev/null | grep -q __asan; then
+    echo "fuzz/asan.sh: $kernel is not instrumented" >&2
+    exit 1
+  fi
+  echo "instrumented kernel: $kernel"
+done
+
+# The tests run from the copy, with the installed package ahead of its sources
+# (--import-mode=append, and the pytest script, which does not put the cwd first);
+# the copy has no compiled kernels, so a test that imported it would fail.
+cd "$src"
+LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
+  tests/test_decoders.py tests/test_container.py tests/test_meshcode.py \
+  tests/test_fuzz_smoke.py tests/test_stream.py tests/test_conformance.py tests/test_fields.py "$@"

@@ -1,0 +1,33 @@
+"""Builds the compiled kernels (Cython, codec/_*.pyx); everything else is in
+pyproject.toml. Extra compiler flags (e.g. a sanitizer, fuzz/asan.sh) come through
+the usual CFLAGS and LDFLAGS."""
+
+import sys
+
+from Cython.Build import cythonize
+from setuptools import Extension, setup
+
+#: The kernels, each a module of its own.
+KERNELS = ["codec._rasterise", "codec._fields"]
+
+# MSVC spells optimisation its own way; gcc and clang take -O2.
+OPTIMISE = ["/O2"] if sys.platform == "win32" else ["-O2"]
+
+extensions = [
+    Extension(name, [name.replace(".", "/") + ".pyx"], extra_compile_args=OPTIMISE)
+    for name in KERNELS
+]
+
+setup(
+    ext_modules=cythonize(
+        extensions,
+        compiler_directives={
+            "language_level": 3,
+            # the kernels check every index they read from a file themselves
+            "boundscheck": False,
+            "wraparound": False,
+            "initializedcheck": False,
+            "cdivision": True,
+        },
+    )
+)
