@@ -23,10 +23,10 @@ import codec
 from codec import container
 from codec.files import read_image
 from codec.mesh import Mesh
-from codec.synthetic import range_scene
 from codec.triangulate import triangulate
 from format_spec import schema
 from tests.conftest import chunks, random_mesh
+from tests.synthetic import range_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = ROOT / "format_spec" / "reference_decoder.py"
