@@ -35,7 +35,7 @@ from .triangulate import step_over_vertex, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
-_NAMES = [sub.name for sub in schema.MeshPayload.subcons]
+_NAMES = tuple(sub.name for sub in schema.MeshPayload.subcons)
 FIELDS = tuple(_NAMES[_NAMES.index("sample_step") + 1 :])
 
 
@@ -121,6 +121,7 @@ def _position_gaps(m, free: int, where: str) -> np.ndarray:
 #: x and y of a step turned by r quarter turns (x, y) -> (-y, x), by r
 _COS = np.array([1, 0, -1, 0])
 _SIN = np.array([0, 1, 0, -1])
+_COS.flags.writeable = _SIN.flags.writeable = False
 
 
 def quadrants(steps: np.ndarray) -> np.ndarray:
@@ -218,6 +219,21 @@ def _stored_order(mesh: Mesh):
     inverse = np.empty(len(order), dtype=np.int64)
     inverse[order] = np.arange(len(order))
     return order, inverse, keys[order], [inverse[c] for c in mesh.constraints]
+
+
+def in_stored_order(mesh: Mesh, *, triangulate_again: bool = True) -> Mesh:
+    """The mesh with its vertices in stored order and its polylines renumbered to it;
+    triangulated from that order as a decoder rebuilds the triangles (or, with
+    triangulate_again=False, its own triangles renumbered). A mesh made this way needs
+    no check that a decoder gets its triangles (encode_band's `delaunay`)."""
+    order, inverse, _, lines = _stored_order(mesh)
+    vertices = mesh.vertices[order]
+    if triangulate_again:
+        flat = _flat(lines)
+        triangles = triangulate(vertices, chain_steps(flat, np.array([len(c) for c in lines], np.int64)))
+    else:
+        triangles = inverse[mesh.triangles]
+    return Mesh(vertices, mesh.values[order], triangles, mesh.width, mesh.height, lines, mesh.holes)
 
 
 def _flat(lines: list[np.ndarray]) -> np.ndarray:
@@ -318,9 +334,12 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     return Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
 
 
-def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
+def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None) -> dict:
     """The MeshPayload fields for a validated band mesh whose samples are as
-    quantise(mesh, step, y0 > 0) left them (any samples with step 1)."""
+    quantise(mesh, step, y0 > 0) left them (any samples with step 1). delaunay: True
+    when the caller knows the triangles are the ones a decoder rebuilds (a mesh from
+    in_stored_order, or a mesher's Meshed.delaunay); otherwise it triangulates to
+    find out."""
     n = len(mesh.vertices)
     order, inverse, sorted_keys, lines = _stored_order(mesh)
     vertices = mesh.vertices[order]
@@ -330,11 +349,12 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1) -> dict:
     lengths = np.array([len(c) for c in lines], dtype=np.int64)
     walls = chain_steps(flat, lengths)
 
-    try:
-        rebuilt = canonical_triangles(triangulate(vertices, walls))
-        delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
-    except ATMError:
-        delaunay = False
+    if not delaunay:
+        try:
+            rebuilt = canonical_triangles(triangulate(vertices, walls))
+            delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
+        except ATMError:
+            delaunay = False
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 

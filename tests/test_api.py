@@ -103,8 +103,10 @@ def test_bad_options_raise_option_error():
         codec.encode(image, mesher="nope")
     with pytest.raises(OptionError, match="points"):
         codec.encode(image, points=0)
-    with pytest.raises(OptionError, match="no option colour"):
+    with pytest.raises(OptionError, match="unknown encoder option colour; the options are: points, quality"):
         codec.encode(image, mesher="uniform", colour=1)
+    with pytest.raises(OptionError, match="mesher 'uniform' has no option effort; its options are: values"):
+        codec.encode(image, mesher="uniform", effort=3)
     with pytest.raises(OptionError, match="backend"):
         codec.decode(codec.encode(image), backend="nope")
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from types import MappingProxyType
 
 import numpy as np
 
@@ -25,7 +26,8 @@ from . import sampling
 from . import values as vertex_values
 from ..errors import OptionError
 from ..image import structure
-from ..mesh import MeasuredMesh, Mesh
+from ..mesh import Mesh
+from . import Meshed
 from .elements import Statistics, concat, element_sse, line_raster, triangle_raster
 from ..triangulate import split_at_vertices, triangulate
 from .unfold import Walls, unfold
@@ -53,7 +55,7 @@ FOCUSED_ROUNDS = 6
 #: per round: effort 3 leaves it 90 % of the budget in up to 8 rounds, for 2-5 %
 #: lower RMS at equal bytes on the corpus and about 1.5x the encode time of effort 2
 #: (the default); effort 1 is the quickest (benchmarks/quality.py, rate.py --effort).
-EFFORTS = {1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, ROUNDS, 8)}
+EFFORTS = MappingProxyType({1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, ROUNDS, 8)})
 #: Piecewise-smooth images (range images: surfaces and steps) keep less than
 #: SMOOTH_OFF_EDGES of their curvature energy away from their edges. Curvature
 #: sampling then has nothing to follow off the walls, and refinement places the
@@ -267,12 +269,12 @@ def refine(
     straight segments cut a corner of the true edge, that is where the error is.
     Rounds: `rounds`, or `focused_rounds` where the error is CONCENTRATED.
 
-    Returns (vertices, segments, triangles, raster, stats): the final vertices in
-    raster order, the wall segments cut at the vertices on them, their triangulation
-    (remembered by codec.triangulate for the MESH chunk's check), a raster of its
-    elements (triangles then border lines; the triangles' spans are not kept) and
-    every element's statistics (`layout`, which must have `gray` as its structure
-    plane).
+    Returns (vertices, segments, triangles, raster, stats, delaunay): the final
+    vertices in raster order, the wall segments cut at the vertices on them, their
+    triangulation, a raster of its elements (triangles then border lines; the
+    triangles' spans are not kept), every element's statistics (`layout`, which must
+    have `gray` as its structure plane) and whether the triangulation is the one a
+    decoder rebuilds from the vertices and segments in that order (Meshed.delaunay).
     """
     height, width = gray.shape
     cache = _Cache(layout)
@@ -283,7 +285,7 @@ def refine(
             vertices, segments, _ = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        tris = triangulate(vertices, segments, remember=ordered)
+        tris = triangulate(vertices, segments)
         tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
@@ -318,7 +320,7 @@ def refine(
         vertices = _merge(width, vertices, np.stack([x[big], y[big]], axis=1))
     lines = line_raster(vertices, width, height)
     elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, segments, tris, elements, np.concatenate([tri_stats, layout(lines)])
+    return vertices, segments, tris, elements, np.concatenate([tri_stats, layout(lines)]), ordered
 
 
 def build(
@@ -334,7 +336,7 @@ def build(
     region_share: float | None = None,
     values: str = "lsq",
     effort: int = 2,
-) -> Mesh:
+) -> Meshed:
     """Mesh `image` with about `points` vertices, walls along its discontinuities.
 
     segment_length, segment_error: the seed's edge polyline rule (pixels).
@@ -393,7 +395,7 @@ def build(
     vertices = _merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
     layout = Statistics(image if image.ndim == 2 else gray, fit)
-    vertices, segments, triangles, elements, stats = refine(
+    vertices, segments, triangles, elements, stats, delaunay = refine(
         gray, vertices, segments, points, layout, rounds, focused_rounds
     )
     if values == "lsq":
@@ -408,4 +410,4 @@ def build(
         # exactly; decoders round each pixel to a level, which adds about 1/12 (an
         # error uniform over +-0.5) where the mesh does not reproduce the image
         mse = float(element_sse(elements, stats, vals).sum()) / (width * height) + 1 / 12
-    return MeasuredMesh(vertices, vals, triangles, width, height, _chains(segments), decoded_mse=mse)
+    return Meshed(Mesh(vertices, vals, triangles, width, height, _chains(segments)), mse, delaunay)

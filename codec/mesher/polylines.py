@@ -78,6 +78,10 @@ def _kernel(weights) -> np.ndarray:
 _CODE = _kernel(1 << np.arange(8))
 _COUNT = _kernel(np.ones(8))
 _REDUNDANT_U8 = _REDUNDANT.astype(np.uint8)
+# constant tables, shared by every call and thread: frozen
+for _table in (_OFFSETS, _REDUNDANT, _CODE, _COUNT, _REDUNDANT_U8):
+    _table.flags.writeable = False
+del _table
 
 
 def _filtered(grid: _Grid, kernel: np.ndarray) -> np.ndarray:
