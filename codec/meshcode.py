@@ -13,6 +13,8 @@ step (finer where the triangles are larger).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .format_spec import schema
@@ -297,19 +299,61 @@ def tree_sums(increments: np.ndarray, parent: np.ndarray) -> np.ndarray:
     return acc[:n]
 
 
-def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """How a band mesh is stored: its vertices' stored order (`order`, and `inverse`
+    from old to stored numbering), their pixel keys in that order, the polylines
+    renumbered (`lines`; `flat` one after another, of `lengths`) and their steps as
+    vertex pairs (`walls`), the canonical triangles and their doubled areas, and the
+    sample sequence (`seq`, the `free` vertices and their Hilbert keys, each sample's
+    `parents` place). It depends on the mesh's vertices, triangles and polylines, not
+    on its values: quantise and encode_band share one."""
+
+    order: np.ndarray
+    inverse: np.ndarray
+    sorted_keys: np.ndarray
+    vertices: np.ndarray
+    lines: list
+    flat: np.ndarray
+    lengths: np.ndarray
+    walls: np.ndarray
+    triangles: np.ndarray
+    areas: np.ndarray
+    seq: np.ndarray
+    free: np.ndarray
+    curve_keys: np.ndarray
+    parents: np.ndarray
+
+    def steps(self, step: int, top_pinned: bool) -> np.ndarray:
+        """Every stored vertex's quantisation step (vertex_steps)."""
+        return vertex_steps(self.vertices, self.triangles, step, top_pinned, self.areas)
+
+
+def layout(mesh: Mesh) -> Layout:
+    """The Layout of a band mesh."""
+    order, inverse, sorted_keys, lines = _stored_order(mesh)
+    vertices = mesh.vertices[order]
+    flat = _flat(lines)
+    lengths = np.array([len(c) for c in lines], dtype=np.int64)
+    triangles = canonical_triangles(inverse[mesh.triangles])
+    seq, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
+    return Layout(
+        order, inverse, sorted_keys, vertices, lines, flat, lengths, chain_steps(flat, lengths), triangles,
+        doubled_areas(vertices, triangles), seq, free, curve_keys, sample_parents(triangles, seq),
+    )
+
+
+def quantise(mesh: Mesh, step: int, top_pinned: bool, lay: Layout | None = None) -> Mesh:
     """A copy of the mesh with its samples as the decoder will rebuild them from residuals with
     base step `step` (closed-loop: each sample is coded against its parent as
     rebuilt, so rounding errors do not add up). Call with the final triangles; pass
-    the same step and top_pinned to the writer."""
+    the same step and top_pinned to the writer. lay: the mesh's layout(), if made."""
     if step == 1:
         return mesh
-    order, inverse, _, lines = _stored_order(mesh)
-    vertices = mesh.vertices[order]
-    seq, _, _ = _sample_order(vertices, _flat(lines), hilbert_levels(mesh.width, mesh.height))
-    triangles = inverse[mesh.triangles]
-    steps = vertex_steps(vertices, triangles, step, top_pinned)[seq].tolist()
-    parents = sample_parents(triangles, seq).tolist()
+    lay = layout(mesh) if lay is None else lay
+    order, inverse, seq = lay.order, lay.inverse, lay.seq
+    steps = lay.steps(step, top_pinned)[seq].tolist()
+    parents = lay.parents.tolist()
     top = int(np.iinfo(mesh.dtype).max)
     values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
     out = np.empty_like(values)
@@ -334,20 +378,18 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     return Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
 
 
-def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None) -> dict:
+def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None,
+                lay: Layout | None = None) -> dict:
     """The MeshPayload fields for a validated band mesh whose samples are as
     quantise(mesh, step, y0 > 0) left them (any samples with step 1). delaunay: True
     when the caller knows the triangles are the ones a decoder rebuilds (a mesh from
     in_stored_order, or a mesher's Meshed.delaunay); otherwise it triangulates to
-    find out."""
+    find out. lay: the mesh's layout(), if made (quantise's)."""
     n = len(mesh.vertices)
-    order, inverse, sorted_keys, lines = _stored_order(mesh)
-    vertices = mesh.vertices[order]
+    lay = layout(mesh) if lay is None else lay
+    order, sorted_keys, vertices, lines = lay.order, lay.sorted_keys, lay.vertices, lay.lines
     values = mesh.values[order].reshape(n, -1)
-    triangles = canonical_triangles(inverse[mesh.triangles])
-    flat = _flat(lines)
-    lengths = np.array([len(c) for c in lines], dtype=np.int64)
-    walls = chain_steps(flat, lengths)
+    triangles, flat, lengths, walls = lay.triangles, lay.flat, lay.lengths, lay.walls
 
     if not delaunay:
         try:
@@ -358,10 +400,9 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
-    seq_order, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
-    seq_steps = vertex_steps(vertices, triangles, step, y0 > 0)[seq_order][:, None]
+    seq_order, free, curve_keys, parents = lay.seq, lay.free, lay.curve_keys, lay.parents
+    seq_steps = lay.steps(step, y0 > 0)[seq_order][:, None]
     in_order = values[seq_order].astype(np.int64)
-    parents = sample_parents(triangles, seq_order)
     diffs = in_order - np.where(parents[:, None] >= 0, in_order[parents], 0)
     residuals = diffs // seq_steps
     if (residuals * seq_steps != diffs).any():

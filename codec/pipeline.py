@@ -133,12 +133,14 @@ class CodedBand:
     mesh: in stored order (vertices in raster order), values quantised as stored.
     step: the base value step it was quantised with (the next bands use the same).
     delaunay: the triangles are the ones a decoder rebuilds (meshcode.encode_band).
+    layout: the mesh's meshcode.Layout, which quantising it made (None if not made).
     """
 
     y0: int
     mesh: Mesh
     step: int
     delaunay: bool
+    layout: meshcode.Layout | None = None
 
     def bottom_row(self) -> tuple[np.ndarray, np.ndarray]:
         """The last row's vertices (x sorted) and values, which the next band shares."""
@@ -225,8 +227,11 @@ def code_band(
         if mse is None:
             mse = _decoded_mse(mesh, band, ~holes if has_holes else None)
         step = max(1, int(STEP_FACTOR * np.sqrt(mse)))
-    # the values as the file will store them (pinned first-row values stay exact)
-    mesh = meshcode.quantise(mesh, step, top is not None)
+    # the values as the file will store them (pinned first-row values stay exact); the
+    # stored order and sample order made for that serve the writer too
+    mesh = meshcode.in_stored_order(mesh, triangulate_again=False)
+    layout = meshcode.layout(mesh)
+    mesh = meshcode.quantise(mesh, step, top is not None, layout)
     refined = error_bound.refine(
         mesh,
         band,
@@ -237,5 +242,6 @@ def code_band(
         valid=~holes if has_holes else None,
     )
     if refined is not mesh:
-        mesh, delaunay = refined, False
-    return CodedBand(y0, meshcode.in_stored_order(mesh, triangulate_again=False), step, delaunay)
+        mesh = meshcode.in_stored_order(refined, triangulate_again=False)
+        return CodedBand(y0, mesh, step, delaunay=False)
+    return CodedBand(y0, mesh, step, delaunay, layout)

@@ -147,7 +147,7 @@ class StreamEncoder:
             last=self._received == self.height,
             step=self._step,
         )
-        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay)
+        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout)
         self.bands += 1
         self.vertices += len(coded.mesh.vertices)
         self.triangles += len(coded.mesh.triangles)
