@@ -223,6 +223,11 @@ def _stored_order(mesh: Mesh):
     return order, inverse, keys[order], [inverse[c] for c in mesh.constraints]
 
 
+def stored_permutation(mesh: Mesh) -> np.ndarray:
+    """Old vertex index of each vertex in stored order (in_stored_order's)."""
+    return _stored_order(mesh)[0]
+
+
 def in_stored_order(mesh: Mesh, *, triangulate_again: bool = True) -> Mesh:
     """The mesh with its vertices in stored order and its polylines renumbered to it;
     triangulated from that order as a decoder rebuilds the triangles (or, with

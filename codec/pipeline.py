@@ -232,7 +232,7 @@ def code_band(
     mesh = meshcode.in_stored_order(mesh, triangulate_again=False)
     layout = meshcode.layout(mesh)
     mesh = meshcode.quantise(mesh, step, top is not None, layout)
-    refined = error_bound.refine(
+    refined, delaunay = error_bound.refine(
         mesh,
         band,
         plan.bound,
@@ -240,8 +240,8 @@ def code_band(
         pinned_rows=1 if top is not None else 0,
         last_band=last,
         valid=~holes if has_holes else None,
+        delaunay=delaunay,
     )
     if refined is not mesh:
-        mesh = meshcode.in_stored_order(refined, triangulate_again=False)
-        return CodedBand(y0, mesh, step, delaunay=False)
+        return CodedBand(y0, meshcode.in_stored_order(refined, triangulate_again=False), step, delaunay)
     return CodedBand(y0, mesh, step, delaunay, layout)

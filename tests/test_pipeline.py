@@ -116,3 +116,32 @@ def test_code_band_is_pure():
     np.testing.assert_array_equal(a.mesh.values[first], top[1])
     keys = a.mesh.vertices[:, 1] * 96 + a.mesh.vertices[:, 0]
     assert (np.diff(keys) > 0).all()  # stored order
+
+
+@pytest.mark.parametrize(
+    "options",
+    [dict(points=500), dict(points=600, band_height=20), dict(quality=70), dict(max_error=6, band_height=30),
+     dict(points=500, mesher="uniform"), dict(points=400, mask="holes")],
+)
+def test_the_writer_never_triangulates_again(options):
+    """Every stage that changes a band's triangles makes them as a decoder rebuilds
+    them and says so, so the MESH chunk is written without a second triangulation."""
+    image = range_scene(160, 120, seed=4)
+    if options.get("mask") == "holes":
+        options = dict(options, mask=np.zeros(image.shape, bool))
+        options["mask"][40:70, 50:90] = True
+    real = meshcode.encode_band
+    runs = []
+
+    def encode_band(*args, **kwargs):
+        with counting(triangle, "triangulate") as calls:
+            out = real(*args, **kwargs)
+        runs.append(len(calls))
+        return out
+
+    meshcode.encode_band = encode_band
+    try:
+        codec.encode(image, **options)
+    finally:
+        meshcode.encode_band = real
+    assert runs and not any(runs)
