@@ -1,5 +1,7 @@
-"""Error-bounded refinement (the seed's §3.3.1, coarse to fine): insert vertices where
-the decoded error is largest until a bound holds.
+"""Error-bounded refinement: insert vertices where the decoded error is largest until a
+bound holds (coarse to fine, as the refinement of section 3.3.1 that section 3.3.2.3
+of "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes" names for bounding
+its mesh's error).
 
 The error is measured on the image the decoder will produce (the exact CPU rule), so
 a bound reached here holds for every decode. Refinement always ends: at worst every
@@ -67,7 +69,7 @@ def _squared_errors(mesh: Mesh, image: np.ndarray) -> np.ndarray:
     return (diff * diff).reshape(mesh.height, mesh.width, -1)
 
 
-def refine(
+def refine_to_bound(
     mesh: Mesh,
     image: np.ndarray,
     bound: Bound,

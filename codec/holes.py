@@ -16,7 +16,7 @@ from .mesh import Mesh, without_vertices
 from .meshcode import in_stored_order
 from .triangulate import through_vertices
 
-#: Simplification tolerance of hole outlines, in pixels (the seed's d for walls).
+#: Simplification tolerance of hole outlines, in pixels (the approximating error of the paper's edge polylines, section 3.3.2.1).
 OUTLINE_ERROR = 1.0
 
 

@@ -232,7 +232,7 @@ def code_band(
     mesh = meshcode.in_stored_order(mesh, triangulate_again=False)
     layout = meshcode.layout(mesh)
     mesh = meshcode.quantise(mesh, step, top is not None, layout)
-    refined, delaunay = error_bound.refine(
+    refined, delaunay = error_bound.refine_to_bound(
         mesh,
         band,
         plan.bound,

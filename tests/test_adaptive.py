@@ -139,7 +139,7 @@ def check_exact_away_from_steps(m, img) -> None:
 def test_planar_steps_are_walls_and_exact_away_from_them(seed):
     """The walls make the mesh exact away from the steps, with least-squares values
     (the default: step pixels, which no wall can follow, do not pull the vertices
-    beside them) as with the pixel values (the seed's)."""
+    beside them) as with the pixel values (the paper's)."""
     img = planar_steps(160, 120, seed=seed)
     m = codec.build_mesh(img, points=600)
     check_tiling(m)

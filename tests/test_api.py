@@ -70,7 +70,7 @@ def test_uniform_rms_on_camera_matches_the_baseline(corpus):
     image = corpus["camera"]
     out = codec.decode(codec.encode(image, points=4000, mesher="uniform"))
     rms = np.sqrt(np.mean((out.astype(float) - image) ** 2))
-    assert 15 < rms < 25  # a 63 x 63 grid with pixel values: the seed's baseline
+    assert 15 < rms < 25  # a 63 x 63 grid with pixel values: the paper's uniform baseline
 
 
 def test_every_pixel_as_vertex_is_lossless():
