@@ -14,6 +14,7 @@ error bound (codec.error_bound).
 
 from __future__ import annotations
 
+import inspect
 import numbers
 from dataclasses import dataclass
 
@@ -42,10 +43,12 @@ STEP_FACTOR = 1.0
 
 
 def default_points(width: int, height: int) -> int:
+    """The vertex budget of an image when none is asked for."""
     return max(4, round(DEFAULT_DENSITY * width * height))
 
 
 def start_points(width: int, height: int) -> int:
+    """The vertex budget of the first mesh when refinement to a bound decides the size."""
     return max(4, round(START_DENSITY * width * height))
 
 
@@ -118,8 +121,9 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
     points = s.points
     if points is None:
         points = start_points(width, height) if bound.active else default_points(width, height)
-    # the values method refinement uses is the mesher's: given, or its default
-    values = s.values or ("lsq" if s.mesher == "adaptive" else "sample")
+    # refinement picks new vertices' values as the mesher does: as given, or by its
+    # build()'s default
+    values = s.values or inspect.signature(builder(s.mesher)).parameters["values"].default
     return Plan(
         s, int(width), int(height), dtype, channels, np.dtype(storage),
         int(min(band_height, max(height - 1, 1))), int(points), bound, step, values, quant, nodata,
