@@ -83,7 +83,7 @@ def encode(
     from .settings import Settings
 
     if unknown:
-        Settings.from_options(**unknown)  # raises, listing the valid options
+        Settings.from_options(also=("mask",), **unknown)  # raises, listing the valid options
     settings = Settings.from_options(
         points=points, quality=quality, max_rms=max_rms, max_error=max_error, band_height=band_height,
         mesher=mesher, value_step=value_step, nodata=nodata, value_range=value_range, precision=precision,

@@ -129,15 +129,16 @@ class Settings:
             )
 
     @classmethod
-    def from_options(cls, **options) -> "Settings":
+    def from_options(cls, *, also: tuple[str, ...] = (), **options) -> "Settings":
         """Settings from keyword options; an unknown one is an OptionError that lists
-        the valid ones. None stands for the default, as if not given."""
+        the valid ones (and `also`, the caller's own keywords). None stands for the
+        default, as if not given."""
         names = option_names()
         unknown = sorted(set(options) - set(names))
         if unknown:
             raise OptionError(
                 f"unknown encoder option{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
-                f"the options are: {', '.join(names)}"
+                f"the options are: {', '.join(names + tuple(also))}"
             )
         return cls(**{k: v for k, v in options.items() if v is not None})
 
