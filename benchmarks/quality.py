@@ -1,6 +1,6 @@
 """Quality benchmark: .atm's adaptive mesher against the uniform grid and pydelatin.
 
-For every public corpus image (DESIGN.md) at 1 % and 2.8 % vertex density, and the
+For every public corpus image (tests/corpus.py) at 1 % and 2.8 % vertex density, and the
 two reference images of "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes"
 (section 3.3.2.3) at its vertex counts, prints the vertex count, RMS
 and time of
