@@ -58,7 +58,8 @@ class StreamEncoder:
         if settings is None:
             settings = Settings.from_options(**options)
         elif options:
-            settings = settings.replace(**Settings.from_options(**options).given())
+            Settings.from_options(**options)  # names checked, and listed if unknown
+            settings = settings.replace(**{k: v for k, v in options.items() if v is not None})
         self._plan = pipeline.plan(settings, width, height, dtype, channels)
         p = self._plan
         self.width, self.height, self.dtype, self.channels = p.width, p.height, p.dtype, p.channels

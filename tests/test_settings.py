@@ -112,3 +112,11 @@ def test_settings_are_values():
     assert a.replace(points=5).points == 5 and a.points == 100
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.points = 3  # type: ignore[misc]
+
+
+def test_stream_options_override_the_settings_given():
+    import io
+
+    base = Settings(mesher="uniform", points=50)
+    enc = codec.StreamEncoder(io.BytesIO(), 20, 10, settings=base, mesher="adaptive")
+    assert enc._plan.settings.mesher == "adaptive" and enc._plan.settings.points == 50
