@@ -14,6 +14,7 @@ import io
 import numpy as np
 
 from .errors import ATMError
+from .decoding import render
 from .mesh import Mesh, edges
 
 #: ITU-R BT.601 luma weights, used as z for RGB vertices.
@@ -158,7 +159,7 @@ def overlay_png(
     import cv2
 
     if image is None:
-        image = mesh.render()
+        image = render(mesh)
     rgb = display_rgb(image)
     if scale > 1:
         rgb = cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
