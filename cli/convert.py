@@ -51,7 +51,7 @@ class _Counter:
 
 #: Flags of `atm encode` that are not encoder options (every other flag must be one of
 #: codec.settings.cli_option_names(), which tests/test_settings.py checks).
-NOT_ENCODER_OPTIONS = ("inputs", "output", "verbose", "jobs", "quiet")
+NOT_ENCODER_OPTIONS = ("inputs", "output", "verbose", "jobs", "quiet", "force")
 
 
 def encode_options(args: argparse.Namespace) -> dict:
