@@ -3,9 +3,10 @@ GIL released (see codec.decoder_cpu for the rule it implements, ATM.md §5).
 
 Every quantity is an int64 integer: the pixel centres and vertices are integer
 points, so a span's ends and a pixel's value are exact fractions, walked from row to
-row and pixel to pixel as quotient and remainder (one division per triangle edge and
-per span, none per pixel). Bounds: with W*H <= 2**32 and samples below 2**16, every
-numerator is below 2**53 (see _plane)."""
+row and pixel to pixel as quotient and remainder (a float64 division, corrected to
+the exact floor, per triangle edge and per span; none per pixel). Bounds: with
+W*H <= 2**32 and samples below 2**16, every numerator is below 2**53 (see the plane
+in _triangles), so the float64 quotients are off by at most one before correction."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t
 
