@@ -47,6 +47,14 @@ def test_tree_sums_follow_deep_chains_and_wrap_like_int64() -> None:
     assert one.tolist() == [3, 7, 8]
 
 
+def test_tree_sums_of_no_samples() -> None:
+    """A band without vertices has no samples: empty sums of the increments' shape,
+    not an error from reshaping nothing."""
+    for shape in [(0,), (0, 1), (0, 3)]:
+        sums = meshcode.tree_sums(np.zeros(shape, np.int64), np.zeros(0, np.int64))
+        assert sums.shape == shape
+
+
 def test_malformed_trees_are_corrupt() -> None:
     with pytest.raises(CorruptError, match="does not come before"):
         meshcode.tree_sums(np.zeros((3, 1), np.int64), np.array([-1, 2, 0]))
