@@ -32,6 +32,13 @@ def test_malformed_varints_are_corrupt(data: bytes, count: int, message: str) ->
         coding.unvarints(data, count, "field")
 
 
+def test_a_count_the_bytes_cannot_hold_allocates_nothing() -> None:
+    """A file that declares 10**12 numbers in one byte is refused by the count check,
+    before an array of that count (8 TB) is asked for."""
+    with pytest.raises(CorruptError, match="1 bytes do not hold 1000000000000 numbers"):
+        coding.unvarints(b"\x01", 10**12, "field")
+
+
 def test_tree_sums_follow_deep_chains_and_wrap_like_int64() -> None:
     """A chain as deep as the sequence (each sample's parent the one before) and a
     sum past int64 that wraps as numpy's arithmetic does (the caller's range check
