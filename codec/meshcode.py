@@ -17,7 +17,7 @@ import numpy as np
 
 from format_spec import schema
 
-from . import _fields, frames, limits
+from . import frames, limits
 from .coding import (
     canonical_triangles,
     hilbert_keys,
@@ -31,6 +31,7 @@ from .coding import (
 )
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, chain_steps, doubled_areas
+from .native import _fields
 from .triangulate import step_over_vertex, triangulate
 
 

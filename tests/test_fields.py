@@ -73,3 +73,20 @@ def test_malformed_trees_are_corrupt() -> None:
     vertices = np.array([[0, 0], [1, 0], [0, 1]])
     with pytest.raises(CorruptError, match="beyond"):
         meshcode.vertex_steps(vertices, np.array([[0, 1, 5]]), 4, False, areas=np.array([1]))
+
+
+def test_a_package_without_its_kernels_says_how_to_build_them(monkeypatch) -> None:
+    """No fallback: an install that skipped the build fails at import, saying what to
+    run (None in sys.modules, and no attribute on the package, make that import fail
+    as a missing file would)."""
+    import importlib
+    import sys
+
+    import codec
+
+    monkeypatch.setitem(sys.modules, "codec._fields", None)
+    monkeypatch.delattr(codec, "_fields")
+    monkeypatch.delitem(sys.modules, "codec.native")
+    with pytest.raises(ImportError, match=r"not built: install the package with `pip install -e \.`"):
+        importlib.import_module("codec.native")
+
