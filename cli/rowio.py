@@ -109,7 +109,11 @@ def _pnm_source(f: BinaryIO, magic: bytes, name: str) -> RowSource:
 
 def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
     if path is not None:
-        array = np.load(path, mmap_mode="r", allow_pickle=False)  # pages in as rows are read
+        try:
+            array = np.load(path, mmap_mode="r", allow_pickle=False)  # pages in as rows are read
+        except (ValueError, SyntaxError, EOFError) as exc:
+            # a header that lies about the data's size, or one cut short
+            raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
         shape, dtype = array.shape, array.dtype
     else:
         try:
@@ -135,7 +139,7 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
         for y in range(0, height, BLOCK_ROWS):
             n = min(BLOCK_ROWS, height - y)
             if array is not None:
-                yield np.ascontiguousarray(array[y : y + n])
+                yield np.ascontiguousarray(array[y : y + n], dtype.newbyteorder("="))
             else:
                 data = _read_exact(f, n * row_items * dtype.itemsize, name)
                 yield np.frombuffer(data, dtype).reshape((n,) + tuple(shape[1:])).astype(dtype.newbyteorder("="))
