@@ -163,14 +163,15 @@ def run(args: argparse.Namespace, command: str) -> int:
         fmt = args.format or "png"
         options = {"format": fmt, "backend": args.backend}
         suffix = "." + fmt
+    # checked before the output directory is made: a usage error leaves nothing behind
+    jobs = args.jobs if args.jobs is not None else os.cpu_count() or 1
+    if jobs < 1:
+        raise UsageError(f"--jobs must be at least 1, not {jobs}")
     pairs = plan(expand(args.inputs, command), outdir, suffix)
     try:
         outdir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ATMError(f"cannot create {outdir}: {exc.strerror}") from None
-    jobs = args.jobs or os.cpu_count() or 1
-    if jobs < 1:
-        raise UsageError(f"--jobs must be at least 1, not {jobs}")
     bar = Progress(len(pairs), quiet=args.quiet)
     start = time.monotonic()
     results: list[Result] = []

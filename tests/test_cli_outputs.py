@@ -81,6 +81,12 @@ def test_an_empty_output_name_is_refused(scene, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.png"]
 
 
+@pytest.mark.parametrize("jobs", [0, -2])
+def test_batch_refuses_a_job_count_below_one_and_makes_no_directory(scene, tmp_path, jobs):
+    refused(atm("encode", scene, scene, tmp_path / "new", "-j", jobs), f"--jobs must be at least 1, not {jobs}")
+    assert not (tmp_path / "new").exists()
+
+
 def test_batch_refuses_an_output_that_is_an_input_before_converting(tmp_path):
     # .atm data kept under a .png name (say, written with --force), decoded to PNG beside it
     (tmp_path / "kept.png").write_bytes(codec.encode(range_scene(48, 32, seed=3)))
