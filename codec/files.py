@@ -104,9 +104,8 @@ def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
         raise WriteError("the output file name is empty", errno.ENOENT)
     if name.endswith(os.sep):
         raise WriteError(f"cannot write {name}: a file name cannot end with {os.sep}", errno.EISDIR, name)
-    target = os.path.realpath(name)
     try:
-        st = os.stat(target)
+        st = os.stat(name)  # through any links, as the kernel resolves them
     except FileNotFoundError:
         st = None
     except OSError as exc:
@@ -114,10 +113,11 @@ def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise WriteError(f"cannot write {name}: it is a directory", errno.EISDIR, name)
     if st is not None and not stat.S_ISREG(st.st_mode):
-        with _through(name, target) as f:
+        # /dev/stdout on a pipe has no path realpath() could name: open it as it is
+        with _through(name, name) as f:
             yield f
         return
-    with _replacing(name, target, st) as f:
+    with _replacing(name, os.path.realpath(name), st) as f:
         yield f
 
 

@@ -74,6 +74,12 @@ def test_a_name_claiming_another_kind_of_file_needs_force(scene, tmp_path):
     assert r.returncode == 0 and (tmp_path / "keep.atm").read_bytes().startswith(b"\x89PNG")
 
 
+def test_dev_stdout_on_a_pipe_is_written_through(scene, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "cli", "encode", scene, "/dev/stdout"], capture_output=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == codec.encode(codec.files.read_image(scene))
+
+
 def test_an_empty_output_name_is_refused(scene, tmp_path):
     refused(atm("encode", scene, "", cwd=tmp_path), "output file name is empty")
     refused(atm("decode", scene, "", cwd=tmp_path), "output file name is empty")
