@@ -71,22 +71,28 @@ class _Output:
         self.name = name
 
     def write(self, data) -> int:
-        n = len(memoryview(data).cast("B"))
-        self._pending += data
-        if len(self._pending) >= self.BUFFER:
+        view = memoryview(data).cast("B")
+        if len(self._pending) + len(view) < self.BUFFER:
+            self._pending += view
+        else:  # a large piece goes straight out, not copied into the buffer first
             self.flush()
-        return n
+            self._write_all(view)
+        return len(view)
 
     def flush(self) -> None:
-        view = memoryview(self._pending)
         try:
-            while view:
-                view = view[os.write(self._fd, view):]
-        except OSError as exc:
-            raise write_error(self.name, exc) from None
+            self._write_all(self._pending)
         finally:
-            view.release()
             self._pending.clear()
+
+    def _write_all(self, data) -> None:
+        with memoryview(data) as view:
+            done = 0
+            try:
+                while done < len(view):
+                    done += os.write(self._fd, view[done:])
+            except OSError as exc:
+                raise write_error(self.name, exc) from None
 
     def fileno(self) -> int:
         return self._fd
@@ -114,7 +120,7 @@ def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
         raise WriteError(f"cannot write {name}: it is a directory", errno.EISDIR, name)
     if st is not None and not stat.S_ISREG(st.st_mode):
         # /dev/stdout on a pipe has no path realpath() could name: open it as it is
-        with _through(name, name) as f:
+        with _through(name) as f:
             yield f
         return
     with _replacing(name, os.path.realpath(name), st) as f:
@@ -122,10 +128,10 @@ def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
 
 
 @contextlib.contextmanager
-def _through(name: str, target: str) -> Iterator[BinaryIO]:
+def _through(name: str) -> Iterator[BinaryIO]:
     # a device or FIFO has no contents to keep: replacing it would only break it
     try:
-        fd = os.open(target, os.O_WRONLY | os.O_CLOEXEC)
+        fd = os.open(name, os.O_WRONLY | os.O_CLOEXEC)
     except OSError as exc:
         raise write_error(name, exc) from None
     try:
