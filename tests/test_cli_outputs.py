@@ -131,12 +131,6 @@ def test_dev_stdout_on_a_pipe_is_written_through(scene, tmp_path):
     assert r.stdout == codec.encode(codec.files.read_image(scene))
 
 
-def test_deeply_nested_metadata_is_one_line(scene, tmp_path):
-    deep = '{"a": ' + "[" * 5000 + "]" * 5000 + "}"
-    refused(atm("encode", scene, tmp_path / "m.atm", "--metadata", deep), "--metadata is nested too deeply")
-    assert not (tmp_path / "m.atm").exists()
-
-
 def test_an_empty_output_name_is_refused(scene, tmp_path):
     refused(atm("encode", scene, "", cwd=tmp_path), "output file name is empty")
     refused(atm("decode", scene, "", cwd=tmp_path), "output file name is empty")
