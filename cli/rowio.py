@@ -12,7 +12,7 @@ import numpy as np
 
 from codec import quantise
 from codec.errors import ATMError, UnsupportedError
-from codec.files import decode_image
+from codec.files import decode_image, npy_header
 
 #: Rows handed to the encoder at a time when reading a stream.
 BLOCK_ROWS = 64
@@ -117,15 +117,9 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
         shape, dtype = array.shape, array.dtype
     else:
         try:
-            version = np.lib.format.read_magic(f)
-            header = (
-                np.lib.format.read_array_header_1_0(f)
-                if version == (1, 0)
-                else np.lib.format.read_array_header_2_0(f)
-            )
+            shape, fortran, dtype = npy_header(f)
         except (ValueError, SyntaxError) as exc:
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
-        shape, fortran, dtype = header
         if fortran:
             raise UnsupportedError(f"{name}: Fortran-ordered .npy cannot be streamed")
         array = None

@@ -17,11 +17,13 @@ import functools
 import os
 import secrets
 import stat
+import struct
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
 import numpy as np
 
+from . import limits
 from .errors import ATMError, OptionError, UnsupportedError
 
 #: Extensions an image can be written as, by OpenCV.
@@ -32,6 +34,8 @@ IMAGE_SUFFIXES = frozenset({
     ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp",
     ".webp", ".jp2", ".npy",
 })  # fmt: skip
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 #: O_TMPFILE where the platform has it (Linux); None selects named temporaries.
 UNNAMED = getattr(os, "O_TMPFILE", None)
@@ -280,15 +284,33 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> None:
         f.write(data)
 
 
+def npy_header(stream: BinaryIO) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """(shape, fortran_order, dtype) from the start of an .npy stream, which is left at
+    the array data. ValueError (or SyntaxError) if it is not one."""
+    version = np.lib.format.read_magic(stream)
+    if version == (1, 0):
+        return np.lib.format.read_array_header_1_0(stream)
+    return np.lib.format.read_array_header_2_0(stream)
+
+
 def decode_image(data: bytes, name: str = "input") -> np.ndarray:
     """Decode image-file bytes (any format OpenCV reads, or .npy) to gray or RGB."""
+    # the size a header declares is checked before any pixel is allocated: a small file
+    # may declare a huge image (a PNG of zeros compresses about 1000:1)
     if data[:6] == b"\x93NUMPY":
         import io
 
         try:
+            shape = npy_header(io.BytesIO(data))[0]
+            if len(shape) in (2, 3):
+                limits.check_image_size(int(shape[1]), int(shape[0]))
             return np.load(io.BytesIO(data), allow_pickle=False)
+        except ATMError:
+            raise
         except Exception as exc:  # numpy raises several types for a bad .npy
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
+    if data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR" and len(data) >= 24:
+        limits.check_image_size(*struct.unpack(">II", data[16:24]))
     import cv2
 
     buf = np.frombuffer(data, dtype=np.uint8)
