@@ -42,6 +42,8 @@ UNNAMED = getattr(os, "O_TMPFILE", None)
 # where O_TMPFILE exists but this file system lacks it, open() fails with one of these
 _NO_TMPFILE = {errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL}
 _AT_FDCWD, _AT_EMPTY_PATH = -100, 0x1000
+# linkat() of an unnamed file refused outright (no privilege, no /proc, a sandbox)
+_CANNOT_LINK = {errno.EPERM, errno.EACCES, errno.ENOENT, errno.EXDEV, errno.ENOSYS, errno.EOPNOTSUPP, errno.EINVAL}
 
 
 class WriteError(ATMError, OSError):
@@ -208,7 +210,9 @@ def _link_unnamed(fd: int, directory: str, target: str) -> None:
         return
     except FileExistsError:
         pass
-    except OSError:
+    except OSError as exc:
+        if exc.errno not in _CANNOT_LINK:
+            raise
         _copy_to(fd, directory, target)  # no way to name it on this system: copy it
         return
     # linkat never replaces: name it beside the target and rename that over it (the
