@@ -28,12 +28,17 @@ from .errors import ATMError, OptionError, UnsupportedError
 
 #: Extensions an image can be written as, by OpenCV.
 WRITABLE = (".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff")
-#: Extensions that name image files (what OpenCV reads, and .npy): .atm bytes written
-#: under one of these would be mistaken for an image, and the other way round.
+#: Extensions of the image files the codec reads (OpenCV's common formats, and .npy).
 IMAGE_SUFFIXES = frozenset({
     ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp",
     ".webp", ".jp2", ".npy",
 })  # fmt: skip
+#: Extensions that name an image or raster format: .atm bytes written under one of
+#: these would be taken for that format (and may replace the user's original).
+IMAGE_NAMES = IMAGE_SUFFIXES | {
+    ".gif", ".jpe", ".jfif", ".exr", ".hdr", ".pfm", ".pam", ".avif", ".heic", ".heif",
+    ".jxl", ".dng", ".raw", ".dib", ".npz", ".img", ".asc", ".dem", ".flt",
+}  # fmt: skip
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -275,7 +280,7 @@ def refuse_image_name(path: str | os.PathLike) -> None:
     """OptionError if `path` has an image extension: .atm bytes written there would be
     taken for that format (and an image of that name may be the user's original)."""
     suffix = Path(os.fsdecode(os.fspath(path))).suffix.lower()
-    if suffix in IMAGE_SUFFIXES:
+    if suffix in IMAGE_NAMES:
         raise OptionError(
             f"{os.fsdecode(os.fspath(path))} has the image extension {suffix}, but .atm data would be written "
             "there: use a name ending in .atm (or force=True to write it all the same)"

@@ -63,6 +63,7 @@ def test_a_name_claiming_another_kind_of_file_needs_force(scene, tmp_path):
     victim.write_bytes(b"a photo the user keeps")
     refused(atm("encode", scene, victim), "victim.png is named as a .png image", "victim.atm", "--force")
     assert victim.read_bytes() == b"a photo the user keeps"
+    refused(atm("encode", scene, tmp_path / "dem.exr"), "named as a .exr image")
     assert atm("encode", scene, victim, "--force").returncode == 0
     np.testing.assert_array_equal(codec.read(victim).shape, (32, 48))
 
