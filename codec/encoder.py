@@ -104,7 +104,7 @@ def encode(
             raise OptionError(f"mask must have shape {(height, width)}, not {holes.shape}")
         if img.dtype.kind != "f" and options.get("nodata") is None:
             options["nodata"] = 0
-    if img.dtype.kind == "f" and "value_range" not in options:
+    if img.dtype.kind in "fi" and "value_range" not in options:
         valid = np.isfinite(img) if holes is None else np.isfinite(img) & ~holes
         nodata = options.get("nodata")
         if nodata is not None:

@@ -12,7 +12,7 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder, error_bound, holes, meshcode, quantise
+from . import banding, container, encoder, error_bound, holes, integers, meshcode, quantise
 from .mesher import values as vertex_values
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
@@ -75,7 +75,20 @@ class StreamEncoder:
                 raise OptionError(f"{name} must be a positive whole number, not {value!r}")
         dtype = np.dtype(dtype)
         self._quant = None
-        if dtype.kind == "f":
+        if integers.is_signed(dtype):
+            if channels != 1:
+                raise UnsupportedError("signed integer images must have one channel")
+            if precision is not None:
+                raise OptionError(f"{dtype} data is stored exactly; precision applies to float images only")
+            value_range = value_range if value_range is not None else integers.default_range(dtype)
+            if value_range is None:
+                raise OptionError(
+                    f"a {dtype} stream needs value_range=(lowest, highest) so that the header can "
+                    "carry the offset before the data arrives"
+                )
+            # whole numbers with scale 1: bounds in sample units are bounds on q as they are
+            self._quant = integers.plan(*value_range, dtype)
+        elif dtype.kind == "f":
             if channels != 1:
                 raise UnsupportedError("float images must have one channel")
             if value_range is None:
@@ -87,19 +100,17 @@ class StreamEncoder:
             if quality is None:
                 max_rms, max_error = self._quant.integer_bounds(max_rms, max_error, self._quant.scale / 2)
         elif value_range is not None or precision is not None:
-            raise OptionError("value_range and precision apply to float images only")
+            raise OptionError("value_range applies to float and signed integer images; precision to float images only")
         elif dtype not in SAMPLE_TYPES:
-            raise UnsupportedError(
-                f"unsupported pixel type {dtype}; .atm stores uint8, uint16 or float samples"
-            )
+            raise integers.unsupported(dtype)
         storage = quantise.STORAGE if self._quant is not None else dtype
-        if nodata is not None and self._quant is None:
+        if nodata is not None and dtype.kind in "ui":
             info = np.iinfo(dtype)
             if not (isinstance(nodata, numbers.Real) and float(nodata).is_integer() and info.min <= nodata <= info.max):
                 raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
         # float data always has a nodata value (NaN unless given), as NaN can turn up in
         # any row; integer data has one when the user names it
-        self._nodata = (float("nan") if nodata is None else float(nodata)) if self._quant else nodata
+        self._nodata = (float("nan") if nodata is None else float(nodata)) if dtype.kind == "f" else nodata
         if channels not in (1, 3):
             raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
         if band_height is None:
@@ -135,7 +146,7 @@ class StreamEncoder:
         header = container.Header(
             width,
             height,
-            np.dtype(np.float32) if self._quant else dtype,
+            np.dtype(np.float32) if dtype.kind == "f" else dtype,
             channels,
             quant=self._quant,
             nodata=None if self._nodata is None else float(self._nodata),
@@ -328,7 +339,9 @@ class StreamDecoder:
         for y0, mesh in self._reader:
             self.metadata.update(self._reader.header.metadata or {})
             rows = decoding.render(mesh, backend=self._backend)
-            if quant is not None:
+            if quant is not None and integers.is_signed(self.dtype):
+                rows = integers.restore(rows, quant, self.dtype)
+            elif quant is not None:
                 rows = quant.dequantise(rows)
             if mesh.holes is not None:
                 rows[mesh.holes] = nodata
