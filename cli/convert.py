@@ -15,6 +15,7 @@ import numpy as np
 
 import codec
 from . import rowio
+from codec import geotiff, integers
 from codec.errors import ATMError, UnsupportedError
 
 
@@ -67,13 +68,15 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
     """Encode one image (a path or -) to one .atm output (a path or -), band by band.
     Returns the finished encoder (its statistics) and the bytes written."""
     src = rowio.open_rows(src_name)
-    if src.dtype.kind == "f" and "value_range" not in options:
-        if src.value_range is None:
+    options = geotiff.source_options(src, options)
+    if (src.dtype.kind == "f" or integers.is_signed(src.dtype)) and "value_range" not in options and src.channels == 1:
+        if src.scan is None and src.dtype.kind == "f":
             raise codec.OptionError(
                 f"{src_name}: float data from a stream needs --value-range LOW HIGH "
                 "(the header carries the quantisation before the rows arrive)"
             )
-        options = dict(options, value_range=src.value_range)
+        if src.scan is not None:
+            options = dict(options, value_range=src.scan(options.get("nodata")))
     with open_output(dst_name) as f:
         out = _Counter(f)
         enc = codec.StreamEncoder(
@@ -132,7 +135,8 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
         image = np.empty(dec.shape, dec.dtype)
         for y0, rows in dec:
             image[y0 : y0 + len(rows)] = rows
-    data = encode_image(image, "." + fmt)
+    # a TIFF gets its georeferencing back (the geotiff metadata record)
+    data = geotiff.write(image, dec.metadata) if fmt in ("tif", "tiff") else encode_image(image, "." + fmt)
     with open_output(dst_name) as out:
         out.write(data)
     return len(data)

@@ -16,6 +16,7 @@ from pathlib import Path
 import codec
 from . import batch, convert, tools
 from .progress import Progress
+from codec import geotiff
 from codec.errors import ATMError
 
 EPILOG = "Use - for standard input or output. Run 'atm COMMAND --help' for a command's options."
@@ -70,7 +71,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
         if i["nodata"] is not None:
             print(f"  holes decode to {i['nodata']:g}")
+        for line in geotiff.describe(i["metadata"]):
+            print(f"  {line}")
         for key, value in i["metadata"].items():
+            if key == geotiff.KEY:
+                continue  # shown above in words; --json has the tags themselves
             print(f"  {key}: {json.dumps(value, ensure_ascii=False)}")
     return 0
 

@@ -6,11 +6,12 @@ from __future__ import annotations
 import ast
 import sys
 from dataclasses import dataclass
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
 from codec.errors import ATMError, UnsupportedError
+from codec import geotiff
 from codec.files import decode_image
 
 #: Rows handed to the encoder at a time when reading a stream.
@@ -29,6 +30,13 @@ class RowSource:
     #: lowest and highest finite value of float data, when it can be known before the
     #: rows are streamed (files; not standard input)
     value_range: tuple[float, float] | None = None
+    #: scan(nodata): the range of float or signed integer data, values equal to nodata
+    #: left out (files; None for standard input)
+    scan: Callable[[float | None], tuple[float, float]] | None = None
+    #: the source's own nodata value and metadata (a GeoTIFF's GDAL_NODATA and
+    #: georeferencing), used unless the user gives their own
+    nodata: float | None = None
+    metadata: dict | None = None
 
 
 def _read_exact(f: BinaryIO, n: int, name: str) -> bytes:
@@ -114,17 +122,22 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
                 data = _read_exact(f, n * row_items * dtype.itemsize, name)
                 yield np.frombuffer(data, dtype).reshape((n,) + tuple(shape[1:])).astype(dtype.newbyteorder("="))
 
-    value_range = None
-    if array is not None and np.dtype(dtype).kind == "f":
-        value_range = _finite_range(array[y : y + BLOCK_ROWS] for y in range(0, height, BLOCK_ROWS))
-    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks(), value_range)
+    value_range = scan = None
+    if array is not None and np.dtype(dtype).kind in "fi":
+        def scan(nodata=None):
+            return _finite_range((array[y : y + BLOCK_ROWS] for y in range(0, height, BLOCK_ROWS)), nodata)
+
+        value_range = scan() if np.dtype(dtype).kind == "f" else None
+    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks(), value_range, scan)
 
 
-def _finite_range(blocks) -> tuple[float, float]:
-    """(lowest, highest) finite value over blocks of rows, one block in memory at a time."""
+def _finite_range(blocks, nodata: float | None = None) -> tuple[float, float]:
+    """(lowest, highest) finite value over blocks of rows, one block in memory at a time,
+    values equal to `nodata` left out."""
     lo, hi = np.inf, -np.inf
     for block in blocks:
-        finite = block[np.isfinite(block)]
+        keep = np.isfinite(block) if nodata is None else np.isfinite(block) & (block != nodata)
+        finite = block[keep]
         if finite.size:
             lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
     return (lo, hi) if lo <= hi else (0.0, 0.0)
@@ -148,15 +161,22 @@ def open_rows(name: str) -> RowSource:
         else:
             f = _Prefixed(magic, f)
         return _npy_source(f, name, path)
-    image = decode_image(magic + f.read(), name)  # formats OpenCV reads whole
+    data = magic + f.read()
     if path is not None:
         f.close()
+    raster = geotiff.read(data, name) if geotiff.is_tiff(data) else None
+    image = raster.image if raster is not None else decode_image(data, name)  # read whole
     if image.ndim not in (2, 3):
         raise ATMError(f"{name}: not a 2-D image")
     h, w = image.shape[:2]
     channels = 1 if image.ndim == 2 else image.shape[2]
     value_range = _finite_range([image]) if image.dtype.kind == "f" else None
-    return RowSource(w, h, image.dtype, channels, iter([image]), value_range)
+    return RowSource(
+        w, h, image.dtype, channels, iter([image]), value_range,
+        lambda nodata=None: _finite_range([image], nodata),
+        raster.nodata if raster is not None else None,
+        raster.metadata if raster is not None else None,
+    )
 
 
 class _Prefixed:

@@ -60,6 +60,12 @@ def decode_image(data: bytes, name: str = "input") -> np.ndarray:
             return np.load(io.BytesIO(data), allow_pickle=False)
         except Exception as exc:  # numpy raises several types for a bad .npy
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
+    from . import geotiff
+
+    if geotiff.is_tiff(data):
+        # tifffile reads the compressions GDAL writes (ZSTD, LZW, ...) and knows the
+        # GeoTIFF tags that OpenCV warns about
+        return geotiff.read(data, name).image
     import cv2
 
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -85,6 +91,10 @@ def encode_image(image: np.ndarray, ext: str) -> bytes:
     if image.dtype.kind == "f" and ext not in (".tif", ".tiff"):
         # OpenCV would quietly cut float samples to 8 bits
         raise UnsupportedError(f"float data cannot be written as {ext}; use .tif or .npy")
+    if ext in (".tif", ".tiff"):
+        from . import geotiff
+
+        return geotiff.write(image)
     if ext in (".pgm", ".ppm", ".pnm"):
         ext = ".pgm" if image.ndim == 2 else ".ppm"
     if image.ndim == 3:
