@@ -157,11 +157,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     msh = sub.add_parser(
         "mesh",
-        help="export an .atm file's mesh as OBJ, PLY, SVG, or a PNG drawn over the image",
+        help="export an .atm file's mesh as OBJ, PLY, SVG, a PNG drawn over the image, or a terrain tile",
         description=(
-            "Write the mesh of an .atm file: .obj or .ply (x = column, y = row, z = sample "
-            "value; walls as OBJ l-lines / PLY edges), .svg (the triangulation, walls in red), "
-            "or .png (the decoded image with the triangle edges in blue and walls in red)."
+            "Write the mesh of an .atm file: .obj or .ply (x = column, y = row, z = the value "
+            "in data units, e.g. metres; walls as OBJ l-lines / PLY edges), .svg (the "
+            "triangulation, walls in red), .png (the decoded image, its pixels with data "
+            "stretched, with the triangle edges in blue and walls in red) or .terrain (a "
+            "Cesium quantized-mesh-1.0 tile of a longitude/latitude GeoTIFF DEM; walls are "
+            "triangle edges)."
         ),
         epilog=EPILOG,
     )
