@@ -22,12 +22,11 @@ from pathlib import Path
 from . import convert
 from .progress import Progress
 from codec.errors import ATMError
+from codec.files import READABLE
 
-#: What a directory's images are recognised by (encode); .atm for decode.
-IMAGE_SUFFIXES = {
-    ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp",
-    ".webp", ".jp2", ".npy",
-}  # fmt: skip
+#: What a directory's images are recognised by (encode): what a single-file encode
+#: reads; .atm for decode.
+IMAGE_SUFFIXES = set(READABLE)
 GLOB_CHARS = set("*?[")
 
 

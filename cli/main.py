@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
             "memory bounded by the band; other formats (PNG, TIFF, ...) are read whole. "
             "On a terminal a long encode shows its progress band by band."
         ),
-        epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .jpg, .npy, ...)") + " " + EPILOG,
+        epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .pfm, .jpg, .gif, .npy, ...)") + " " + EPILOG,
     )
     enc.add_argument("inputs", nargs="+", metavar="IN", help="image file, - for standard input, or (batch) directories, glob patterns, files")
     enc.add_argument("output", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")

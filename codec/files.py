@@ -12,6 +12,14 @@ import numpy as np
 
 from .errors import ATMError, UnsupportedError
 
+#: Extensions of the image files `atm encode` reads (OpenCV's formats, TIFF through
+#: tifffile, .npy): batch mode picks these out of a directory, so that it takes every
+#: file a single-file encode takes (.pfm is Middlebury's disparity format).
+READABLE = (
+    ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".pam", ".pfm", ".tif", ".tiff", ".jpg", ".jpeg",
+    ".jpe", ".jp2", ".bmp", ".dib", ".webp", ".gif", ".sr", ".ras", ".avif", ".npy",
+)  # fmt: skip
+
 #: Extensions an image can be written as, by OpenCV.
 WRITABLE = (".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff")
 
