@@ -71,9 +71,13 @@ def encode(
 
 
 def build_mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
-    """Build the mesh `encode` would store, without packing it."""
-    from . import encoder
+    """Build the mesh `encode` would store, without packing it. Takes encode's size
+    options (points, max_error, max_rms, quality) and its sample types (float and signed
+    data give values in data units)."""
+    from . import encoder, terrain
 
+    if terrain.needs_encoder(image, options):
+        return terrain.build_mesh(image, points=points, mesher=mesher, **options)
     return encoder.mesh(image, points=points, mesher=mesher or encoder.DEFAULT_MESHER, **options)
 
 

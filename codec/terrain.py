@@ -181,3 +181,36 @@ def to_quantized_mesh(terrain: Terrain) -> bytes:
         out.write(struct.pack("<I", len(edge)))
         out.write(edge.astype(index_type).tobytes())
     return out.getvalue()
+
+
+#: build_mesh options that only an encode (refinement to a bound) honours.
+BOUND_OPTIONS = ("max_error", "max_rms", "quality")
+
+
+def needs_encoder(image: np.ndarray, options: dict) -> bool:
+    """Whether build_mesh must go through the encoder: a size bound, or samples (float,
+    signed) that the file stores with a scale and offset."""
+    return any(options.get(k) is not None for k in BOUND_OPTIONS) or np.asarray(image).dtype not in (
+        np.dtype(np.uint8), np.dtype(np.uint16)
+    )
+
+
+def build_mesh(image, **options) -> Mesh:
+    """The mesh `codec.encode(image, **options)` stores, as one piece (one band), its
+    values in data units and the image's dtype (float32 for float data). Accepts every
+    encode option: points, max_error, max_rms, quality, nodata, precision, ..."""
+    from . import encoder
+    from .image import as_image
+    from .stream import merge_bands
+
+    img = as_image(image, allow_nan=True)
+    height = img.shape[0]
+    options.setdefault("band_height", max(height - 1, 1))
+    if options.get("mesher") is None:
+        options["mesher"] = encoder.DEFAULT_MESHER
+    reader = container.Reader(io.BytesIO(encoder.encode(img, **options)))
+    mesh = merge_bands(list(reader))
+    values = data_values(mesh.values, reader.header)
+    dtype = reader.header.dtype
+    mesh.values = values.astype(dtype) if np.dtype(dtype).kind == "f" else np.rint(values).astype(dtype)
+    return mesh

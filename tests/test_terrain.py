@@ -115,3 +115,19 @@ def test_overlay_stretches_the_pixels_with_data_only():
     assert (rgb[~valid] == 0).all()
     washed = export.display_rgb(dem)  # nodata in the stretch: the terrain is one grey
     assert washed[valid].min() > 200
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.int16, np.uint16])
+def test_build_mesh_takes_encode_bounds_and_sample_types(dtype):
+    y, x = np.mgrid[:60, :70]
+    z = 900 + 30 * np.sin(x / 6.0) + 0.7 * y
+    z[:, 40:] += 25
+    image = z.astype(dtype) if np.dtype(dtype).kind == "f" else np.round(z).astype(dtype)
+    bound = 0.3 if np.dtype(dtype).kind == "f" else 1
+    mesh = codec.build_mesh(image, max_error=bound)
+    data = codec.encode(image, max_error=bound, band_height=59)
+    assert len(mesh.vertices) == codec.info(data)["vertices"]
+    assert mesh.dtype == (np.float32 if np.dtype(dtype).kind == "f" else dtype)
+    at = image[mesh.vertices[:, 1], mesh.vertices[:, 0]].astype(np.float64)
+    assert np.abs(mesh.values.astype(np.float64) - at).max() <= bound + 1e-4  # data units
+    assert len(codec.build_mesh(image, points=200, quality=90).vertices) >= 3
