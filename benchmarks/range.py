@@ -131,7 +131,7 @@ def load_cases(range_data: Path = RANGE_DATA) -> dict[str, Callable[[], Case]]:
         return Case("motorcycle_disp", disparity(), 0)
 
     def scene() -> Case:
-        from codec.synthetic import range_scene
+        from tests.synthetic import range_scene
 
         return Case("scene_u16", range_scene(512, 384, seed=0, dtype=np.uint16), None)
 

@@ -73,7 +73,7 @@ def rms_of(original: Path, decoded: Path, width: int, height: int) -> float:
 def measure(work: Path, width: int, height: int) -> dict:
     src, out = work / f"in_{height}.pgm", work / f"out_{height}.pgm"
     write_pgm(src, width, height)
-    atm = [sys.executable, "-m", "cli"]
+    atm = [sys.executable, "-m", "codec"]
     t = ["/usr/bin/time", "-v", "-o"]
     enc_rep, dec_rep, cv_rep = work / "enc.txt", work / "dec.txt", work / "cv.txt"
     start = time.perf_counter()

@@ -13,25 +13,20 @@ from __future__ import annotations
 import argparse
 import glob
 import os
+import signal
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import convert
+from . import convert, outputs, signals
+from .outputs import UsageError
 from .progress import Progress
 from codec.errors import ATMError
-from codec.files import READABLE
+from codec.files import IMAGE_SUFFIXES
 
-#: What a directory's images are recognised by (encode): what a single-file encode
-#: reads; .atm for decode.
-IMAGE_SUFFIXES = set(READABLE)
 GLOB_CHARS = set("*?[")
-
-
-class UsageError(ATMError):
-    """The batch arguments do not make sense together (exit status 2)."""
 
 
 def is_batch(inputs: list[str], output: str) -> bool:
@@ -77,14 +72,16 @@ def expand(inputs: list[str], command: str) -> list[Path]:
 
 
 def plan(files: list[Path], outdir: Path, suffix: str) -> list[tuple[Path, Path]]:
-    """(input, output) pairs; two inputs that would write one output are refused before
-    anything is converted, since one would silently replace the other."""
+    """(input, output) pairs; two inputs that would write one output, or an output that
+    is one of the inputs, are refused before anything is converted, since one would
+    silently replace the other."""
     pairs = [(f, outdir / (f.stem + suffix)) for f in files]
     seen: dict[Path, Path] = {}
     for src, dst in pairs:
         if dst in seen:
             raise ATMError(f"{seen[dst]} and {src} would both be written to {dst}; convert them separately")
         seen[dst] = src
+    outputs.refuse_overwriting_inputs([str(f) for f in files], [str(d) for _, d in pairs])
     return pairs
 
 
@@ -116,16 +113,46 @@ def convert_one(command: str, src: str, dst: str, options: dict) -> Result:
         return Result(src, False, error=f"internal error ({type(exc).__name__}: {exc}); rerun it alone with --debug")
 
 
-def _quiet_worker() -> None:
+def _worker_setup() -> None:
+    # Ctrl-C reaches the whole process group: the main process alone decides what stops
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # an idle worker just ends on SIGTERM (a forked one inherits the parent's handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     # each worker is one of --jobs processes: OpenCV's own thread pool would oversubscribe
     import cv2
 
     cv2.setNumThreads(1)
 
 
+def _work(command: str, src: str, dst: str, options: dict) -> Result:
+    """convert_one in a worker; terminated, the worker leaves at once (the conversion's
+    `with` blocks have removed its partial file) instead of taking the next file."""
+    try:
+        with signals.terminate_as_exception():
+            return convert_one(command, src, dst, options)
+    except signals.Terminated:
+        os._exit(128 + signal.SIGTERM)
+
+
+def _stop(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
+    """Cancel the files not started and end the workers converting the others."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in workers:
+        p.terminate()  # SIGTERM: the worker's partial output is removed as it exits
+    deadline = time.monotonic() + grace
+    for p in workers:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            p.kill()
+            p.join()
+
+
 def run(args: argparse.Namespace, command: str) -> int:
     """Convert every input of a batch command; print failures, a summary, and return
     the exit status."""
+    if not args.output:
+        raise UsageError("the output directory name is empty")
     outdir = Path(args.output)
     if outdir.exists() and not outdir.is_dir():
         raise UsageError(f"{outdir} is a file; in batch mode the last argument is an output directory")
@@ -161,16 +188,18 @@ def run(args: argparse.Namespace, command: str) -> int:
         for src, dst in pairs:
             record(convert_one(command, str(src), str(dst), options))
     else:
-        with ProcessPoolExecutor(min(jobs, len(pairs)), initializer=_quiet_worker) as pool:
-            pending = {pool.submit(convert_one, command, str(s), str(d), options) for s, d in pairs}
-            try:
-                while pending:
-                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for future in done:
-                        record(future.result())
-            except BaseException:
-                pool.shutdown(wait=False, cancel_futures=True)
-                raise
+        pool = ProcessPoolExecutor(min(jobs, len(pairs)), initializer=_worker_setup)
+        try:
+            pending = {pool.submit(_work, command, str(s), str(d), options) for s, d in pairs}
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    record(future.result())
+        except BaseException:
+            # Ctrl-C, SIGTERM or a broken pool: no file may be written after this returns
+            _stop(pool)
+            raise
+        pool.shutdown()
     bar.clear()
     failed = [r for r in results if not r.ok]
     ok = [r for r in results if r.ok]

@@ -69,14 +69,15 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
     Returns the finished encoder (its statistics) and the bytes written."""
     src = rowio.open_rows(src_name)
     options = geotiff.source_options(src, options)
-    if (src.dtype.kind == "f" or integers.is_signed(src.dtype)) and "value_range" not in options and src.channels == 1:
-        if src.scan is None and src.dtype.kind == "f":
+    if src.dtype.kind == "f":
+        if "value_range" not in options and src.scan is None:
             raise codec.OptionError(
                 f"{src_name}: float data from a stream needs --value-range LOW HIGH "
                 "(the header carries the quantisation before the rows arrive)"
             )
-        if src.scan is not None:
-            options = dict(options, value_range=src.scan(options.get("nodata")))
+        options = src.float_options(options)
+    elif integers.is_signed(src.dtype) and "value_range" not in options and src.scan is not None:
+        options = dict(options, value_range=integers.value_range(src.scan(), options.get("nodata")))
     with open_output(dst_name) as f:
         out = _Counter(f)
         enc = codec.StreamEncoder(
@@ -113,10 +114,12 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
 
     with open_input(src_name) as f:
         dec = codec.StreamDecoder(f, backend=backend)
-        if np.dtype(dec.dtype).kind == "f" and fmt not in FLOAT_FORMATS:
-            # OpenCV would quietly cut float samples to 8 bits; PNM cannot hold them at all
+        if (np.dtype(dec.dtype).kind == "f" or integers.is_signed(dec.dtype)) and fmt not in FLOAT_FORMATS:
+            # OpenCV would quietly cut float samples to 8 bits; PNG and PNM have no
+            # negative numbers and no floats at all
+            kind = "float" if np.dtype(dec.dtype).kind == "f" else str(dec.dtype)
             raise UnsupportedError(
-                f"{src_name} holds float data, which .{fmt} cannot store; decode it to .tif or .npy"
+                f"{src_name} holds {kind} data, which .{fmt} cannot store; decode it to .tif or .npy"
             )
         if fmt in STREAMED:
             with open_output(dst_name) as raw:

@@ -2,19 +2,22 @@
 export their meshes and compare images.
 
 Errors print one line, `atm: error: ...`, and exit 1 for bad data, 2 for bad usage.
-Output files are written atomically: a failed run leaves no partial file and does not
-touch an existing one.
+Output files are written atomically: a failed, interrupted or terminated run leaves no
+partial file and does not touch an existing one. An output that is an input is refused,
+and so is a name that claims another kind of file (.atm data as x.png) unless --force.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import signal
 import sys
 from pathlib import Path
 
 import codec
-from . import batch, convert, tools
+from . import batch, convert, outputs, signals, tools
 from .progress import Progress
 from codec import geotiff
 from codec.errors import ATMError
@@ -26,6 +29,8 @@ def cmd_encode(args: argparse.Namespace) -> int:
     if batch.is_batch(args.inputs, args.output):
         return batch.run(args, "encode")
     (source,) = args.inputs
+    outputs.refuse_overwriting_inputs([source], [args.output])
+    outputs.refuse_misleading_name(args.output, True, args.force)
     bar = Progress(1, quiet=args.quiet or args.verbose)
     label = f"encoding {Path(source).name if source != '-' else 'standard input'}"
 
@@ -52,7 +57,10 @@ def cmd_decode(args: argparse.Namespace) -> int:
     if batch.is_batch(args.inputs, args.output):
         return batch.run(args, "decode")
     (source,) = args.inputs
-    convert.decode_file(source, args.output, convert.output_format(args.output, args.format), args.backend)
+    fmt = convert.output_format(args.output, args.format)
+    outputs.refuse_overwriting_inputs([source], [args.output])
+    outputs.refuse_misleading_name(args.output, False, args.force, f"{fmt.upper()} data")
+    convert.decode_file(source, args.output, fmt, args.backend)
     return 0
 
 
@@ -61,8 +69,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         data = f.read()
     i = codec.info(data)
     if args.json:
-        if i["nodata"] is not None and i["nodata"] != i["nodata"]:
-            i["nodata"] = "NaN"  # JSON has no NaN
+        if i["nodata"] is not None and not math.isfinite(i["nodata"]):
+            # JSON has no NaN or infinity: their JavaScript names, as strings
+            i["nodata"] = "NaN" if math.isnan(i["nodata"]) else ("Infinity" if i["nodata"] > 0 else "-Infinity")
         print(json.dumps(i, indent=2))
     else:
         kind = "gray" if i["channels"] == 1 else "RGB"
@@ -88,9 +97,16 @@ BATCH_HELP = (
 )
 
 
+FORCE_HELP = (
+    "write even under a name that claims another kind of file (.atm data as x.png, an image as "
+    "x.atm); an output that is one of the inputs is refused all the same"
+)
+
+
 def _add_batch_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("-j", "--jobs", type=int, metavar="N", help="batch: worker processes (default: one per CPU)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and, in batch, no summary line")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -172,6 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     msh.add_argument("output", help="OUT.obj, OUT.ply, OUT.svg or OUT.png, or - with --format")
     msh.add_argument("--format", choices=list(tools.MESH_FORMATS), help="output format (default: the extension)")
     msh.add_argument("--scale", type=int, metavar="K", help="PNG: enlarge the image K times (default: to about 1024 pixels)")
+    msh.add_argument("--force", action="store_true", help=FORCE_HELP)
     msh.set_defaults(run=tools.cmd_mesh)
 
     cmp = sub.add_parser(
@@ -205,13 +222,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return args.run(args)
+        with signals.terminate_as_exception():
+            return args.run(args)
     except ATMError as exc:
         if args.debug:
             raise
         print(f"atm: error: {exc}", file=sys.stderr)
         # bad options are bad usage (argparse's 2); bad data is 1
-        return 2 if isinstance(exc, (batch.UsageError, codec.OptionError)) else 1
+        return 2 if isinstance(exc, (outputs.UsageError, codec.OptionError)) else 1
     except BrokenPipeError:
         return 1
     except OSError as exc:
@@ -224,6 +242,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("atm: interrupted", file=sys.stderr)
         return 130
+    except signals.Terminated:
+        print("atm: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
 
 
 if __name__ == "__main__":  # pragma: no cover

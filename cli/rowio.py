@@ -6,12 +6,12 @@ from __future__ import annotations
 import ast
 import sys
 from dataclasses import dataclass
-from typing import BinaryIO, Callable, Iterator
+from typing import BinaryIO, Callable, Iterable, Iterator
 
 import numpy as np
 
+from codec import geotiff, integers, quantise
 from codec.errors import ATMError, UnsupportedError
-from codec import geotiff
 from codec.files import decode_image
 
 #: Rows handed to the encoder at a time when reading a stream.
@@ -27,16 +27,38 @@ class RowSource:
     dtype: np.dtype
     channels: int
     blocks: Iterator[np.ndarray]
-    #: lowest and highest finite value of float data, when it can be known before the
-    #: rows are streamed (files; not standard input)
-    value_range: tuple[float, float] | None = None
-    #: scan(nodata): the range of float or signed integer data, values equal to nodata
-    #: left out (files; None for standard input)
-    scan: Callable[[float | None], tuple[float, float]] | None = None
+    #: float or signed integer data read from a file (not standard input): the same
+    #: rows again, so that what the header needs can be found before the rows are streamed
+    scan: Callable[[], Iterable[np.ndarray]] | None = None
     #: the source's own nodata value and metadata (a GeoTIFF's GDAL_NODATA and
     #: georeferencing), used unless the user gives their own
     nodata: float | None = None
     metadata: dict | None = None
+
+    def float_options(self, options: dict) -> dict:
+        """Float data: `options` with a value_range and a nodata value taken from the
+        rows where not given and the rows can be scanned first (quantise.data_range,
+        quantise.hole_value); otherwise `options` as they are."""
+        if self.scan is None:
+            return options
+        out = dict(options)
+        nodata = quantise.check_nodata(options.get("nodata"))
+        holes: list[np.ndarray] = []
+
+        def blocks() -> Iterator[np.ndarray]:
+            for block in self.scan():
+                if nodata is None:
+                    holes.append(np.unique(block[~np.isfinite(block)]))  # NaN, -inf, +inf at most
+                yield block
+
+        if "value_range" not in options:
+            out["value_range"] = quantise.data_range(blocks(), nodata)
+        elif nodata is None:
+            for _ in blocks():
+                pass
+        if nodata is None:
+            out["nodata"] = quantise.hole_value(holes)
+        return out
 
 
 def _read_exact(f: BinaryIO, n: int, name: str) -> bytes:
@@ -122,25 +144,11 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
                 data = _read_exact(f, n * row_items * dtype.itemsize, name)
                 yield np.frombuffer(data, dtype).reshape((n,) + tuple(shape[1:])).astype(dtype.newbyteorder("="))
 
-    value_range = scan = None
-    if array is not None and np.dtype(dtype).kind in "fi":
-        def scan(nodata=None):
-            return _finite_range((array[y : y + BLOCK_ROWS] for y in range(0, height, BLOCK_ROWS)), nodata)
+    def scan() -> Iterator[np.ndarray]:
+        return (array[y : y + BLOCK_ROWS] for y in range(0, height, BLOCK_ROWS))
 
-        value_range = scan() if np.dtype(dtype).kind == "f" else None
-    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks(), value_range, scan)
-
-
-def _finite_range(blocks, nodata: float | None = None) -> tuple[float, float]:
-    """(lowest, highest) finite value over blocks of rows, one block in memory at a time,
-    values equal to `nodata` left out."""
-    lo, hi = np.inf, -np.inf
-    for block in blocks:
-        keep = np.isfinite(block) if nodata is None else np.isfinite(block) & (block != nodata)
-        finite = block[keep]
-        if finite.size:
-            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
-    return (lo, hi) if lo <= hi else (0.0, 0.0)
+    scannable = array is not None and (np.dtype(dtype).kind == "f" or integers.is_signed(dtype))
+    return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks(), scan if scannable else None)
 
 
 def open_rows(name: str) -> RowSource:
@@ -170,10 +178,9 @@ def open_rows(name: str) -> RowSource:
         raise ATMError(f"{name}: not a 2-D image")
     h, w = image.shape[:2]
     channels = 1 if image.ndim == 2 else image.shape[2]
-    value_range = _finite_range([image]) if image.dtype.kind == "f" else None
+    scan = (lambda: [image]) if image.dtype.kind == "f" or integers.is_signed(image.dtype) else None
     return RowSource(
-        w, h, image.dtype, channels, iter([image]), value_range,
-        lambda nodata=None: _finite_range([image], nodata),
+        w, h, image.dtype, channels, iter([image]), scan,
         raster.nodata if raster is not None else None,
         raster.metadata if raster is not None else None,
     )

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import codec
-from . import convert
+from . import convert, outputs
 from codec.errors import ATMError, UnsupportedError
 
 MESH_FORMATS = ("obj", "ply", "svg", "png", "terrain")
@@ -32,6 +32,8 @@ def cmd_mesh(args: argparse.Namespace) -> int:
             f"cannot write the mesh as {'.' + fmt if fmt else 'a file without an extension'}; "
             f"use .obj, .ply, .svg, .png or .terrain (or --format)"
         )
+    outputs.refuse_overwriting_inputs([args.input], [args.output])
+    outputs.refuse_misleading_name(args.output, False, args.force, f"{fmt.upper()} data")
     data = _read_bytes(args.input)
     dem = terrain.load(data)  # z in data units (metres for a float or quantised DEM)
     mesh = dem.mesh

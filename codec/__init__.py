@@ -142,10 +142,14 @@ def read(path: str | os.PathLike, *, backend: str = "cpu", metadata: bool = Fals
     return (image, meta) if metadata else image
 
 
-def write(path: str | os.PathLike, image, **options) -> None:
-    """Encode `image` and write it to `path` atomically (options as for `encode`)."""
-    from .files import atomic_write
+def write(path: str | os.PathLike, image, *, force: bool = False, **options) -> None:
+    """Encode `image` and write it to `path` atomically (options as for `encode`).
+    A name with an image extension (x.png, x.tif, ...) is refused unless force=True:
+    .atm bytes there would be taken for that image format."""
+    from .files import atomic_write, refuse_image_name
 
+    if not force:
+        refuse_image_name(path)
     atomic_write(path, encode(image, **options))
 
 

@@ -5,7 +5,8 @@ any of its algorithms) differs from the canonical one only where four vertices a
 exactly cocircular. Lawson flips with the perturbed predicate (lifts raised by
 infinitesimals that decrease in raster order) turn any triangulation of the vertices
 and constraints into the unique one: this module makes them in rounds of independent
-flips, each round vectorised over all free edges.
+flips, vectorised: the first round tests every free edge, later ones only the edges
+around the last round's flips. verify() checks the result from scratch.
 """
 
 from __future__ import annotations
@@ -73,8 +74,9 @@ def flip_to_canonical(vertices: np.ndarray, triangles: np.ndarray,
     corner = tris.ravel()  # a view: corner[s] is the first end of side s
     # the side after and before each side in its triangle (the first end of the one
     # before is the corner opposite): side numbers never change, only what they hold
-    nxt = np.arange(len(corner)).reshape(-1, 3)[:, [1, 2, 0]].ravel()
-    prv = np.arange(len(corner)).reshape(-1, 3)[:, [2, 0, 1]].ravel()
+    first = 3 * np.arange(len(tris))[:, None]
+    nxt = (first + np.array([1, 2, 0])).ravel()
+    prv = (first + np.array([2, 0, 1])).ravel()
     keys = _edge_keys(corner, corner[nxt], n)
     order = np.argsort(keys)
     sorted_keys = keys[order]
@@ -151,6 +153,28 @@ def verify(vertices: np.ndarray, triangles: np.ndarray, constraints: np.ndarray 
         raise ATMError(f"{int(bad.sum())} free edges are not locally Delaunay after the canonical pass")
 
 
+def random_flips(vertices: np.ndarray, triangles: np.ndarray, constraints: np.ndarray | None,
+                 rng: np.random.Generator, share: float, ties_only: bool = False) -> np.ndarray:
+    """Another triangulation of the same vertices with the same constraints as edges,
+    for tests and conformance files: of the free edges whose quadrilateral is strictly
+    convex (only exact ties if ties_only), about `share` flipped, no two in one
+    triangle."""
+    vertices = np.asarray(vertices, dtype=np.int64)
+    tris = np.array(triangles, dtype=np.int64).reshape(-1, 3)
+    e = free_edges(tris, len(vertices), constraint_keys(constraints, len(vertices)))
+    a, b, c, d = (vertices[p] for p in e[:4])
+    ok = (orient2d(a, d, c) > 0) & (orient2d(d, b, c) > 0)
+    if ties_only:
+        ok &= incircle_sign(a, b, c, d) == 0
+    used = np.zeros(len(tris), bool)
+    for j in rng.permutation(np.flatnonzero(ok)).tolist():
+        if not used[e.t1[j]] and not used[e.t2[j]] and rng.random() < share:
+            used[[e.t1[j], e.t2[j]]] = True
+            tris[e.t1[j]] = [e.a[j], e.d[j], e.c[j]]
+            tris[e.t2[j]] = [e.d[j], e.b[j], e.c[j]]
+    return tris
+
+
 def tie_count(vertices: np.ndarray, triangles: np.ndarray,
               constraints: np.ndarray | None = None) -> tuple[int, int]:
     """(free edges, those whose quadrilateral is exactly cocircular) of a triangulation."""
@@ -162,11 +186,12 @@ def tie_count(vertices: np.ndarray, triangles: np.ndarray,
 
 
 def constraint_keys(constraints: np.ndarray | None, n: int) -> np.ndarray:
-    """The sorted undirected keys of the constraint edges (none if there are none)."""
+    """The sorted undirected keys of the constraint edges (none if there are none; a
+    repeated one is harmless to the look-ups)."""
     if constraints is None:
         return np.zeros(0, np.int64)
     c = np.asarray(constraints, dtype=np.int64).reshape(-1, 2)
-    return np.unique(_edge_keys(c[:, 0], c[:, 1], n))
+    return np.sort(_edge_keys(c[:, 0], c[:, 1], n))
 
 
 def free_edges(triangles: np.ndarray, n: int, fixed: np.ndarray) -> FreeEdges:

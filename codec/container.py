@@ -284,7 +284,7 @@ class Reader:
         if version != schema.VERSION:
             # version 5 has version 6's bytes, but its implicit triangles were one
             # library's tie-breaking (ATM.md section 7)
-            why = "; version 5 files are re-encoded from their source images" if version == 5 else ""
+            why = " (version 5 left ties to one library: re-encode the source image)" if version == 5 else ""
             raise UnsupportedError(
                 f"this file is .atm version {version}; this codec reads version {schema.VERSION}{why}"
             )
@@ -395,8 +395,8 @@ class Reader:
             info = np.iinfo(h.dtype)
             if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):
                 raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")
-        elif np.isinf(value) or (np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max)):
-            raise CorruptError(f"NDAT value {value!r} is not a finite float32 or NaN")
+        elif np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max):
+            raise CorruptError(f"NDAT value {value!r} is beyond float32's range")
         return Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, float(value), h.metadata)
 
     def _parse_mask(self, payload: bytes, offset: int, y0: int) -> np.ndarray:

@@ -9,7 +9,7 @@ import numbers
 
 import numpy as np
 
-from . import container
+from . import container, integers, quantise
 from .errors import OptionError
 from .image import as_image
 from .mesh import Mesh
@@ -104,14 +104,15 @@ def encode(
             raise OptionError(f"mask must have shape {(height, width)}, not {holes.shape}")
         if img.dtype.kind != "f" and options.get("nodata") is None:
             options["nodata"] = 0
-    if img.dtype.kind in "fi" and "value_range" not in options:
-        valid = np.isfinite(img) if holes is None else np.isfinite(img) & ~holes
-        nodata = options.get("nodata")
-        if nodata is not None:
-            valid &= img != nodata
-        options["value_range"] = (
-            (float(img[valid].min()), float(img[valid].max())) if valid.any() else (0.0, 0.0)
-        )
+    if img.dtype.kind == "f":
+        # the header carries nodata and the quantisation: both come from the data here
+        if options.get("nodata") is None:
+            options["nodata"] = quantise.hole_value([img[~np.isfinite(img) | (False if holes is None else holes)]])
+        if "value_range" not in options:
+            nodata = quantise.check_nodata(options["nodata"])
+            options["value_range"] = quantise.data_range([img if holes is None else img[~holes]], nodata)
+    elif integers.is_signed(img.dtype) and "value_range" not in options:
+        options["value_range"] = integers.value_range([img if holes is None else img[~holes]], options.get("nodata"))
     out = io.BytesIO()
     enc = StreamEncoder(
         out,

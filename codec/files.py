@@ -1,16 +1,28 @@
-"""Files: atomic writes, and images in the formats OpenCV reads and writes."""
+"""Files: safe writes, and images in the formats OpenCV reads and writes.
+
+`atomic_open` writes a regular file so that its path holds either the old file or the
+whole new one. On Linux the new data goes to an unnamed file (O_TMPFILE) that gets its
+name only when it is complete, so even SIGKILL leaves nothing behind; elsewhere a hidden
+named temporary is used and removed on any exception (the `atm` command turns SIGTERM
+into one). Devices and FIFOs are not replaced but written through, and a symbolic link
+keeps pointing where it did: its target is what gets replaced.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
+import functools
 import os
-import tempfile
+import secrets
+import stat
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
 import numpy as np
 
-from .errors import ATMError, UnsupportedError
+from .errors import ATMError, OptionError, UnsupportedError
 
 #: Extensions of the image files `atm encode` reads (OpenCV's formats, TIFF through
 #: tifffile, .npy): batch mode picks these out of a directory, so that it takes every
@@ -22,35 +34,243 @@ READABLE = (
 
 #: Extensions an image can be written as, by OpenCV.
 WRITABLE = (".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff")
+#: Extensions that name image files (what OpenCV reads, and .npy): .atm bytes written
+#: under one of these would be mistaken for an image, and the other way round.
+IMAGE_SUFFIXES = frozenset(READABLE)
+
+#: O_TMPFILE where the platform has it (Linux); None selects named temporaries.
+UNNAMED = getattr(os, "O_TMPFILE", None)
+# where O_TMPFILE exists but this file system lacks it, open() fails with one of these
+_NO_TMPFILE = {errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL}
+_AT_FDCWD, _AT_EMPTY_PATH = -100, 0x1000
+
+
+class WriteError(ATMError, OSError):
+    """An output file cannot be written (a missing folder, a full disk, no permission).
+    Also an OSError, so that callers that catch the file system's errors catch it."""
+
+    def __init__(self, message: str, code: int | None = None, name: str | None = None):
+        super().__init__(message)
+        self.errno = code
+        self.path = name
+
+
+def write_error(name: str, exc: OSError) -> WriteError:
+    """A WriteError naming the user's path (never a temporary file's) and the cause."""
+    reason = exc.strerror or str(exc)
+    folder = os.path.dirname(os.path.abspath(name))
+    if exc.errno == errno.ENOENT and not os.path.isdir(folder):
+        reason = f"the folder {folder} does not exist"
+    return WriteError(f"cannot write {name}: {reason}", exc.errno, name)
+
+
+class _Output:
+    """Writes to a file descriptor through a buffer of its own, so that a failed write
+    is raised once, naming the user's path, and never retried when the file closes."""
+
+    BUFFER = 1 << 20
+
+    def __init__(self, fd: int, name: str):
+        self._fd = fd
+        self._pending = bytearray()
+        self.name = name
+
+    def write(self, data) -> int:
+        n = len(memoryview(data).cast("B"))
+        self._pending += data
+        if len(self._pending) >= self.BUFFER:
+            self.flush()
+        return n
+
+    def flush(self) -> None:
+        view = memoryview(self._pending)
+        try:
+            while view:
+                view = view[os.write(self._fd, view):]
+        except OSError as exc:
+            raise write_error(self.name, exc) from None
+        finally:
+            view.release()
+            self._pending.clear()
+
+    def fileno(self) -> int:
+        return self._fd
 
 
 @contextlib.contextmanager
 def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
-    """A binary file to write `path` with: it replaces `path` only when the block
-    finishes without error; otherwise it is deleted and `path` is left as it was."""
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    """A binary file to write `path` with. A regular file (or a new one) is replaced
+    only when the block finishes without error, keeping the old file's permissions;
+    otherwise `path` is left as it was and nothing else remains. A device or FIFO is
+    written straight through; a symbolic link's target is replaced, not the link.
+    Failures raise WriteError naming `path`."""
+    name = os.fsdecode(os.fspath(path))
+    if not name:
+        raise WriteError("the output file name is empty", errno.ENOENT)
+    if name.endswith(os.sep):
+        raise WriteError(f"cannot write {name}: a file name cannot end with {os.sep}", errno.EISDIR, name)
+    target = os.path.realpath(name)
     try:
-        # mkstemp makes the file private; give it the mode a plain open() would have
-        try:
-            mode = os.stat(path).st_mode & 0o7777
-        except FileNotFoundError:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.fchmod(fd, mode)
-        with os.fdopen(fd, "wb") as f:
+        st = os.stat(target)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise write_error(name, exc) from None
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise WriteError(f"cannot write {name}: it is a directory", errno.EISDIR, name)
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        with _through(name, target) as f:
             yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
+        return
+    with _replacing(name, target, st) as f:
+        yield f
+
+
+@contextlib.contextmanager
+def _through(name: str, target: str) -> Iterator[BinaryIO]:
+    # a device or FIFO has no contents to keep: replacing it would only break it
+    try:
+        fd = os.open(target, os.O_WRONLY | os.O_CLOEXEC)
+    except OSError as exc:
+        raise write_error(name, exc) from None
+    try:
+        out = _Output(fd, name)
+        yield out
+        out.flush()
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def _replacing(name: str, target: str, st: os.stat_result | None) -> Iterator[BinaryIO]:
+    directory = os.path.dirname(target)
+    fd, temp = _create(name, directory, UNNAMED)
+    try:
+        if st is not None:
+            _keep_owner_and_mode(fd, st)
+        out = _Output(fd, name)
+        yield out
+        out.flush()
         try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
+            os.fsync(fd)
+            if temp is None:
+                _link_unnamed(fd, directory, target)
+            else:
+                os.replace(temp, target)
+        except OSError as exc:
+            raise write_error(name, exc) from None
+    except BaseException:
+        if temp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(temp)
         raise
+    finally:
+        os.close(fd)
+
+
+def _create(name: str, directory: str, unnamed: int | None) -> tuple[int, str | None]:
+    """A new file in `directory` to write: unnamed where `unnamed` (O_TMPFILE) works
+    (its name None), else a hidden named one. Its mode is what open() would give."""
+    if unnamed is not None:
+        try:
+            return os.open(directory, unnamed | os.O_RDWR | os.O_CLOEXEC, 0o666), None
+        except OSError as exc:
+            if exc.errno not in _NO_TMPFILE:
+                raise write_error(name, exc) from None
+    while True:
+        temp = os.path.join(directory, f".{os.path.basename(name)}.{secrets.token_hex(4)}.tmp")
+        try:
+            return os.open(temp, os.O_CREAT | os.O_EXCL | os.O_RDWR | os.O_CLOEXEC, 0o666), temp
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise write_error(name, exc) from None
+
+
+def _keep_owner_and_mode(fd: int, st: os.stat_result) -> None:
+    os.fchmod(fd, stat.S_IMODE(st.st_mode))
+    if (st.st_uid, st.st_gid) != (os.getuid(), os.getgid()):
+        # only root (or a member of the group) may; otherwise the new file is the user's
+        with contextlib.suppress(PermissionError):
+            os.fchown(fd, st.st_uid, st.st_gid)
+            os.fchmod(fd, stat.S_IMODE(st.st_mode))  # chown clears set-id bits
+
+
+def _link_unnamed(fd: int, directory: str, target: str) -> None:
+    """Give the unnamed file `fd` the name `target`, replacing any file there."""
+    try:
+        _link(fd, target)
+        return
+    except FileExistsError:
+        pass
+    except OSError:
+        _copy_to(fd, directory, target)  # no way to name it on this system: copy it
+        return
+    # linkat never replaces: name it beside the target and rename that over it (the
+    # extra name exists only between these two system calls)
+    while True:
+        temp = os.path.join(directory, f".{os.path.basename(target)}.{secrets.token_hex(4)}.tmp")
+        try:
+            _link(fd, temp)
+            break
+        except FileExistsError:
+            continue
+    try:
+        os.replace(temp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temp)
+        raise
+
+
+def _link(fd: int, dst: str) -> None:
+    """linkat(fd, "", dst, AT_EMPTY_PATH), or through /proc where that is refused."""
+    libc = _libc()
+    if libc is not None:
+        if libc.linkat(fd, b"", _AT_FDCWD, os.fsencode(dst), _AT_EMPTY_PATH) == 0:
+            return
+        if ctypes.get_errno() == errno.EEXIST:
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), dst)
+    os.link(f"/proc/self/fd/{fd}", dst, follow_symlinks=True)
+
+
+@functools.cache
+def _libc():
+    try:
+        return ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        return None
+
+
+def _copy_to(fd: int, directory: str, target: str) -> None:
+    out, temp = _create(target, directory, None)
+    try:
+        offset = 0
+        while chunk := os.pread(fd, 1 << 20, offset):
+            offset += len(chunk)
+            view = memoryview(chunk)
+            while view:
+                view = view[os.write(out, view):]
+        os.fchmod(out, stat.S_IMODE(os.fstat(fd).st_mode))
+        os.fsync(out)
+        os.replace(temp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temp)
+        raise
+    finally:
+        os.close(out)
+
+
+def refuse_image_name(path: str | os.PathLike) -> None:
+    """OptionError if `path` has an image extension: .atm bytes written there would be
+    taken for that format (and an image of that name may be the user's original)."""
+    suffix = Path(os.fsdecode(os.fspath(path))).suffix.lower()
+    if suffix in IMAGE_SUFFIXES:
+        raise OptionError(
+            f"{os.fsdecode(os.fspath(path))} has the image extension {suffix}, but .atm data would be written "
+            "there: use a name ending in .atm (or force=True to write it all the same)"
+        )
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> None:

@@ -138,7 +138,7 @@ def nodata_value(text: str, dtype: np.dtype) -> float | None:
         return None
     dtype = np.dtype(dtype)
     if dtype.kind == "f":
-        return value if math.isnan(value) or abs(value) <= float(np.finfo(np.float32).max) else None
+        return value if not math.isfinite(value) or abs(value) <= float(np.finfo(np.float32).max) else None
     info = np.iinfo(dtype)
     return value if value.is_integer() and info.min <= value <= info.max else None
 

@@ -72,3 +72,16 @@ def check_quant(offset: float, scale: float) -> bool:
     info = np.iinfo(np.int32)
     return scale == 1.0 and math.isfinite(offset) and offset == int(offset) and info.min <= offset <= info.max
 
+
+
+def value_range(blocks, nodata: float | None = None) -> tuple[float, float]:
+    """(lowest, highest) sample other than `nodata` over blocks of rows taken one at a
+    time ((0, 0) if there is none): the offset and top of what the file stores."""
+    lo, hi = math.inf, -math.inf
+    for block in blocks:
+        v = np.asarray(block)
+        if nodata is not None:
+            v = v[v != nodata]
+        if v.size:
+            lo, hi = min(lo, float(v.min())), max(hi, float(v.max()))
+    return (lo, hi) if lo <= hi else (0.0, 0.0)

@@ -110,7 +110,7 @@ class StreamEncoder:
                 raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
         # float data always has a nodata value (NaN unless given), as NaN can turn up in
         # any row; integer data has one when the user names it
-        self._nodata = (float("nan") if nodata is None else float(nodata)) if dtype.kind == "f" else nodata
+        self._nodata = (float("nan") if nodata is None else quantise.check_nodata(nodata)) if dtype.kind == "f" else nodata
         if channels not in (1, 3):
             raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
         if band_height is None:

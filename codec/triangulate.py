@@ -67,9 +67,10 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     if segments is not None:
         data["segments"] = segments.astype(np.int32)
         switches = "pc" + switches
-    # B, P, N: no boundary markers, segments or vertices back (about 15 % of the call);
-    # a vertex Triangle had to add is then seen as a triangle corner beyond the input's
-    result = triangle.triangulate(data, switches + "BPN")
+    # B, N: no boundary markers or vertices back; a vertex Triangle had to add is then
+    # seen as a triangle corner beyond the input's. The segments come back as the edges
+    # they became (cut at the vertices on them; the hull's edges too, never flipped)
+    result = triangle.triangulate(data, switches + "BN")
     triangles = np.asarray(result.get("triangles", np.zeros((0, 3))), dtype=np.int64)
     if len(triangles) and int(triangles.max()) >= len(vertices):
         raise ATMError(
@@ -81,7 +82,7 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     # read, so it is not computed a second time on this hot path
     # ties between cocircular vertices are Triangle's to break as its input order falls:
     # the format's own rule decides them (ATM.md section 4.2.5)
-    triangles = canonicalise(vertices, triangles, None if segments is None else unit_steps(vertices, segments))
+    triangles = canonicalise(vertices, triangles, result.get("segments"))
     if remember:
         _memo.entry = (vertices.copy(), None if segments is None else segments.copy(), triangles.copy())
     return triangles
@@ -161,15 +162,3 @@ def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[
         if len(run):
             out.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
     return out
-
-
-def unit_steps(vertices: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """The segments, each cut at the vertices lying inside it: the constraint edges a
-    triangulation has (only segments longer than one unit step can hold a vertex)."""
-    d = vertices[segments[:, 1]] - vertices[segments[:, 0]]
-    long = np.gcd(np.abs(d[:, 0]), np.abs(d[:, 1])) > 1
-    if not long.any():
-        return segments
-    shifted = vertices - vertices.min(axis=0)
-    pieces = split_at_vertices(shifted, segments[long], int(shifted[:, 0].max()) + 1)
-    return np.concatenate([segments[~long], pieces])

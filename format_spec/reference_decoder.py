@@ -6,9 +6,12 @@ with exact integer predicates (Python ints), so that ATM.md can be checked to be
 implementable by a stranger. It is plain and slow on purpose: readable first.
 
     decode(data: bytes) -> numpy.ndarray   # the image, as codec.decode returns it
+    read(data: bytes) -> (Header, [Band])  # the checked bands: vertices, walls, triangles
+    delaunay(xs, ys, segments)             # the triangulation of §4.2.5 alone
 
-Run standalone: ``python reference_decoder.py in.atm out.npy``.
-Section numbers (§) refer to ATM.md.
+Anything but a valid file raises DecodeError (UnsupportedError for a version or a
+reserved value it does not implement). Standalone: ``python reference_decoder.py
+in.atm out.npy``. Section numbers (§) refer to ATM.md.
 """
 
 from __future__ import annotations
@@ -230,7 +233,8 @@ class Triangulation:
 
     def incircle(self, a: int, b: int, c: int, d: int) -> int:
         """> 0 when d is inside the circle through a, b, c (taken with D > 0), < 0 when
-        outside, 0 when the four are cocircular."""
+        outside, 0 when the four are cocircular. Up to 85 bits for the format's largest
+        bands (§4.2.5): Python ints, never floats."""
         x, y = self.x, self.y
         adx, ady = x[a] - x[d], y[a] - y[d]
         bdx, bdy = x[b] - x[d], y[b] - y[d]
@@ -569,6 +573,7 @@ class Band:
         self.values = np.zeros((0, 1), np.int64)
         self.holes: np.ndarray | None = None
         self.base_step = 1
+        self.listed = False  # connectivity 0: the triangles were stored, not built
 
 
 def quadrant(a: int, b: int) -> int:
@@ -594,6 +599,73 @@ def mesh_payload_limit(header: Header) -> int:
     pixels = header.width * header.height
     vertices, triangles = pixels + 16, 2 * pixels + 16
     return min(65 + (35 + 5 * header.channels) * vertices + 15 * triangles, 1 << 31)
+
+
+def read_polylines(r: Reader, count: int, indices: int, width: int, rows: int) -> list[list[int]]:
+    """§4.2.2: each polyline as the pixel indices k = y*width + x of its vertices, from
+    its start pixel and its turned steps."""
+    lengths = r.varints(count, "polyline_lengths")
+    if any(n < 2 for n in lengths) or sum(lengths) != indices:
+        raise DecodeError("MESH: polyline lengths must each be >= 2 and sum to polyline_index_count")
+    starts = r.varints(count, "polyline_starts")
+    steps = r.varints(2 * (indices - count), "polyline_steps")
+    lines: list[list[int]] = []
+    k, s = 0, 0
+    for length, start in zip(lengths, starts):
+        k += unzigzag(start)
+        if not 0 <= k < width * rows:
+            raise DecodeError(f"MESH: polyline start pixel {k} is outside the band")
+        x, y = k % width, k // width
+        line, turned = [k], 0
+        for _ in range(length - 1):
+            u, v = unzigzag(steps[s]), unzigzag(steps[s + 1])
+            s += 2
+            if u == 0 and v == 0:
+                raise DecodeError("MESH: a polyline step is (0, 0)")
+            # step i is the stored pair turned by the quadrants of the pairs before it
+            dx, dy = turn(u, v, turned)
+            turned += quadrant(u, v)
+            if abs(dx) >= width or abs(dy) >= rows:
+                raise DecodeError(f"MESH: polyline step ({dx}, {dy}) is longer than the band")
+            x, y = x + dx, y + dy
+            if not (0 <= x < width and 0 <= y < rows):
+                raise DecodeError(f"MESH: a polyline leaves the band at ({x}, {y})")
+            line.append(y * width + x)
+        lines.append(line)
+    return lines
+
+
+def read_free_vertices(r: Reader, count: int, order: int, width: int, rows: int) -> list[tuple[int, int]]:
+    """§4.2.2: the (pixel index, Hilbert distance) of the vertices on no polyline, from
+    their keys' gaps, each split into a varint high part and b raw low bits."""
+    high = r.varints(count + 1, "positions")
+    bits, high = high[0], high[1:]
+    if bits > 24:
+        raise DecodeError(f"MESH: {bits} low bits per gap (at most 24)")
+    packed = r.take(r.u32())
+    if len(packed) != (count * bits + 7) // 8:
+        raise DecodeError(f"MESH: position_bits holds {len(packed)} bytes, not {(count * bits + 7) // 8}")
+    stream = "".join(f"{byte:08b}" for byte in packed)  # most significant bit first
+    if "1" in stream[count * bits :]:
+        raise DecodeError("MESH: a padding bit of position_bits is 1")
+    n = hilbert_side(width, rows)
+    free: list[tuple[int, int]] = []
+    key = -1
+    for i, h in enumerate(high):
+        low = int(stream[i * bits : (i + 1) * bits] or "0", 2)
+        key += (h << bits) + low + 1
+        if order == 0:
+            if key >= width * rows:
+                raise DecodeError(f"MESH: vertex key {key} is outside the band")
+            free.append((key, hilbert_distance(n, key % width, key // width)))
+        else:
+            if key >= n * n:
+                raise DecodeError(f"MESH: Hilbert distance {key} is beyond the curve")
+            x, y = hilbert_point(n, key)
+            if x >= width or y >= rows:
+                raise DecodeError(f"MESH: Hilbert distance {key} is the point ({x}, {y}), outside the band")
+            free.append((y * width + x, key))
+    return free
 
 
 def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
@@ -626,69 +698,13 @@ def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
     if base_step < 1:
         raise DecodeError("MESH: sample_step is 0")
 
-    # Polylines: start pixels, then turned steps (§4.2.2).
-    lengths = r.varints(n_polylines, "polyline_lengths")
-    if any(n < 2 for n in lengths) or sum(lengths) != n_indices:
-        raise DecodeError("MESH: polyline lengths must each be >= 2 and sum to polyline_index_count")
-    starts = r.varints(n_polylines, "polyline_starts")
-    steps = r.varints(2 * (n_indices - n_polylines), "polyline_steps")
-    pixel_lines: list[list[int]] = []
-    k, s = 0, 0
-    for length, start in zip(lengths, starts):
-        k += unzigzag(start)
-        if not 0 <= k < pixels:
-            raise DecodeError(f"MESH: polyline start pixel {k} is outside the band")
-        x, y = k % width, k // width
-        line, turned = [k], 0
-        for _ in range(length - 1):
-            u, v = unzigzag(steps[s]), unzigzag(steps[s + 1])
-            s += 2
-            if u == 0 and v == 0:
-                raise DecodeError("MESH: a polyline step is (0, 0)")
-            dx, dy = turn(u, v, turned)
-            turned += quadrant(u, v)
-            if abs(dx) >= width or abs(dy) >= rows:
-                raise DecodeError(f"MESH: polyline step ({dx}, {dy}) is longer than the band")
-            x, y = x + dx, y + dy
-            if not (0 <= x < width and 0 <= y < rows):
-                raise DecodeError(f"MESH: a polyline leaves the band at ({x}, {y})")
-            line.append(y * width + x)
-        pixel_lines.append(line)
+    pixel_lines = read_polylines(r, n_polylines, n_indices, width, rows)
     on_lines = {k for line in pixel_lines for k in line}
-
-    # Free vertices: keys as gaps split into high parts and raw low bits (§4.2.2).
     n_free = n_vertices - len(on_lines)
     if n_free < 0:
         raise DecodeError(f"MESH: the polylines visit {len(on_lines)} pixels, more than the {n_vertices} vertices")
-    high = r.varints(n_free + 1, "positions")
-    bits, high = high[0], high[1:]
-    if bits > 24:
-        raise DecodeError(f"MESH: {bits} low bits per gap (at most 24)")
-    packed = r.take(r.u32())
-    if len(packed) != (n_free * bits + 7) // 8:
-        raise DecodeError(f"MESH: position_bits holds {len(packed)} bytes, not {(n_free * bits + 7) // 8}")
-    stream = "".join(f"{byte:08b}" for byte in packed)  # most significant bit first
-    if "1" in stream[n_free * bits :]:
-        raise DecodeError("MESH: a padding bit of position_bits is 1")
-    n = hilbert_side(width, rows)
-    free: list[tuple[int, int]] = []  # (pixel index, Hilbert distance)
-    key = -1
-    for i, h in enumerate(high):
-        low = int(stream[i * bits : (i + 1) * bits] or "0", 2)
-        key += (h << bits) + low + 1
-        if position_order == 0:
-            if key >= pixels:
-                raise DecodeError(f"MESH: vertex key {key} is outside the band")
-            k = key
-            free.append((k, hilbert_distance(n, k % width, k // width)))
-        else:
-            if key >= n * n:
-                raise DecodeError(f"MESH: Hilbert distance {key} is beyond the curve")
-            x, y = hilbert_point(n, key)
-            if x >= width or y >= rows:
-                raise DecodeError(f"MESH: Hilbert distance {key} is the point ({x}, {y}), outside the band")
-            k = y * width + x
-            free.append((k, key))
+    free = read_free_vertices(r, n_free, position_order, width, rows)
+    for k, _ in free:
         if k in on_lines:
             raise DecodeError(f"MESH: free vertex ({k % width}, {k // width}) is on a polyline")
 
@@ -697,6 +713,7 @@ def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
     index = {k: i for i, k in enumerate(pixel_ids)}
     band = Band(y0, rows)
     band.base_step = base_step
+    band.listed = connectivity == 0
     band.xs = [k % width for k in pixel_ids]
     band.ys = [k // width for k in pixel_ids]
     band.polylines = [[index[k] for k in line] for line in pixel_lines]
@@ -712,29 +729,33 @@ def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
     listed = r.varints(3 * n_triangles if connectivity == 0 else 0, "triangles")
     r.end()
 
-    flat = header.width == 1 or rows == 1
-    if flat:
-        if n_triangles:
-            raise DecodeError(f"MESH: {n_triangles} triangles in a band one pixel wide or high")
-        line_end = max(width, rows) - 1
+    band.triangles = band_triangles(band, width, connectivity, listed, n_triangles, triangle_crc)
+    return band
+
+
+def band_triangles(band: Band, width: int, connectivity: int, listed: list[int], count: int,
+                   crc: int) -> list[tuple[int, int, int]]:
+    """§4.2.3: the band's triangles (none in a band one pixel wide or high), checked."""
+    if width == 1 or band.rows == 1:
+        if count:
+            raise DecodeError(f"MESH: {count} triangles in a band one pixel wide or high")
+        if crc != zlib.crc32(b""):
+            raise DecodeError("MESH: triangle_crc does not match the empty triangle list")
         positions = band.ys if width == 1 else band.xs
-        if positions[0] != 0 or positions[-1] != line_end:
+        if positions[0] != 0 or positions[-1] != max(width, band.rows) - 1:
             raise DecodeError("MESH: a one-pixel band needs a vertex at each end (§4.2.3, constraint 5)")
-        # Constraint 6 in one dimension (ATM.md only speaks of triangle edges): a wall
-        # segment joins two vertices with none between them on the line.
+        # Constraint 6 on a line: a wall segment joins neighbours, no vertex between.
         for line in band.polylines:
             for a, b in zip(line, line[1:]):
                 if abs(a - b) != 1:
                     raise DecodeError(f"MESH: wall segment ({a}, {b}) skips a vertex of the line (constraint 6)")
-    elif connectivity == 0:
-        band.triangles = listed_triangles(listed, band, width, rows)
+        return []
+    if connectivity == 0:
+        triangles = listed_triangles(listed, band, width, band.rows)
     else:
-        band.triangles = implicit_triangles(band)
-    if not flat:
-        check_triangles(band, width, rows, n_triangles, triangle_crc)
-    elif triangle_crc != zlib.crc32(b""):
-        raise DecodeError("MESH: triangle_crc does not match the empty triangle list")
-    return band
+        triangles = implicit_triangles(band)
+    check_triangles(band.xs, band.ys, triangles, width, band.rows, count, crc)
+    return triangles
 
 
 def listed_triangles(numbers: list[int], band: Band, width: int, rows: int) -> list[tuple[int, int, int]]:
@@ -777,16 +798,15 @@ def implicit_triangles(band: Band) -> list[tuple[int, int, int]]:
     return delaunay(band.xs, band.ys, segments)
 
 
-def check_triangles(band: Band, width: int, rows: int, count: int, crc: int) -> None:
+def check_triangles(xs: list[int], ys: list[int], tris: list[tuple[int, int, int]], width: int, rows: int,
+                    count: int, crc: int) -> None:
     """§4.2.3: the count, the CRC of the canonical list, the area sum (constraint 4.1)
     and §8's bound on the triangles' total row extent."""
-    tris = band.triangles
     if len(tris) != count:
         raise DecodeError(f"MESH: {len(tris)} triangles where triangle_count says {count}")
     flat = [i for t in tris for i in t]
     if zlib.crc32(struct.pack(f"<{len(flat)}I", *flat)) != crc:
         raise DecodeError("MESH: the triangles do not match triangle_crc")
-    xs, ys = band.xs, band.ys
     area = sum((xs[b] - xs[a]) * (ys[c] - ys[a]) - (xs[c] - xs[a]) * (ys[b] - ys[a]) for a, b, c in tris)
     if count < 1 or area != 2 * (width - 1) * (rows - 1):
         raise DecodeError("MESH: the triangles do not tile the band (constraint 4.1)")
@@ -908,8 +928,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
     expect_qunt, have_ndat, mask, complete = header.sample_type == 2, False, None, False
     for kind, payload in chunks[1:]:
         name = kind.decode()
-        # §4 "a QUNT chunk follows it directly": not even an ancillary chunk comes
-        # between (the codec reads it so; §4 also lets ancillary chunks be "anywhere").
+        # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
             raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type 2)")
         if kind[0] & 0x20:  # ancillary (lower-case first letter): nothing here needs one

@@ -25,8 +25,8 @@ from codec.triangulate import triangulate
 def shuffled_triangle(rng: np.random.Generator, algorithm: str):
     """triangle.triangulate as called with the vertices and segments in a random order,
     each segment in a random direction, by one of Triangle's algorithms ('' divide and
-    conquer, 'i' incremental, 'F' sweepline; 'l' vertical cuts only): the triangles come
-    back in the caller's numbering."""
+    conquer, 'i' incremental, 'F' sweepline; 'l' vertical cuts only): the triangles and
+    segments come back in the caller's numbering."""
     plain = triangle.triangulate
 
     def call(data: dict, switches: str) -> dict:
@@ -41,8 +41,9 @@ def shuffled_triangle(rng: np.random.Generator, algorithm: str):
             seg[flip] = seg[flip][:, ::-1]
             moved["segments"] = seg.astype(np.int32)
         out = dict(plain(moved, switches + algorithm))
-        if "triangles" in out:
-            out["triangles"] = perm[np.asarray(out["triangles"], np.int64)]
+        for key in ("triangles", "segments"):
+            if key in out:
+                out[key] = perm[np.asarray(out[key], np.int64)]
         return out
 
     return call
@@ -274,9 +275,64 @@ def test_conformance_files_decode_alike_by_any_triangle_call(monkeypatch, algori
         np.testing.assert_array_equal(codec.decode(path.read_bytes()), expected)
 
 
+@pytest.mark.parametrize("mesher", ["adaptive", "uniform"])
+def test_a_corpus_image_decodes_alike_by_any_triangle_call(monkeypatch, mesher):
+    """skimage's text image at the default density (walls, thousands of ties): the
+    same pixels, and the self-check holds, whichever way Triangle is called."""
+    from tests.corpus import load_corpus
+
+    data = codec.encode(load_corpus()["text"], mesher=mesher)
+    expected = codec.decode(data)
+    mesh = codec.decode_mesh(data)
+    walls = segments(mesh.constraints) if mesh.constraints else None
+    assert canonical.tie_count(mesh.vertices, mesh.triangles, walls)[1] > 100
+    for k, algorithm in enumerate(ALGORITHMS):
+        call = shuffled_triangle(np.random.default_rng(k), algorithm)
+        monkeypatch.setattr(triangulate_module.triangle, "triangulate", call)
+        np.testing.assert_array_equal(codec.decode(data), expected)
+        raw = raw_triangle(mesh.vertices, walls, np.random.default_rng(k), algorithm)
+        canonical.canonicalise(mesh.vertices, raw, walls, check=True)
+
+
+def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
+    """ATM.md §9: on every conformance file with a two-dimensional Delaunay band, the
+    triangles of Triangle alone (input in file order) fail the CRC; listed and
+    one-pixel files decode as before."""
+    from pathlib import Path
+
+    from codec.errors import CorruptError
+
+    here = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
+    monkeypatch.setattr(triangulate_module, "canonicalise", lambda v, t, c: np.asarray(t, np.int64))
+    caught = set()
+    for path in sorted(here.glob("*.atm")):
+        try:
+            codec.decode(path.read_bytes())
+        except CorruptError as exc:
+            assert "CRC mismatch" in str(exc)
+            caught.add(path.stem)
+    assert caught == {p.stem for p in here.glob("*.atm")} - {"line_1x9", "listed_ties", "listed_not_delaunay"}
+
+
+def test_the_pass_reaches_the_one_answer_from_any_triangulation():
+    """ATM.md §4.2.5, construction: flips from any triangulation with the walls as
+    edges, not only from a constrained Delaunay one, end at the same triangles."""
+    cols, rows = [0, 2, 4, 6, 8, 10, 12, 14, 16, 17], [0, 2, 4, 6, 8, 10, 12, 13]
+    rng = np.random.default_rng(6)
+    for _ in range(40):
+        mesh = _mesh_with_wall(cols, rows, list(rng.random(80) < 0.6), cols[rng.integers(1, 8)], 0)
+        walls = segments(mesh.constraints)
+        start = mesh.triangles
+        for _ in range(6):
+            start = canonical.random_flips(mesh.vertices, start, walls, rng, 0.5)
+        assert not local_rule_holds(mesh.vertices, start, walls)
+        out = canonical.canonicalise(mesh.vertices, start, walls, check=True)
+        np.testing.assert_array_equal(canonical_triangles(out), canonical_triangles(mesh.triangles))
+
+
 def test_version_5_files_are_refused_naming_both_versions():
     """Version 5 has version 6's bytes but Triangle's tie-breaking: not decoded."""
     data = codec.encode(np.arange(64, dtype=np.uint8).reshape(8, 8), points=10)
     old = data[:8] + struct.pack("<H", 5) + data[10:]
-    with pytest.raises(UnsupportedError, match="version 5; this codec reads version 6.*re-encoded"):
+    with pytest.raises(UnsupportedError, match="version 5; this codec reads version 6 .*re-encode the source image"):
         codec.decode(old)

@@ -146,3 +146,12 @@ def test_damaged_tiff_is_an_atm_error(tmp_path):
     data = src.read_bytes()
     with pytest.raises(codec.ATMError, match="not a readable TIFF"):
         geotiff.read(data[:40], "cut.tif")
+
+
+def test_int16_decodes_to_tif_or_npy_only(tmp_path):
+    atm = tmp_path / "dem.atm"
+    codec.write(atm, np.full((8, 8), -5, np.int16), points=10)
+    assert main(["decode", str(atm), str(tmp_path / "dem.png")]) == 1
+    assert not (tmp_path / "dem.png").exists()
+    assert main(["decode", str(atm), str(tmp_path / "dem.npy")]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "dem.npy"), np.full((8, 8), -5, np.int16))

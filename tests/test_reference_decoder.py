@@ -26,6 +26,7 @@ from codec.mesh import Mesh
 from codec.triangulate import triangulate
 from format_spec import schema
 from tests.conftest import chunks, random_mesh
+from tests.synthetic import range_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = ROOT / "format_spec" / "reference_decoder.py"
@@ -158,11 +159,25 @@ def test_every_conformance_file_is_tested():
             "holes_float", "bands_gray8", "rgb8_grid", "gray16_scene", "float_elevation"} <= set(CASES)
 
 
+def assert_built_bands_follow_the_rule(data: bytes) -> int:
+    """Every band whose triangles the decoder built obeys §4.2.5 by brute force; returns
+    how many such bands there were."""
+    _, bands = ref.read(data)
+    built = [b for b in bands if not b.listed and b.triangles]
+    for band in built:
+        segments = [s for line in band.polylines for s in zip(line, line[1:])]
+        assert_follows_the_rule(list(zip(band.xs, band.ys)), segments, band.triangles)
+    return len(built)
+
+
 @pytest.mark.parametrize("name", CASES)
 def test_conformance_file_decodes_to_its_image(name):
     npy = VECTORS / f"{name}.npy"
     expected = np.load(npy) if npy.exists() else read_image(VECTORS / f"{name}.png")
-    assert_same_image(ref.decode((VECTORS / f"{name}.atm").read_bytes()), expected)
+    data = (VECTORS / f"{name}.atm").read_bytes()
+    assert_same_image(ref.decode(data), expected)
+    built = assert_built_bands_follow_the_rule(data)
+    assert built == 0 if name.startswith(("listed", "line")) else built >= 1
 
 
 # ---------------------------------------------------------------------------
@@ -286,9 +301,13 @@ def test_hilbert_point_inverts_the_distance_of_the_spec():
 @st.composite
 def images(draw) -> tuple[np.ndarray, dict]:
     """Small images of every kind the format stores, with steps (walls) and noise."""
-    kind = draw(st.sampled_from(["gray8", "gray16", "rgb8", "rgb16", "float", "float_holes", "int_holes"]))
+    kind = draw(st.sampled_from(["gray8", "gray16", "rgb8", "rgb16", "float", "float_holes", "int_holes", "scene"]))
     h, w = draw(st.integers(1, 28)), draw(st.integers(1, 28))
-    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    seed = draw(st.integers(0, 2**32 - 1))
+    if kind == "scene":  # range data: objects with walls, at sizes where walls pay
+        h, w = draw(st.integers(40, 56)), draw(st.integers(56, 72))
+        return range_scene(w, h, seed=seed, dtype=draw(st.sampled_from([np.uint8, np.uint16]))), {}
+    rng = np.random.default_rng(seed)
     surface = rng.normal(size=(h, w)).cumsum(0).cumsum(1)
     surface += np.where(np.arange(w) >= draw(st.integers(0, w)), draw(st.floats(-40, 40)), 0)
     unit = (surface - surface.min()) / max(np.ptp(surface), 1e-9)
@@ -322,6 +341,7 @@ def test_random_files_decode_as_the_codec_decodes_them(case):
     image, options = case
     data = codec.encode(image, **options)
     assert_same_image(ref.decode(data), codec.decode(data))
+    assert_built_bands_follow_the_rule(data)
 
 
 def flipped(mesh: Mesh, rnd) -> Mesh:
@@ -424,8 +444,8 @@ def test_refuses_damaged_files_with_its_own_error():
 
 
 def test_walls_of_a_one_pixel_band_join_neighbouring_vertices():
-    """In a band one pixel high there are no triangle edges; constraint 6 read on the
-    line: a wall segment may not skip a vertex (the codec reads it so too)."""
+    """In a band one pixel high there are no triangle edges; constraint 6 on the line:
+    a wall segment may not skip a vertex."""
     v, values = np.array([[0, 0], [3, 0], [9, 0]]), np.array([10, 200, 30], np.uint8)
     ok = container.pack(Mesh(v, values, np.zeros((0, 3), np.int64), 10, 1, [np.array([0, 1, 2, 1])]))
     assert_same_image(ref.decode(ok), codec.decode(ok))
@@ -444,8 +464,9 @@ def run_lengths(holes: np.ndarray) -> list[int]:
 
 
 def test_the_row_two_bands_share_has_one_mask():
-    """§4.6: the shared row has the same mask in both bands; a file whose second MASK
-    says otherwise is refused (the codec takes the later band's mask today)."""
+    """§4.6: the shared row MUST have the same mask in both bands; a file whose second
+    MASK says otherwise is refused (as a decoder SHOULD; the codec takes the later
+    band's mask, as one that does not refuse must)."""
     from codec.coding import varints
 
     rng = np.random.default_rng(0)

@@ -102,19 +102,9 @@ def flipped(mesh: Mesh, rng: np.random.Generator, delaunay: bool) -> Mesh:
     """The mesh with a set of non-adjacent free edges flipped where their quadrilateral
     is strictly convex: ties only (delaunay=True: another Delaunay tiling, just not the
     one of the tie rule) or any (a tiling that is not Delaunay). Listed in its file."""
-    v, tris = mesh.vertices, mesh.triangles.copy()
-    e = canonical.free_edges(tris, len(v), canonical.constraint_keys(segments(mesh.constraints), len(v)))
-    a, b, c, d = (v[p] for p in e[:4])
-    ok = (canonical.orient2d(a, d, c) > 0) & (canonical.orient2d(d, b, c) > 0)
-    if delaunay:
-        ok &= canonical.incircle_sign(a, b, c, d) == 0
-    used = np.zeros(len(tris), bool)
-    for j in rng.permutation(np.flatnonzero(ok)).tolist():
-        if not used[e.t1[j]] and not used[e.t2[j]] and rng.random() < 0.7:
-            used[[e.t1[j], e.t2[j]]] = True
-            tris[e.t1[j]] = [e.a[j], e.d[j], e.c[j]]
-            tris[e.t2[j]] = [e.d[j], e.b[j], e.c[j]]
-    return Mesh(v, mesh.values, tris, mesh.width, mesh.height, mesh.constraints)
+    walls = segments(mesh.constraints) if mesh.constraints else None
+    tris = canonical.random_flips(mesh.vertices, mesh.triangles, walls, rng, 0.7, ties_only=delaunay)
+    return Mesh(mesh.vertices, mesh.values, tris, mesh.width, mesh.height, mesh.constraints)
 
 
 def describe(data: bytes) -> str:

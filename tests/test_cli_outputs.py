@@ -1,0 +1,195 @@
+"""What `atm` refuses to write, and what it leaves when stopped: an output that is an
+input, a name that claims another kind of file, SIGTERM/SIGKILL mid-write, Ctrl-C in a
+batch."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import codec
+from codec.files import write_image
+from tests.synthetic import range_scene
+from tests.test_cli import ROOT, atm
+
+
+@pytest.fixture()
+def scene(tmp_path) -> Path:
+    path = tmp_path / "scene.png"
+    write_image(path, range_scene(48, 32, seed=3))
+    return path
+
+
+def refused(r: subprocess.CompletedProcess, *words: str) -> None:
+    err = r.stderr.decode()
+    assert r.returncode == 2, err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("atm: error: ")
+    for w in words:
+        assert w in err, err
+
+
+def test_an_output_that_is_the_input_is_refused_by_any_name(scene, tmp_path):
+    original = scene.read_bytes()
+    os.link(scene, tmp_path / "hard.png")
+    (tmp_path / "soft.png").symlink_to(scene)
+    for out in (scene, tmp_path / "hard.png", tmp_path / "soft.png"):
+        refused(atm("encode", scene, out, "--force"), "would destroy the input")
+    assert scene.read_bytes() == original
+    atm("encode", scene, tmp_path / "a.atm")
+    encoded = (tmp_path / "a.atm").read_bytes()
+    refused(atm("decode", tmp_path / "a.atm", tmp_path / "a.atm"), "would destroy the input")
+    refused(atm("decode", tmp_path / "a.atm", tmp_path / "a.atm", "--force", "--format", "png"), "destroy")
+    refused(atm("mesh", tmp_path / "a.atm", tmp_path / "a.atm", "--force", "--format", "obj"), "destroy")
+    # standard input is the file it is redirected from
+    with open(tmp_path / "a.atm", "rb") as f:
+        r = subprocess.run(
+            [sys.executable, "-m", "codec", "decode", "-", tmp_path / "a.atm", "--force", "--format", "png"],
+            stdin=f, capture_output=True,
+        )
+    refused(r, "destroy")
+    assert (tmp_path / "a.atm").read_bytes() == encoded
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.atm", "hard.png", "scene.png", "soft.png"]
+
+
+def test_a_name_claiming_another_kind_of_file_needs_force(scene, tmp_path):
+    victim = tmp_path / "victim.png"
+    victim.write_bytes(b"a photo the user keeps")
+    refused(atm("encode", scene, victim), "victim.png is named as a .png image", "victim.atm", "--force")
+    assert victim.read_bytes() == b"a photo the user keeps"
+    assert atm("encode", scene, victim, "--force").returncode == 0
+    np.testing.assert_array_equal(codec.read(victim).shape, (32, 48))
+
+    (tmp_path / "keep.atm").write_bytes(victim.read_bytes())
+    refused(atm("decode", victim, tmp_path / "keep.atm", "--format", "png"), "named as an .atm file", "PNG data")
+    refused(atm("mesh", victim, tmp_path / "keep.atm", "--format", "obj"), "OBJ data")
+    assert (tmp_path / "keep.atm").read_bytes() == victim.read_bytes()
+    r = atm("decode", victim, tmp_path / "keep.atm", "--format", "png", "--force")
+    assert r.returncode == 0 and (tmp_path / "keep.atm").read_bytes().startswith(b"\x89PNG")
+
+
+def test_an_empty_output_name_is_refused(scene, tmp_path):
+    refused(atm("encode", scene, "", cwd=tmp_path), "output file name is empty")
+    refused(atm("decode", scene, "", cwd=tmp_path), "output file name is empty")
+    refused(atm("encode", scene, scene, "", cwd=tmp_path), "output directory name is empty")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.png"]
+
+
+def test_batch_refuses_an_output_that_is_an_input_before_converting(tmp_path):
+    # .atm data kept under a .png name (say, written with --force), decoded to PNG beside it
+    (tmp_path / "kept.png").write_bytes(codec.encode(range_scene(48, 32, seed=3)))
+    codec.write(tmp_path / "other.atm", range_scene(30, 20, seed=4))
+    kept = (tmp_path / "kept.png").read_bytes()
+    r = atm("decode", tmp_path / "kept.png", tmp_path / "other.atm", tmp_path, "--format", "png")
+    refused(r, "kept.png", "would destroy the input")
+    assert (tmp_path / "kept.png").read_bytes() == kept
+    assert not (tmp_path / "other.png").exists()
+
+
+def fds_into(pid: int, folder: Path) -> list[str]:
+    """The files under `folder` that process `pid` holds open (an unnamed O_TMPFILE
+    shows as 'folder/#inode (deleted)')."""
+    links = []
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            links.append(os.readlink(f"/proc/{pid}/fd/{fd}"))
+        except OSError:
+            pass
+    return [link for link in links if link.startswith(str(folder))]
+
+
+def stalled_encode(tmp_path: Path, *prelude: str) -> subprocess.Popen:
+    """`atm encode - OUT` that has opened its output and waits for image rows that never
+    come (a PGM header on a pipe left open)."""
+    code = "; ".join(prelude + ("from codec.cli.main import main", "raise SystemExit(main())"))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, "encode", "-", str(tmp_path / "out" / "x.atm")],
+        stdin=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+    )
+    proc.stdin.write(b"P5\n64 64\n255\n" + bytes(64 * 10))
+    proc.stdin.flush()
+    deadline = time.monotonic() + 60
+    while not fds_into(proc.pid, tmp_path / "out"):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+        time.sleep(0.05)
+    return proc
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="O_TMPFILE and /proc are Linux's")
+def test_sigkill_mid_write_leaves_nothing(tmp_path):
+    (tmp_path / "out").mkdir()
+    proc = stalled_encode(tmp_path)
+    proc.kill()
+    proc.wait(30)
+    proc.stdin.close()
+    assert os.listdir(tmp_path / "out") == []
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc")
+def test_sigterm_mid_write_removes_a_named_temporary(tmp_path):
+    (tmp_path / "out").mkdir()
+    # where O_TMPFILE is missing the writer names its temporary file
+    proc = stalled_encode(tmp_path, "import codec.files", "codec.files.UNNAMED = None")
+    assert [p.startswith(".x.atm.") for p in os.listdir(tmp_path / "out")] == [True]
+    proc.terminate()
+    assert proc.wait(30) == 128 + signal.SIGTERM
+    proc.stdin.close()
+    assert proc.stderr.read().decode().strip() == "atm: terminated"
+    assert os.listdir(tmp_path / "out") == []
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses FIFOs and process groups")
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
+    """Two workers are each mid-way through a file (FIFOs fed a header and some rows),
+    more files wait; Ctrl-C (SIGINT to the process group) or SIGTERM (to the command
+    alone) must end the command promptly and nothing may be written afterwards, not even
+    once the stalled inputs end."""
+    src, out = tmp_path / "in", tmp_path / "out"
+    src.mkdir()
+    fifos = [src / "f1.pgm", src / "f2.pgm"]
+    for f in fifos:
+        os.mkfifo(f)
+    images = [src / f"img{i}.png" for i in range(4)]
+    for i, path in enumerate(images):
+        write_image(path, range_scene(40, 30, seed=i))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "-q"],
+        stderr=subprocess.PIPE, cwd=ROOT, start_new_session=True,
+    )
+    writers = []
+    deadline = time.monotonic() + 60
+    for f in fifos:
+        while True:  # a FIFO opens for writing once a worker has opened it to read
+            try:
+                writers.append(os.open(f, os.O_WRONLY | os.O_NONBLOCK))
+                break
+            except OSError:
+                assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+                time.sleep(0.05)
+        os.write(writers[-1], b"P5\n64 64\n255\n" + bytes(64 * 10))
+    try:
+        if how == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.terminate()
+        try:
+            code = proc.wait(20)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            pytest.fail(f"the batch did not stop within 20 s of {how}")
+        expected = (130, b"atm: interrupted") if how == "ctrl-c" else (143, b"atm: terminated")
+        assert (code, proc.stderr.read().strip()) == expected
+        written = sorted(os.listdir(out))
+    finally:
+        for fd in writers:
+            os.close(fd)  # the stalled inputs end: a worker still alive would go on
+    time.sleep(2)
+    assert sorted(os.listdir(out)) == written == []
