@@ -70,3 +70,27 @@ def test_integer_quant_chunk_must_have_scale_one():
     bad = data[:offset] + make_chunk(b"QUNT", np.array([-5.0, 0.5], "<f8").tobytes()) + data[offset + 28 :]
     with pytest.raises(CorruptError, match="scale 1"):
         codec.decode(bad)
+
+
+@pytest.mark.parametrize("dtype, lo, nodata", [(np.int8, -100, -128), (np.int16, -400, -32768), (np.int32, -2_000_000_000, None)])
+def test_reference_decoder_decodes_signed_integers_as_the_codec_does(dtype, lo, nodata):
+    from tests.test_reference_decoder import ref
+
+    image = terrain(dtype, lo)
+    if nodata is not None:
+        image[3:6, 4:9] = nodata
+    for options in ({"max_error": 0}, {"points": 60}):
+        data = codec.encode(image, nodata=nodata, **options)
+        out = ref.decode(data)
+        assert out.dtype == np.dtype(dtype)
+        np.testing.assert_array_equal(out, codec.decode(data))
+
+
+def test_reference_decoder_refuses_an_integer_quant_with_scale_not_one():
+    from tests.test_reference_decoder import ref
+
+    data = codec.encode(terrain(np.int16, -5), points=50)
+    offset, _, _ = next(c for c in chunks(data) if c[1] == b"QUNT")
+    bad = data[:offset] + make_chunk(b"QUNT", np.array([-5.0, 0.5], "<f8").tobytes()) + data[offset + 28 :]
+    with pytest.raises(ref.DecodeError, match="scale 1"):
+        ref.decode(bad)
