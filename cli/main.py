@@ -80,6 +80,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
         if i["nodata"] is not None:
             print(f"  holes decode to {i['nodata']:g}")
+        if "precision" in i:
+            print(f"  float samples stored in steps of {i['precision']:.6g} from {i['offset']:.10g} (16 bits)")
         for line in geotiff.describe(i["metadata"]):
             print(f"  {line}")
         for key, value in i["metadata"].items():

@@ -105,7 +105,8 @@ def decode_mesh(data: bytes) -> Mesh:
 
 def info(data: bytes) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
-    vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
+    vertices, triangles, constraints, bytes, nodata, metadata, and for float data its
+    precision (the quantisation step; signed integers: offset). Read from the header and
     each band's count fields (checksums and limits checked, no mesh decoded)."""
     from . import container
 
@@ -126,7 +127,21 @@ def info(data: bytes) -> dict:
         "bytes": len(data),
         "nodata": header.nodata,
         "metadata": header.metadata or {},
+        **_sample_mapping(header),
     }
+
+
+def _sample_mapping(header) -> dict:
+    """How stored 16-bit samples map to values: float data's step (its precision) and
+    lowest value, signed integers' offset."""
+    from .integers import is_signed
+
+    q = header.quant
+    if q is None:
+        return {}
+    if is_signed(header.dtype):
+        return {"offset": int(q.offset)}
+    return {"precision": q.scale, "offset": q.offset}
 
 
 def read(path: str | os.PathLike, *, backend: str = "cpu", metadata: bool = False):

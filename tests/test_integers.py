@@ -94,3 +94,11 @@ def test_reference_decoder_refuses_an_integer_quant_with_scale_not_one():
     bad = data[:offset] + make_chunk(b"QUNT", np.array([-5.0, 0.5], "<f8").tobytes()) + data[offset + 28 :]
     with pytest.raises(ref.DecodeError, match="scale 1"):
         ref.decode(bad)
+
+
+def test_info_states_float64_precision_and_integer_offset():
+    z = terrain(np.float64, 100) * 0.01
+    info = codec.info(codec.encode(z, precision=0.001, points=50))
+    assert info["dtype"] == "float32" and info["precision"] == 0.001 and info["offset"] == pytest.approx(1.0)
+    assert codec.info(codec.encode(terrain(np.int16, -7), points=50))["offset"] == -7
+    assert "precision" not in codec.info(codec.encode(terrain(np.uint16, 7), points=50))
