@@ -139,7 +139,7 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
         for y0, rows in dec:
             image[y0 : y0 + len(rows)] = rows
     # a TIFF gets its georeferencing back (the geotiff metadata record)
-    data = geotiff.write(image, dec.metadata) if fmt in ("tif", "tiff") else encode_image(image, "." + fmt)
+    data = geotiff.write(image, dec.metadata, dec.nodata) if fmt in ("tif", "tiff") else encode_image(image, "." + fmt)
     with open_output(dst_name) as out:
         out.write(data)
     return len(data)

@@ -159,7 +159,7 @@ def read(data: bytes, name: str = "input") -> Raster:
                 record = _tag_record(tags)
                 samples = page.samplesperpixel
                 separate = page.planarconfig == tifffile.PLANARCONFIG.SEPARATE
-    except (tifffile.TiffFileError, ValueError, OSError, KeyError, IndexError, RuntimeError) as exc:
+    except Exception as exc:  # tifffile and imagecodecs raise many types for a damaged file
         raise ATMError(f"{name}: not a readable TIFF: {exc}") from None
     if separate and samples > 1 and image.ndim == 3:
         image = np.moveaxis(image, 0, -1)
@@ -176,14 +176,31 @@ def read(data: bytes, name: str = "input") -> Raster:
     return Raster(image, nodata, record or None)
 
 
-def write(image: np.ndarray, metadata: dict | None = None) -> bytes:
+def nodata_text(value: float) -> str:
+    """A nodata value as GDAL writes its GDAL_NODATA tag: "nan", "inf", "-inf", a whole
+    number without a decimal point, or the shortest decimal that reads back the same."""
+    if math.isnan(value):
+        return "nan"
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return str(int(value)) if float(value).is_integer() else repr(float(value))
+
+
+def write(image: np.ndarray, metadata: dict | None = None, nodata: float | None = None) -> bytes:
     """TIFF bytes of `image` (Deflate-compressed), with the tags of a `geotiff` record
-    in `metadata` written back as they were read."""
+    in `metadata` written back as they were read; `nodata` (what the holes hold), when
+    given, is the GDAL_NODATA tag, so that GIS software sees the holes."""
     import tifffile
 
     record = (metadata or {}).get(KEY)
+    record = dict(record) if isinstance(record, dict) else {}
+    if nodata is not None:
+        kept = nodata_value(str(record.get("GDAL_NODATA", "")), image.dtype)
+        same = kept is not None and (kept == nodata or (math.isnan(kept) and math.isnan(nodata)))
+        if not same:  # the holes hold `nodata`: the tag must say so
+            record["GDAL_NODATA"] = nodata_text(nodata)
     extratags = []
-    if isinstance(record, dict):
+    if record:
         for name, (code, kind) in TAGS.items():
             value = record.get(name)
             if value is None:

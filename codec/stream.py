@@ -324,6 +324,8 @@ class StreamDecoder:
         h = self._reader.header
         self.width, self.height, self.dtype, self.channels = h.width, h.height, h.dtype, h.channels
         self.shape = h.shape
+        #: what hole pixels decode to (None: the file has no holes)
+        self.nodata = h.nodata
         #: JSON key-values stored with the image (empty if none); meta chunks after
         #: the first band are added as they are read
         self.metadata = dict(h.metadata or {})

@@ -155,3 +155,25 @@ def test_int16_decodes_to_tif_or_npy_only(tmp_path):
     assert not (tmp_path / "dem.png").exists()
     assert main(["decode", str(atm), str(tmp_path / "dem.npy")]) == 0
     np.testing.assert_array_equal(np.load(tmp_path / "dem.npy"), np.full((8, 8), -5, np.int16))
+
+
+@pytest.mark.parametrize("dtype, nodata", [(np.int16, -32768), (np.float32, -9999.5), (np.float32, None)])
+def test_decoded_tif_names_its_holes_for_gis_software(tmp_path, dtype, nodata):
+    """A file's holes (a user's --nodata, or NaN) come back as the TIFF's GDAL nodata,
+    overriding a source tag that says otherwise."""
+    image = np.round(dem(20, 30, seed=4)).astype(dtype)
+    image[2:5, 3:9] = np.nan if nodata is None else nodata
+    src = tmp_path / "dem.tif"
+    write_geotiff(src, image, -1.0 if dtype == np.int16 else None, "deflate")  # a tag that is not the holes
+    options = [] if nodata is None else ["--nodata", str(nodata)]
+    out = round_trip(tmp_path, src, "--max-error", "1", *options)
+    with rasterio.open(out) as r:
+        decoded, tag = r.read(1), r.nodata
+        assert r.crs == "EPSG:32633"
+    holes = np.isnan(image) if nodata is None else image == nodata
+    if nodata is None:
+        assert np.isnan(tag)
+        np.testing.assert_array_equal(np.isnan(decoded), holes)
+    else:
+        assert tag == nodata
+        np.testing.assert_array_equal(decoded == nodata, holes)
