@@ -15,6 +15,7 @@ import numpy as np
 
 import codec
 from . import rowio
+from codec import geotiff, integers
 from codec.errors import ATMError, UnsupportedError
 from codec.settings import cli_option_names
 
@@ -74,6 +75,7 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
     """Encode one image (a path or -) to one .atm output (a path or -), band by band.
     Returns the finished encoder (its statistics) and the bytes written."""
     src = rowio.open_rows(src_name)
+    options = geotiff.source_options(src, options)
     if src.dtype.kind == "f":
         if "value_range" not in options and src.scan is None:
             raise codec.OptionError(
@@ -81,6 +83,8 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
                 "(the header carries the quantisation before the rows arrive)"
             )
         options = src.float_options(options)
+    elif integers.is_signed(src.dtype) and "value_range" not in options and src.scan is not None:
+        options = dict(options, value_range=integers.value_range(src.scan(), options.get("nodata")))
     with open_output(dst_name) as f:
         out = _Counter(f)
         enc = codec.StreamEncoder(
@@ -117,10 +121,12 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
 
     with open_input(src_name) as f:
         dec = codec.StreamDecoder(f, backend=backend)
-        if np.dtype(dec.dtype).kind == "f" and fmt not in FLOAT_FORMATS:
-            # OpenCV would quietly cut float samples to 8 bits; PNM cannot hold them at all
+        if (np.dtype(dec.dtype).kind == "f" or integers.is_signed(dec.dtype)) and fmt not in FLOAT_FORMATS:
+            # OpenCV would quietly cut float samples to 8 bits; PNG and PNM have no
+            # negative numbers and no floats at all
+            kind = "float" if np.dtype(dec.dtype).kind == "f" else str(dec.dtype)
             raise UnsupportedError(
-                f"{src_name} holds float data, which .{fmt} cannot store; decode it to .tif or .npy"
+                f"{src_name} holds {kind} data, which .{fmt} cannot store; decode it to .tif or .npy"
             )
         if fmt in STREAMED:
             with open_output(dst_name) as raw:
@@ -139,7 +145,8 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
         image = np.empty(dec.shape, dec.dtype)
         for y0, rows in dec:
             image[y0 : y0 + len(rows)] = rows
-    data = encode_image(image, "." + fmt)
+    # a TIFF gets its georeferencing back (the geotiff metadata record)
+    data = geotiff.write(image, dec.metadata, dec.nodata) if fmt in ("tif", "tiff") else encode_image(image, "." + fmt)
     with open_output(dst_name) as out:
         out.write(data)
     return len(data)

@@ -19,6 +19,7 @@ from pathlib import Path
 import codec
 from . import batch, convert, outputs, signals, tools
 from .progress import Progress
+from codec import geotiff
 from codec.errors import ATMError
 
 EPILOG = "Use - for standard input or output. Run 'atm COMMAND --help' for a command's options."
@@ -79,7 +80,13 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
         if i["nodata"] is not None:
             print(f"  holes decode to {i['nodata']:g}")
+        if "precision" in i:
+            print(f"  float samples stored in steps of {i['precision']:.6g} from {i['offset']:.10g} (16 bits)")
+        for line in geotiff.describe(i["metadata"]):
+            print(f"  {line}")
         for key, value in i["metadata"].items():
+            if key == geotiff.KEY:
+                continue  # shown above in words; --json has the tags themselves
             print(f"  {key}: {json.dumps(value, ensure_ascii=False)}")
     return 0
 
@@ -124,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
             "memory bounded by the band; other formats (PNG, TIFF, ...) are read whole. "
             "On a terminal a long encode shows its progress band by band."
         ),
-        epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .jpg, .npy, ...)") + " " + EPILOG,
+        epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .pfm, .jpg, .gif, .npy, ...)") + " " + EPILOG,
     )
     enc.add_argument("inputs", nargs="+", metavar="IN", help="image file, - for standard input, or (batch) directories, glob patterns, files")
     enc.add_argument("output", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")
@@ -168,11 +175,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     msh = sub.add_parser(
         "mesh",
-        help="export an .atm file's mesh as OBJ, PLY, SVG, or a PNG drawn over the image",
+        help="export an .atm file's mesh as OBJ, PLY, SVG, a PNG drawn over the image, or a terrain tile",
         description=(
-            "Write the mesh of an .atm file: .obj or .ply (x = column, y = row, z = sample "
-            "value; walls as OBJ l-lines / PLY edges), .svg (the triangulation, walls in red), "
-            "or .png (the decoded image with the triangle edges in blue and walls in red)."
+            "Write the mesh of an .atm file: .obj or .ply (x = column, y = row, z = the value "
+            "in data units, e.g. metres; walls as OBJ l-lines / PLY edges), .svg (the "
+            "triangulation, walls in red), .png (the decoded image, its pixels with data "
+            "stretched, with the triangle edges in blue and walls in red) or .terrain (a "
+            "Cesium quantized-mesh-1.0 tile of a longitude/latitude GeoTIFF DEM; walls are "
+            "triangle edges)."
         ),
         epilog=EPILOG,
     )

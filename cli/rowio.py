@@ -10,7 +10,7 @@ from typing import BinaryIO, Callable, Iterable, Iterator
 
 import numpy as np
 
-from codec import quantise
+from codec import geotiff, integers, quantise
 from codec.errors import ATMError, UnsupportedError
 from codec.files import decode_image, npy_header
 
@@ -27,9 +27,13 @@ class RowSource:
     dtype: np.dtype
     channels: int
     blocks: Iterator[np.ndarray]
-    #: float data read from a file (not standard input): the same rows again, so that
-    #: what the header needs can be found before the rows are streamed
+    #: float or signed integer data read from a file (not standard input): the same
+    #: rows again, so that what the header needs can be found before the rows are streamed
     scan: Callable[[], Iterable[np.ndarray]] | None = None
+    #: the source's own nodata value and metadata (a GeoTIFF's GDAL_NODATA and
+    #: georeferencing), used unless the user gives their own
+    nodata: float | None = None
+    metadata: dict | None = None
 
     def float_options(self, options: dict) -> dict:
         """Float data: `options` with a value_range and a nodata value taken from the
@@ -141,7 +145,7 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
     def scan() -> Iterator[np.ndarray]:
         return (array[y : y + BLOCK_ROWS] for y in range(0, height, BLOCK_ROWS))
 
-    scannable = array is not None and np.dtype(dtype).kind == "f"
+    scannable = array is not None and (np.dtype(dtype).kind == "f" or integers.is_signed(dtype))
     return RowSource(width, height, np.dtype(dtype).newbyteorder("="), channels, blocks(), scan if scannable else None)
 
 
@@ -163,15 +167,21 @@ def open_rows(name: str) -> RowSource:
         else:
             f = _Prefixed(magic, f)
         return _npy_source(f, name, path)
-    image = decode_image(magic + f.read(), name)  # formats OpenCV reads whole
+    data = magic + f.read()
     if path is not None:
         f.close()
+    raster = geotiff.read(data, name) if geotiff.is_tiff(data) else None
+    image = raster.image if raster is not None else decode_image(data, name)  # read whole
     if image.ndim not in (2, 3):
         raise ATMError(f"{name}: not a 2-D image")
     h, w = image.shape[:2]
     channels = 1 if image.ndim == 2 else image.shape[2]
-    scan = (lambda: [image]) if image.dtype.kind == "f" else None
-    return RowSource(w, h, image.dtype, channels, iter([image]), scan)
+    scan = (lambda: [image]) if image.dtype.kind == "f" or integers.is_signed(image.dtype) else None
+    return RowSource(
+        w, h, image.dtype, channels, iter([image]), scan,
+        raster.nodata if raster is not None else None,
+        raster.metadata if raster is not None else None,
+    )
 
 
 class _Prefixed:

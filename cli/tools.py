@@ -13,7 +13,7 @@ import codec
 from . import convert, outputs
 from codec.errors import ATMError, UnsupportedError
 
-MESH_FORMATS = ("obj", "ply", "svg", "png")
+MESH_FORMATS = ("obj", "ply", "svg", "png", "terrain")
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
 
 
@@ -23,28 +23,31 @@ def _read_bytes(name: str) -> bytes:
 
 
 def cmd_mesh(args: argparse.Namespace) -> int:
-    from codec import export
+    from codec import export, terrain
     from codec.files import atomic_write
 
     fmt = args.format or Path(args.output).suffix.lstrip(".").lower()
     if fmt not in MESH_FORMATS:
         raise UnsupportedError(
             f"cannot write the mesh as {'.' + fmt if fmt else 'a file without an extension'}; "
-            f"use .obj, .ply, .svg or .png (or --format)"
+            f"use .obj, .ply, .svg, .png or .terrain (or --format)"
         )
     outputs.refuse_overwriting_inputs([args.input], [args.output])
     outputs.refuse_misleading_name(args.output, False, args.force, f"{fmt.upper()} data")
     data = _read_bytes(args.input)
-    mesh = codec.decode_mesh(data)
+    dem = terrain.load(data)  # z in data units (metres for a float or quantised DEM)
+    mesh = dem.mesh
     if fmt == "obj":
-        out = export.to_obj(mesh)
+        out = export.to_obj(mesh, dem.heights)
     elif fmt == "ply":
-        out = export.to_ply(mesh)
+        out = export.to_ply(mesh, dem.heights)
     elif fmt == "svg":
         out = export.to_svg(mesh).encode()
+    elif fmt == "terrain":
+        out = terrain.to_quantized_mesh(dem)
     else:
         scale = args.scale or export.auto_scale(mesh.width, mesh.height)
-        out = export.png_bytes(export.overlay_png(mesh, codec.decode(data), scale=scale))
+        out = export.png_bytes(export.overlay_png(mesh, codec.decode(data), scale=scale, nodata=dem.header.nodata))
     if args.output == "-":
         with convert.open_output("-") as f:
             f.write(out)

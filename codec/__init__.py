@@ -95,11 +95,15 @@ def encode(
 
 
 def build_mesh(image: np.ndarray, *, points: int | None = None, mesher: str = "adaptive", **options) -> Mesh:
-    """The mesh the mesher makes of a whole image in one piece (no bands, no value
-    quantisation, no refinement to a bound): points as for `encode`, and the mesher's
-    options (codec.settings.mesher_option_names)."""
-    from . import encoder
+    """The mesh the mesher makes of a whole image in one piece: points as for `encode`,
+    and the mesher's options (codec.settings.mesher_option_names). With a size bound
+    (max_error, max_rms, quality) or samples the file stores with an offset or scale
+    (float, signed), it is the mesh `encode` stores, its values in data units."""
+    from . import encoder, terrain
     from .settings import Settings, mesher_option_names
+
+    if terrain.needs_encoder(image, options):
+        return terrain.build_mesh(image, points=points, mesher=mesher, **options)
 
     allowed = mesher_option_names(mesher) if isinstance(mesher, str) else ()
     other = sorted(set(options) - set(allowed))
@@ -156,7 +160,21 @@ def info(data: bytes) -> dict:
         "bytes": len(data),
         "nodata": header.nodata,
         "metadata": header.metadata or {},
+        **_sample_mapping(header),
     }
+
+
+def _sample_mapping(header) -> dict:
+    """How stored 16-bit samples map to values: float data's step (its precision) and
+    lowest value, signed integers' offset."""
+    from .integers import is_signed
+
+    q = header.quant
+    if q is None:
+        return {}
+    if is_signed(header.dtype):
+        return {"offset": int(q.offset)}
+    return {"precision": q.scale, "offset": q.offset}
 
 
 def read(path: str | os.PathLike, *, backend: str = "cpu", metadata: bool = False):

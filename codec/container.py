@@ -19,7 +19,7 @@ from construct import ConstructError
 
 from .format_spec import schema
 
-from . import coding, frames, limits, meshcode
+from . import coding, frames, integers, limits, meshcode
 from . import metadata as meta_json
 from .errors import CorruptError, FormatError, LimitError, OptionError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
@@ -55,7 +55,11 @@ class Header:
         return STORAGE if self.quant is not None else np.dtype(self.dtype)
 
     def _fields(self) -> dict:
-        code = schema.FLOAT16Q if self.quant is not None else SAMPLE_TYPES[np.dtype(self.dtype)]
+        dtype = np.dtype(self.dtype)
+        code = (
+            SAMPLE_TYPES[dtype] if self.quant is None
+            else integers.SAMPLE_TYPES[dtype] if integers.is_signed(dtype) else schema.FLOAT16Q
+        )
         return dict(width=self.width, height=self.height, sample_type=code, channels=self.channels)
 
 
@@ -268,10 +272,11 @@ class Reader:
         if ctype != schema.HEADER:
             raise CorruptError(f"the first chunk is {ctype.decode('latin-1')}, not AHDR")
         self.header = self._parse_header(payload)
-        if self.header.sample_type == schema.FLOAT16Q:
+        if self.header.sample_type in schema.QUANTISED:
             ctype, payload, offset = self._next_chunk()
             if ctype != schema.QUANT:
-                raise CorruptError(f"float data needs a QUNT chunk after AHDR; found {ctype.decode('latin-1')}")
+                kind = "float" if self.header.sample_type == schema.FLOAT16Q else "signed integer"
+                raise CorruptError(f"{kind} data needs a QUNT chunk after AHDR; found {ctype.decode('latin-1')}")
             self.header = self._parse_quant(self.header, payload)
         self.header = self.header.header
         self._pending_head = None
@@ -367,16 +372,17 @@ class Reader:
         h = schema.Header.parse(payload)
         if h.sample_type not in schema.SAMPLE_DTYPES:
             raise UnsupportedError(
-                f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16, 2 = quantised float)"
+                f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16, 2 = quantised float, "
+                "3 = int8, 4 = int16, 5 = int32)"
             )
         if h.channels not in (1, 3):
             raise UnsupportedError(f"{h.channels} channels; .atm has 1 or 3")
         if h.width == 0 or h.height == 0:
             raise CorruptError(f"the header declares an empty {h.width}x{h.height} image")
-        if h.sample_type == schema.FLOAT16Q and h.channels != 1:
-            raise UnsupportedError("quantised float data has one channel")
+        if h.sample_type in schema.QUANTISED and h.channels != 1:
+            raise UnsupportedError("quantised float and signed integer data have one channel")
         limits.check_image_size(h.width, h.height)
-        dtype = np.dtype(np.float32) if h.sample_type == schema.FLOAT16Q else DTYPES[h.sample_type]
+        dtype = np.dtype(np.float32) if h.sample_type == schema.FLOAT16Q else {**DTYPES, **integers.DTYPES}[h.sample_type]
         limits.check_image_bytes(h.width, h.height, h.channels, dtype.itemsize)
         return _RawHeader(h.sample_type, Header(h.width, h.height, dtype, h.channels))
 
@@ -392,6 +398,11 @@ class Reader:
                 "and within float32's range"
             )
         h = raw.header
+        if integers.is_signed(h.dtype) and not integers.check_quant(q.offset, q.scale):
+            raise CorruptError(
+                f"QUNT chunk of {h.dtype} data has scale {q.scale!r} and offset {q.offset!r}: "
+                "integer data needs scale 1 and a whole-number offset within int32's range"
+            )
         return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
 
     def _read_metadata(self, payload: bytes, offset: int) -> None:
@@ -413,7 +424,7 @@ class Reader:
         if len(payload) != schema.NoData.sizeof():
             raise CorruptError(f"NDAT chunk has {len(payload)} bytes, not {schema.NoData.sizeof()}")
         value = schema.NoData.parse(payload).value
-        if h.quant is None:
+        if np.dtype(h.dtype).kind in "ui":
             info = np.iinfo(h.dtype)
             if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):
                 raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")

@@ -7,7 +7,7 @@ import io
 
 import numpy as np
 
-from . import container, quantise
+from . import container, integers, quantise
 from .errors import OptionError
 from .image import as_image
 from .mesh import Mesh
@@ -49,6 +49,9 @@ def encode(image, settings: Settings, mask=None) -> bytes:
             nodata = quantise.check_nodata(settings.nodata)
             valid = img if holes is None else img[~holes]
             settings = settings.replace(value_range=quantise.data_range([valid], nodata))
+    elif integers.is_signed(img.dtype) and settings.value_range is None:
+        valid = img if holes is None else img[~holes]
+        settings = settings.replace(value_range=integers.value_range([valid], settings.nodata))
     out = io.BytesIO()
     enc = StreamEncoder(
         out, width, height, dtype=img.dtype, channels=1 if img.ndim == 2 else img.shape[2], settings=settings

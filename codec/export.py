@@ -10,6 +10,7 @@ path in SVG and red lines in the overlay.
 from __future__ import annotations
 
 import io
+import math
 
 import numpy as np
 
@@ -47,16 +48,18 @@ def wall_segments(mesh: Mesh) -> np.ndarray:
     return np.concatenate([np.stack([c[:-1], c[1:]], axis=1) for c in mesh.constraints]).astype(np.int64)
 
 
-def to_obj(mesh: Mesh) -> bytes:
+def to_obj(mesh: Mesh, z: np.ndarray | None = None) -> bytes:
     """Wavefront OBJ: one `v x y z` line per vertex (RGB meshes add `r g b` in 0..1, the
-    common vertex-colour extension), `f` lines with 1-based indices, `l` lines for walls."""
+    common vertex-colour extension), `f` lines with 1-based indices, `l` lines for walls.
+    z: the vertices' heights (default: their stored samples; codec.terrain gives them in
+    data units)."""
     out = io.BytesIO()
     out.write(
         f"# .atm mesh {mesh.width}x{mesh.height}: x = column, y = row, z = sample value\n".encode()
     )
     v = mesh.vertices.astype(np.float64)
-    columns = [v[:, 0], v[:, 1], _z(mesh)]
-    fmt = "v %d %d %.6g"
+    columns = [v[:, 0], v[:, 1], _z(mesh) if z is None else z]
+    fmt = "v %d %d %.9g"  # 9 digits: metres to the millimetre on any terrain
     if mesh.channels == 3:
         top = float(np.iinfo(mesh.dtype).max)
         columns += list((mesh.values.astype(np.float64) / top).T)
@@ -69,15 +72,15 @@ def to_obj(mesh: Mesh) -> bytes:
     return out.getvalue()
 
 
-def to_ply(mesh: Mesh) -> bytes:
+def to_ply(mesh: Mesh, z: np.ndarray | None = None) -> bytes:
     """Binary little-endian PLY: vertices (x, y, z as float32, plus red/green/blue for
-    RGB), faces, and the walls' segments as `edge` elements."""
+    RGB), faces, and the walls' segments as `edge` elements. z as for to_obj."""
     v = np.empty(
         len(mesh.vertices),
         [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
         + ([("red", "u1"), ("green", "u1"), ("blue", "u1")] if mesh.channels == 3 else []),
     )
-    v["x"], v["y"], v["z"] = mesh.vertices[:, 0], mesh.vertices[:, 1], _z(mesh)
+    v["x"], v["y"], v["z"] = mesh.vertices[:, 0], mesh.vertices[:, 1], _z(mesh) if z is None else z
     if mesh.channels == 3:
         # PLY colours are 8-bit; 16-bit samples keep their top byte
         shift = 8 * (mesh.dtype.itemsize - 1)
@@ -130,13 +133,17 @@ def to_svg(mesh: Mesh, *, stroke: float = 0.15) -> str:
     )
 
 
-def display_rgb(image: np.ndarray) -> np.ndarray:
-    """An image as 8-bit RGB for viewing: 16-bit and float samples are stretched to
-    their own range (depth and elevation rarely use all 16 bits), holes (NaN) are black,
-    gray becomes three channels."""
+def display_rgb(image: np.ndarray, nodata: float | None = None) -> np.ndarray:
+    """An image as 8-bit RGB for viewing: 16-bit, signed and float samples are stretched
+    to the range of the pixels with data (depth and elevation rarely use all 16 bits, and
+    a nodata value such as -9999 would wash the rest out), holes (NaN or `nodata`) are
+    black, gray becomes three channels."""
     img = image.astype(np.float64)
     if image.dtype != np.uint8:
         finite = np.isfinite(img)
+        if nodata is not None and not math.isnan(nodata):
+            valid = img != nodata
+            finite &= valid if valid.ndim == 2 else valid.all(axis=2, keepdims=True)
         lo, hi = (float(img[finite].min()), float(img[finite].max())) if finite.any() else (0.0, 0.0)
         img = np.where(finite, (img - lo) * (255.0 / (hi - lo)) if hi > lo else 0.0, 0.0)
     img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
@@ -150,7 +157,8 @@ def auto_scale(width: int, height: int, target: int = 1024) -> int:
 
 
 def overlay_png(
-    mesh: Mesh, image: np.ndarray | None = None, *, scale: int = 1, antialias: bool = False
+    mesh: Mesh, image: np.ndarray | None = None, *, scale: int = 1, antialias: bool = False,
+    nodata: float | None = None,
 ) -> np.ndarray:
     """The decoded image (rendered from `mesh` unless given) as 8-bit RGB, enlarged
     `scale` times, with the triangle edges and the walls drawn over it.
@@ -160,7 +168,7 @@ def overlay_png(
 
     if image is None:
         image = render(mesh)
-    rgb = display_rgb(image)
+    rgb = display_rgb(image, nodata)
     if scale > 1:
         rgb = cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     rgb = np.ascontiguousarray(rgb)

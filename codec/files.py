@@ -26,18 +26,23 @@ import numpy as np
 from . import limits
 from .errors import ATMError, OptionError, UnsupportedError
 
+#: Extensions of the image files `atm encode` reads (OpenCV's formats, TIFF through
+#: tifffile, .npy): batch mode picks these out of a directory, so that it takes every
+#: file a single-file encode takes (.pfm is Middlebury's disparity format).
+READABLE = (
+    ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".pam", ".pfm", ".tif", ".tiff", ".jpg", ".jpeg",
+    ".jpe", ".jp2", ".bmp", ".dib", ".webp", ".gif", ".sr", ".ras", ".avif", ".npy",
+)  # fmt: skip
+
 #: Extensions an image can be written as, by OpenCV.
 WRITABLE = (".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff")
-#: Extensions of the image files the codec reads (OpenCV's common formats, and .npy).
-IMAGE_SUFFIXES = frozenset({
-    ".png", ".pgm", ".ppm", ".pnm", ".pbm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp",
-    ".webp", ".jp2", ".npy",
-})  # fmt: skip
+#: Extensions of the image files the codec reads (batch mode picks these out of a folder).
+IMAGE_SUFFIXES = frozenset(READABLE)
 #: Extensions that name an image or raster format: .atm bytes written under one of
 #: these would be taken for that format (and may replace the user's original).
 IMAGE_NAMES = IMAGE_SUFFIXES | {
-    ".gif", ".jpe", ".jfif", ".exr", ".hdr", ".pfm", ".pam", ".avif", ".heic", ".heif",
-    ".jxl", ".dng", ".raw", ".dib", ".npz", ".img", ".asc", ".dem", ".flt",
+    ".jfif", ".exr", ".hdr", ".heic", ".heif", ".jxl", ".dng", ".raw", ".npz", ".img",
+    ".asc", ".dem", ".flt",
 }  # fmt: skip
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -48,7 +53,7 @@ UNNAMED = getattr(os, "O_TMPFILE", None)
 _NO_TMPFILE = frozenset({errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL})
 _AT_FDCWD, _AT_EMPTY_PATH = -100, 0x1000
 # linkat() of an unnamed file refused outright (no privilege, no /proc, a sandbox)
-_CANNOT_LINK = {errno.EPERM, errno.EACCES, errno.ENOENT, errno.EXDEV, errno.ENOSYS, errno.EOPNOTSUPP, errno.EINVAL}
+_CANNOT_LINK = frozenset({errno.EPERM, errno.EACCES, errno.ENOENT, errno.EXDEV, errno.ENOSYS, errno.EOPNOTSUPP, errno.EINVAL})
 
 
 class WriteError(ATMError, OSError):
@@ -320,6 +325,12 @@ def decode_image(data: bytes, name: str = "input") -> np.ndarray:
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
     if data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR" and len(data) >= 24:
         limits.check_image_size(*struct.unpack(">II", data[16:24]))
+    from . import geotiff
+
+    if geotiff.is_tiff(data):
+        # tifffile reads the compressions GDAL writes (ZSTD, LZW, ...) and knows the
+        # GeoTIFF tags that OpenCV warns about
+        return geotiff.read(data, name).image
     import cv2
 
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -345,6 +356,10 @@ def encode_image(image: np.ndarray, ext: str) -> bytes:
     if image.dtype.kind == "f" and ext not in (".tif", ".tiff"):
         # OpenCV would quietly cut float samples to 8 bits
         raise UnsupportedError(f"float data cannot be written as {ext}; use .tif or .npy")
+    if ext in (".tif", ".tiff"):
+        from . import geotiff
+
+        return geotiff.write(image)
     if ext in (".pgm", ".ppm", ".pnm"):
         ext = ".pgm" if image.ndim == 2 else ".ppm"
     if image.ndim == 3:

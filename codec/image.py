@@ -32,9 +32,12 @@ def as_image(image, *, allow_nan: bool = False) -> np.ndarray:
         if image.ndim == 3:
             raise UnsupportedError("float images must have one channel (e.g. elevations, depths)")
     elif image.dtype not in SAMPLE_TYPES:
-        raise UnsupportedError(
-            f"unsupported pixel type {image.dtype}; .atm stores uint8, uint16 or float samples"
-        )
+        from . import integers
+
+        if not integers.is_signed(image.dtype):
+            raise integers.unsupported(image.dtype)
+        if image.ndim == 3:
+            raise UnsupportedError("signed integer images must have one channel (e.g. elevations)")
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]
     if image.ndim == 3 and image.shape[2] != 3:

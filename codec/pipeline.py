@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import banding, error_bound, holes as hole_stage, meshcode, quantise
+from . import banding, error_bound, holes as hole_stage, integers, meshcode, quantise
 from .errors import OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh, segments
@@ -85,7 +85,20 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
     s = settings
     quant = None
     max_rms, max_error = s.max_rms, s.max_error
-    if dtype.kind == "f":
+    if integers.is_signed(dtype):
+        if channels != 1:
+            raise UnsupportedError("signed integer images must have one channel")
+        if s.precision is not None:
+            raise OptionError(f"{dtype} data is stored exactly; precision applies to float images only")
+        value_range = s.value_range if s.value_range is not None else integers.default_range(dtype)
+        if value_range is None:
+            raise OptionError(
+                f"a {dtype} stream needs value_range=(lowest, highest) so that the header can "
+                "carry the offset before the data arrives"
+            )
+        # whole numbers with scale 1: bounds in sample units are bounds on q as they are
+        quant = integers.plan(*value_range, dtype)
+    elif dtype.kind == "f":
         if channels != 1:
             raise UnsupportedError("float images must have one channel")
         if s.value_range is None:
@@ -97,20 +110,20 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
         if s.quality is None:
             max_rms, max_error = quant.integer_bounds(max_rms, max_error, quant.scale / 2)
     elif s.value_range is not None or s.precision is not None:
-        raise OptionError("value_range and precision apply to float images only")
+        raise OptionError("value_range applies to float and signed integer images; precision to float images only")
     elif dtype not in SAMPLE_TYPES:
-        raise UnsupportedError(f"unsupported pixel type {dtype}; .atm stores uint8, uint16 or float samples")
+        raise integers.unsupported(dtype)
     if channels not in (1, 3):
         raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
     storage = quantise.STORAGE if quant is not None else dtype
     nodata = s.nodata
-    if nodata is not None and quant is None:
+    if nodata is not None and dtype.kind in "ui":
         info = np.iinfo(dtype)
         if not (float(nodata).is_integer() and info.min <= nodata <= info.max):
             raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
     # float data always has a nodata value (NaN unless given), as NaN can turn up in
     # any row; integer data has one when the user names it
-    if quant is not None:
+    if dtype.kind == "f":
         nodata = float("nan") if nodata is None else quantise.check_nodata(nodata)
     band_height = s.band_height or banding.default_band_height(width, height)
     if s.quality is not None:

@@ -11,7 +11,7 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, pipeline
+from . import container, integers, pipeline
 from .errors import ATMError, OptionError
 from .mesh import Mesh
 from .settings import Settings
@@ -69,7 +69,7 @@ class StreamEncoder:
         header = container.Header(
             p.width,
             p.height,
-            np.dtype(np.float32) if p.quant else p.dtype,
+            np.dtype(np.float32) if p.dtype.kind == "f" else p.dtype,
             p.channels,
             quant=p.quant,
             nodata=None if p.nodata is None else float(p.nodata),
@@ -198,6 +198,8 @@ class StreamDecoder:
         h = self._reader.header
         self.width, self.height, self.dtype, self.channels = h.width, h.height, h.dtype, h.channels
         self.shape = h.shape
+        #: what hole pixels decode to (None: the file has no holes)
+        self.nodata = h.nodata
         #: JSON key-values stored with the image (empty if none); meta chunks after
         #: the first band are added as they are read
         self.metadata = dict(h.metadata or {})
@@ -213,7 +215,9 @@ class StreamDecoder:
         for y0, mesh in self._reader:
             self.metadata.update(self._reader.header.metadata or {})
             rows = decoding.render(mesh, backend=self._backend)
-            if quant is not None:
+            if quant is not None and integers.is_signed(self.dtype):
+                rows = integers.restore(rows, quant, self.dtype)
+            elif quant is not None:
                 rows = quant.dequantise(rows)
             if mesh.holes is not None:
                 rows[mesh.holes] = nodata

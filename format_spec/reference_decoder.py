@@ -476,6 +476,11 @@ def delaunay(xs: list[int], ys: list[int], segments: list[tuple[int, int]],
 # Chunks
 
 
+#: §4.1, §4.4: sample types 3, 4, 5 are signed integers of these types, stored as
+#: 16-bit samples plus QUNT's whole-number offset.
+SIGNED = {3: np.int8, 4: np.int16, 5: np.int32}
+
+
 class Header:
     """What AHDR, QUNT and NDAT say about the image."""
 
@@ -499,10 +504,12 @@ def parse_header(payload: bytes) -> Header:
         raise DecodeError(f"image size {width}x{height}: both sides must be at least 1")
     if width > MAX_SIDE or height > MAX_SIDE or width * height > MAX_PIXELS:
         raise DecodeError(f"image size {width}x{height} is over the limits (sides <= 2^20, pixels <= 2^28)")
-    if sample_type not in (0, 1, 2):
+    if sample_type not in (0, 1, 2, *SIGNED):
         raise UnsupportedError(f"sample_type {sample_type} is reserved")
     if channels not in (1, 3):
         raise UnsupportedError(f"{channels} channels: only 1 (gray) and 3 (RGB) are defined")
+    if sample_type >= 2 and channels != 1:
+        raise DecodeError(f"sample_type {sample_type} has 1 channel, not {channels}")
     return Header(width, height, sample_type, channels)
 
 
@@ -511,6 +518,11 @@ def parse_quantisation(payload: bytes, header: Header) -> None:
     if len(payload) != 16:
         raise DecodeError(f"QUNT payload is {len(payload)} bytes, not 16")
     offset, scale = struct.unpack("<dd", payload)
+    if header.sample_type in SIGNED:
+        if not (scale == 1.0 and math.isfinite(offset) and offset == int(offset) and -(2**31) <= offset < 2**31):
+            raise DecodeError(f"QUNT offset {offset} / scale {scale}: integer samples need scale 1 and a whole int32 offset")
+        header.offset, header.scale = offset, scale
+        return
     if not (math.isfinite(offset) and math.isfinite(scale) and scale > 0):
         raise DecodeError(f"QUNT offset {offset} / scale {scale}: both must be finite, the scale > 0")
     if abs(offset) + 65535 * scale > float(np.finfo(np.float32).max):
@@ -526,6 +538,10 @@ def parse_nodata(payload: bytes, header: Header) -> None:
     if header.sample_type == 2:
         if not (math.isnan(value) or abs(value) <= float(np.finfo(np.float32).max)):
             raise DecodeError(f"NDAT value {value} is outside binary32's range")
+    elif header.sample_type in SIGNED:
+        info = np.iinfo(SIGNED[header.sample_type])
+        if not (math.isfinite(value) and value == int(value) and info.min <= value <= info.max):
+            raise DecodeError(f"NDAT value {value} is not a whole number within {info.min}..{info.max}")
     elif not (math.isfinite(value) and value == int(value) and 0 <= value <= header.top):
         raise DecodeError(f"NDAT value {value} is not a whole number within 0..{header.top}")
     header.nodata = value
@@ -925,17 +941,17 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
         raise DecodeError(f"the first chunk is {chunks[0][0].decode()}, not AHDR")
     header = parse_header(chunks[0][1])
     bands: list[Band] = []
-    expect_qunt, have_ndat, mask, complete = header.sample_type == 2, False, None, False
+    expect_qunt, have_ndat, mask, complete = header.sample_type >= 2, False, None, False
     for kind, payload in chunks[1:]:
         name = kind.decode()
         # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
-            raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type 2)")
+            raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type {header.sample_type})")
         if kind[0] & 0x20:  # ancillary (lower-case first letter): nothing here needs one
             continue
         if kind == b"QUNT":
             if not expect_qunt:
-                raise DecodeError("QUNT chunk out of place (only directly after AHDR, for sample_type 2)")
+                raise DecodeError("QUNT chunk out of place (only directly after AHDR, for sample_type 2 to 5)")
             parse_quantisation(payload, header)
             expect_qunt = False
         elif kind == b"NDAT":
@@ -981,7 +997,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
 
 def decode(data: bytes) -> np.ndarray:
     """Decode `.atm` bytes to the image: height x width (gray) or height x width x 3
-    (RGB); uint8, uint16, or float32 for real-valued samples; hole pixels hold the
+    (RGB); uint8, uint16, int8/int16/int32, or float32 for real-valued samples; hole pixels hold the
     NDAT value. Raises DecodeError (UnsupportedError) on anything else."""
     header, bands = read(data)
     image = np.zeros((header.height, header.width, header.channels), np.int64)
@@ -997,6 +1013,9 @@ def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarr
     """The decoded integers in the header's sample type, holes filled with NDAT."""
     if header.sample_type == 2:
         out = (header.offset + header.scale * image.astype(np.float64)).astype(np.float32)
+    elif header.sample_type in SIGNED:
+        info = np.iinfo(SIGNED[header.sample_type])
+        out = np.clip(image + int(header.offset), info.min, info.max).astype(SIGNED[header.sample_type])
     else:
         out = image.astype(np.uint8 if header.sample_type == 0 else np.uint16)
     if header.nodata is not None:

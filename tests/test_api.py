@@ -88,7 +88,7 @@ def test_every_pixel_as_vertex_is_lossless():
         (np.zeros((4, 4, 4), np.uint8), "4 channels"),
         (np.zeros((4, 4), np.complex64), "complex64"),
         (np.zeros((4, 4, 3), np.float32), "one channel"),
-        (np.zeros((4, 4), np.int32), "int32"),
+        (np.zeros((4, 4), np.int64), "int64"),
         ("not an image", "unsupported pixel type"),
     ],
 )

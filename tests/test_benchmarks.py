@@ -157,3 +157,19 @@ def test_range_coder_round_trips_at_the_estimated_length() -> None:
     assert list(range_coder.decode(data, ctx.tolist(), models())) == sym.tolist()
     estimate = study.adaptive_bits(ctx, sym, 12) / 8
     assert estimate <= len(data) <= estimate * 1.01 + 8
+
+
+def test_mesh_formats_benchmark_quick_run() -> None:
+    """benchmarks/mesh_formats.py: .atm against Draco and quantized-mesh on one mesh."""
+    for name in ("DracoPy", "quantized_mesh_encoder", "pydelatin"):
+        pytest.importorskip(name)
+    run = subprocess.run(
+        [sys.executable, "benchmarks/mesh_formats.py", "--quick", "--errors", "5"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, rule, row = _table(run.stdout)
+    assert row[:3] == ["synthetic", "96x80", "5"]
+    figures = dict(zip(head[3:], (float(f.replace(",", "")) for f in row[3:])))
+    assert figures["vertices"] > 0 and figures["atm bytes"] > 0
+    assert figures["draco / atm"] > 0 and figures["qm.gz / atm"] > 0

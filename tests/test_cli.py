@@ -164,9 +164,9 @@ def test_truncated_stream_is_an_error_and_leaves_no_file(tmp_path, png):
 
 
 def test_npy_of_unsupported_type_is_refused(tmp_path):
-    np.save(tmp_path / "f.npy", np.zeros((4, 4), np.int32))
+    np.save(tmp_path / "f.npy", np.zeros((4, 4), np.int64))
     r = atm("encode", tmp_path / "f.npy", tmp_path / "f.atm")
-    assert r.returncode == 1 and b"int32" in r.stderr
+    assert r.returncode == 1 and b"int64" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.npy"]
 
 

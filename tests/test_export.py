@@ -106,7 +106,7 @@ def test_atm_mesh_writes_all_four_outputs(atm_file, tmp_path):
 
 def test_atm_mesh_refuses_unknown_formats_and_bad_input(atm_file, tmp_path):
     r = atm("mesh", atm_file, tmp_path / "m.txt")
-    assert r.returncode == 1 and b"use .obj, .ply, .svg or .png" in r.stderr
+    assert r.returncode == 1 and b"use .obj, .ply, .svg, .png or .terrain" in r.stderr
     (tmp_path / "junk.atm").write_bytes(b"junk")
     r = atm("mesh", tmp_path / "junk.atm", tmp_path / "m.obj")
     assert r.returncode == 1 and r.stderr.startswith(b"atm: error:")

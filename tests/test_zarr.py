@@ -1,0 +1,73 @@
+"""The numcodecs codec `atm`: zarr arrays with .atm chunks, and dask writing them from
+a distributed cluster (the way to scale out over a raster too big for one machine)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+numcodecs = pytest.importorskip("numcodecs")
+zarr = pytest.importorskip("zarr")
+
+import codec  # noqa: E402
+from codec.numcodecs import ATM  # noqa: E402
+
+
+def terrain(height: int, width: int, dtype=np.float32) -> np.ndarray:
+    y, x = np.mgrid[:height, :width].astype(np.float64)
+    z = 300 + 40 * np.sin(x / 11.0) + 25 * np.cos(y / 7.0) + 0.8 * x
+    z[:, width // 3 :] += 35  # a cliff
+    return z.astype(dtype) if dtype != np.int16 else np.round(z).astype(np.int16)
+
+
+def test_entry_point_registers_the_codec():
+    c = numcodecs.get_codec({"id": "atm", "max_error": 0.25, "nodata": -9999})
+    assert isinstance(c, ATM) and c.max_error == 0.25
+    assert numcodecs.get_codec(c.get_config()) == c
+
+
+def test_chunked_zarr_array_round_trips_within_the_bound(tmp_path):
+    z = terrain(150, 170)
+    z[30:45, 60:90] = np.nan  # holes stay holes
+    a = zarr.create_array(tmp_path / "dem.zarr", shape=z.shape, chunks=(64, 64), dtype=z.dtype,
+                          zarr_format=2, compressors=ATM(max_error=0.5), fill_value=np.nan)
+    a[:] = z
+    b = zarr.open_array(tmp_path / "dem.zarr", mode="r")
+    out = b[:]
+    assert isinstance(b.metadata.compressor, ATM)
+    np.testing.assert_array_equal(np.isnan(out), np.isnan(z))
+    assert np.nanmax(np.abs(out - z)) <= 0.5
+    # each stored chunk is an .atm file
+    chunk = (tmp_path / "dem.zarr" / "0.0").read_bytes()
+    assert codec.info(chunk)["width"] == 64
+
+
+def test_lossless_int16_chunks_with_nodata_are_exact(tmp_path):
+    z = terrain(90, 100, np.int16)
+    z[10:20, 10:20] = -32768
+    a = zarr.create_array(tmp_path / "i.zarr", shape=z.shape, chunks=(40, 60), dtype=z.dtype,
+                          zarr_format=2, compressors=ATM(lossless=True, nodata=-32768), fill_value=-32768)
+    a[:] = z
+    np.testing.assert_array_equal(zarr.open_array(tmp_path / "i.zarr", mode="r")[:], z)
+
+
+def test_bad_settings_and_chunks_are_atm_errors():
+    with pytest.raises(codec.OptionError, match="lossless"):
+        ATM(lossless=True, max_error=1)
+    with pytest.raises(codec.UnsupportedError, match="2-D chunks"):
+        ATM(points=10).encode(np.zeros((2, 3, 4, 5), np.uint8))
+
+
+def test_dask_to_zarr_on_a_two_worker_local_cluster(tmp_path):
+    da = pytest.importorskip("dask.array")
+    distributed = pytest.importorskip("distributed")
+    z = terrain(160, 200)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=40) as cluster, \
+            distributed.Client(cluster) as client:
+        assert len(client.scheduler_info()["workers"]) == 2
+        arr = da.from_array(z, chunks=(80, 100))
+        da.to_zarr(arr, str(tmp_path / "big.zarr"), zarr_format=2,
+                   compressors=ATM(max_error=0.25), fill_value=np.nan)
+        back = da.from_zarr(str(tmp_path / "big.zarr")).compute()
+    assert np.abs(back - z).max() <= 0.25
