@@ -9,6 +9,8 @@ int8 and int16 image does; an int32 image that spans more is refused with the fi
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from types import MappingProxyType
 
 import numpy as np
 
@@ -16,8 +18,8 @@ from .errors import OptionError, UnsupportedError
 from .quantise import LEVELS, Quantiser
 
 #: AHDR sample_type code of each signed type (ATM.md section 4.1).
-SAMPLE_TYPES: dict[np.dtype, int] = {np.dtype(np.int8): 3, np.dtype(np.int16): 4, np.dtype(np.int32): 5}
-DTYPES: dict[int, np.dtype] = {code: dtype for dtype, code in SAMPLE_TYPES.items()}
+SAMPLE_TYPES: Mapping[np.dtype, int] = MappingProxyType({np.dtype(np.int8): 3, np.dtype(np.int16): 4, np.dtype(np.int32): 5})
+DTYPES: Mapping[int, np.dtype] = MappingProxyType({code: dtype for dtype, code in SAMPLE_TYPES.items()})
 
 def is_signed(dtype) -> bool:
     """Whether `dtype` is one of the signed integer types .atm stores."""
