@@ -5,7 +5,8 @@ than one input, or one input that is a directory or a glob pattern (`*`, `?` or 
 no file of that exact name), or when the last argument is an existing directory. The
 last argument is then an output directory, created if missing; each input X becomes OUTDIR/X-stem.atm (encode) or OUTDIR/X-stem.png (decode,
 or the --format). A file that fails is reported and the others still convert; the exit
-status is 1 if any failed.
+status is 1 if any failed. Ctrl-C or SIGTERM stops the workers at once: files not yet
+finished are not written, then or later.
 """
 
 from __future__ import annotations
@@ -138,6 +139,8 @@ def _work(command: str, src: str, dst: str, options: dict) -> Result:
 
 def _stop(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
     """Cancel the files not started and end the workers converting the others."""
+    # ProcessPoolExecutor has no public way to end its workers before Python 3.14's
+    # terminate_workers(); without this, shutdown waits for every running conversion
     workers = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for p in workers:
@@ -205,7 +208,7 @@ def run(args: argparse.Namespace, command: str) -> int:
                         # the pool is gone, and with it every file not yet converted
                         record(Result(sources[future], False, error=WORKER_DIED))
         except BaseException:
-            # Ctrl-C, SIGTERM or a broken pool: no file may be written after this returns
+            # Ctrl-C or SIGTERM: no file may be written after the command has stopped
             _stop(pool)
             raise
         pool.shutdown()

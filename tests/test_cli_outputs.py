@@ -86,7 +86,7 @@ def feed_stalled(fifos: list[Path], proc: subprocess.Popen) -> list[int]:
                 writers.append(os.open(f, os.O_WRONLY | os.O_NONBLOCK))
                 break
             except OSError:
-                assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+                assert proc.poll() is None and time.monotonic() < deadline, stderr_of(proc)
                 time.sleep(0.05)
         os.write(writers[-1], b"P5\n64 64\n255\n" + bytes(64 * 10))
     return writers
@@ -119,7 +119,7 @@ def test_a_worker_that_dies_is_reported_per_file_not_a_traceback(tmp_path):
     finally:
         for fd in writers:
             os.close(fd)
-    err = proc.stderr.read().decode()
+    err = stderr_of(proc)
     assert code == 1 and "Traceback" not in err, err
     assert "a worker process ended abruptly" in err and "file(s) failed" in err.splitlines()[-1]
     assert all(line.startswith("atm: error: ") for line in err.strip().splitlines())
@@ -156,6 +156,15 @@ def test_batch_refuses_an_output_that_is_an_input_before_converting(tmp_path):
     assert not (tmp_path / "other.png").exists()
 
 
+def stderr_of(proc: subprocess.Popen, timeout: float = 20) -> str:
+    """What an ended (or ending) command wrote to stderr, without waiting for ever on a
+    pipe that a process it left behind still holds open."""
+    try:
+        return proc.communicate(timeout=timeout)[1].decode()
+    except subprocess.TimeoutExpired:
+        return "<stderr still open after the command: a process it started lives on>"
+
+
 def fds_into(pid: int, folder: Path) -> list[str]:
     """The files under `folder` that process `pid` holds open (an unnamed O_TMPFILE
     shows as 'folder/#inode (deleted)')."""
@@ -180,7 +189,7 @@ def stalled_encode(tmp_path: Path, *prelude: str) -> subprocess.Popen:
     proc.stdin.flush()
     deadline = time.monotonic() + 60
     while not fds_into(proc.pid, tmp_path / "out"):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+        assert proc.poll() is None and time.monotonic() < deadline, stderr_of(proc)
         time.sleep(0.05)
     return proc
 
@@ -203,8 +212,7 @@ def test_sigterm_mid_write_removes_a_named_temporary(tmp_path):
     assert [p.startswith(".x.atm.") for p in os.listdir(tmp_path / "out")] == [True]
     proc.terminate()
     assert proc.wait(30) == 128 + signal.SIGTERM
-    proc.stdin.close()
-    assert proc.stderr.read().decode().strip() == "atm: terminated"
+    assert stderr_of(proc).strip() == "atm: terminated"
     assert os.listdir(tmp_path / "out") == []
 
 
@@ -227,8 +235,8 @@ def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
             pytest.fail(f"the batch did not stop within 20 s of {how}")
-        expected = (130, b"atm: interrupted") if how == "ctrl-c" else (143, b"atm: terminated")
-        assert (code, proc.stderr.read().strip()) == expected
+        expected = (130, "atm: interrupted") if how == "ctrl-c" else (143, "atm: terminated")
+        assert (code, stderr_of(proc).strip()) == expected
         written = sorted(os.listdir(out))
     finally:
         for fd in writers:
