@@ -536,7 +536,8 @@ def parse_nodata(payload: bytes, header: Header) -> None:
         raise DecodeError(f"NDAT payload is {len(payload)} bytes, not 8")
     (value,) = struct.unpack("<d", payload)
     if header.sample_type == 2:
-        if not (math.isnan(value) or abs(value) <= float(np.finfo(np.float32).max)):
+        # NaN, +inf, -inf or a finite binary32 value
+        if not (math.isnan(value) or math.isinf(value) or abs(value) <= float(np.finfo(np.float32).max)):
             raise DecodeError(f"NDAT value {value} is outside binary32's range")
     elif header.sample_type in SIGNED:
         info = np.iinfo(SIGNED[header.sample_type])

@@ -328,7 +328,8 @@ def images(draw) -> tuple[np.ndarray, dict]:
         image = (100 * surface).astype(np.float32)
     holes = rng.random((h, w)) < draw(st.sampled_from([0.0, 0.1, 0.4]))
     if kind == "float_holes":
-        image[holes] = np.nan
+        # NaN, or holes all +inf or all -inf, which NDAT keeps (ATM.md section 4.5)
+        image[holes] = draw(st.sampled_from([np.nan, np.inf, -np.inf]))
     elif kind == "int_holes":
         image[holes] = 0
         options["nodata"] = 0
@@ -505,3 +506,15 @@ def test_damaged_mesh_payloads_give_its_own_error_or_an_image(name, edits):
     except ref.DecodeError:
         return
     assert out.shape[:2] == ref.decode(good).shape[:2]
+
+
+@pytest.mark.parametrize("hole", [np.inf, -np.inf])
+def test_infinite_holes_come_back_as_they_were(hole):
+    """Float holes that are all +inf (or all -inf) are stored as an infinite NDAT value
+    (ATM.md section 4.5) and both decoders give them back."""
+    image = np.linspace(0, 100, 30 * 40, dtype=np.float32).reshape(30, 40)
+    image[5:9, 5:12] = hole
+    data = codec.encode(image, max_error=0.5)
+    out = ref.decode(data)
+    assert_same_image(out, codec.decode(data))
+    assert (out[5:9, 5:12] == hole).all()
