@@ -1,7 +1,8 @@
 """Quality benchmark: .atm's adaptive mesher against the uniform grid and pydelatin.
 
-For every public corpus image (DESIGN.md) at 1 % and 2.8 % vertex density, and the
-seed's two reference images at the seed's vertex counts, prints the vertex count, RMS
+For every public corpus image (tests/corpus.py) at 1 % and 2.8 % vertex density, and the
+two reference images of "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes"
+(section 3.3.2.3) at its vertex counts, prints the vertex count, RMS
 and time of
 
 * atm      codec.encode (default adaptive mesher), decoded with codec.decode;
@@ -123,7 +124,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="time one run instead of the median of REPEAT")
     parser.add_argument("--repeat", type=int, default=5, help="timed runs of each (default 5)")
     parser.add_argument("--no-png", action="store_true", help="do not write mesh pictures")
-    parser.add_argument("--reference", type=Path, default=REFERENCE, help="the seed's reference images")
+    parser.add_argument("--reference", type=Path, default=REFERENCE, help="the paper's reference images (Lenna, House)")
     args = parser.parse_args(argv)
     repeat = 1 if args.quick else max(1, args.repeat)
     out_dir = ROOT / "benchmarks" / "out"

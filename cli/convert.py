@@ -17,6 +17,7 @@ import codec
 from . import rowio
 from codec import geotiff, integers
 from codec.errors import ATMError, UnsupportedError
+from codec.settings import cli_option_names
 
 
 def open_input(name: str) -> BinaryIO:
@@ -49,16 +50,20 @@ class _Counter:
         return self._f.write(data)
 
 
+#: Flags of `atm encode` that are not encoder options (every other flag must be one of
+#: codec.settings.cli_option_names(), which tests/test_settings.py checks).
+NOT_ENCODER_OPTIONS = ("inputs", "output", "verbose", "jobs", "quiet", "force")
+
+
 def encode_options(args: argparse.Namespace) -> dict:
     """The encoder options the command line sets (the ones left unset take the codec's
-    defaults)."""
-    names = ("points", "band_height", "mesher", "effort", "quality", "max_rms", "max_error", "precision", "nodata")
-    options = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
-    if getattr(args, "value_range", None) is not None:
-        options["value_range"] = tuple(args.value_range)
-    if getattr(args, "metadata", None) is not None:
+    defaults): every option of codec.settings that has a flag, by the same name."""
+    options = {n: getattr(args, n) for n in cli_option_names() if getattr(args, n, None) is not None}
+    if "value_range" in options:
+        options["value_range"] = tuple(options["value_range"])
+    if "metadata" in options:
         try:
-            options["metadata"] = json.loads(args.metadata)
+            options["metadata"] = json.loads(options["metadata"])
         except ValueError as exc:
             raise codec.OptionError(f"--metadata is not JSON: {exc}") from None
     return options

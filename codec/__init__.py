@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import os
+from typing import NoReturn
 
 import numpy as np
 
@@ -40,45 +41,77 @@ __version__ = "0.1.0"
 
 
 def encode(
-    image,
+    image: np.ndarray,
     *,
     points: int | None = None,
-    mesher: str | None = None,
+    quality: int | None = None,
+    max_rms: float | None = None,
+    max_error: float | None = None,
     band_height: int | None = None,
-    **options,
+    mesher: str = "adaptive",
+    value_step: int | str = "auto",
+    nodata: float | None = None,
+    value_range: tuple[float, float] | None = None,
+    precision: float | None = None,
+    metadata: dict | None = None,
+    effort: int | None = None,
+    values: str | None = None,
+    segment_length: int | None = None,
+    segment_error: float | None = None,
+    tiles: tuple[int, int] | None = None,
+    per_tile: tuple[int, int] | None = None,
+    canny: tuple[float, float] | None = None,
+    edge_share: float | None = None,
+    region_share: float | None = None,
+    mask: np.ndarray | None = None,
+    **unknown: NoReturn,
 ) -> bytes:
-    """Encode an H x W (gray) or H x W x 3 (RGB) uint8/uint16 array as .atm bytes.
+    """Encode an image as .atm bytes; the same image and options give the same bytes.
 
-    points: target vertex count (within 10 %); default 2.8 % of the pixels.
-    quality: 1..100, like JPEG's (an RMS bound; 100 is lossless); or
-    max_rms / max_error: a bound on the decoded image's RMS / largest error, per
-    channel, in sample units, guaranteed by refinement.
-    mesher: "adaptive" (default: walls along discontinuities, curvature sampling,
-    least-squares values) or "uniform" (the grid baseline); further options go to
-    the mesher (see codec.mesher.adaptive.build).
-    band_height: rows per band (default: about a megapixel per band); images are coded
-    band by band so that StreamEncoder/StreamDecoder can work in bounded memory.
+    image: H x W (gray) or H x W x 3 (RGB) uint8/uint16, or H x W float (stored as
+    16-bit levels; NaN and infinite values are holes). mask: H x W booleans, True where
+    the image has no data (integer images: nodata defaults to 0).
+
+    Size: `points` (target vertex count, within 10 %; default 2.8 % of the pixels), or
+    a bound that refinement guarantees on the decoded image, per channel: `quality`
+    (1..100, like JPEG's: an RMS bound, 100 lossless), `max_rms`, `max_error` (sample
+    units; float data: data units). The other options and their defaults:
+    codec.settings.Settings, which checks them all (OptionError names a bad one; an
+    unknown one is refused with the list of valid ones).
     """
     from . import encoder
+    from .settings import Settings
 
-    return encoder.encode(
-        image,
-        points=points,
-        mesher=mesher or encoder.DEFAULT_MESHER,
-        band_height=band_height,
-        **options,
+    if unknown:
+        Settings.from_options(also=("mask",), **unknown)  # raises, listing the valid options
+    settings = Settings.from_options(
+        points=points, quality=quality, max_rms=max_rms, max_error=max_error, band_height=band_height,
+        mesher=mesher, value_step=value_step, nodata=nodata, value_range=value_range, precision=precision,
+        metadata=metadata, effort=effort, values=values, segment_length=segment_length,
+        segment_error=segment_error, tiles=tiles, per_tile=per_tile, canny=canny, edge_share=edge_share,
+        region_share=region_share,
     )
+    return encoder.encode(image, settings, mask)
 
 
-def build_mesh(image, *, points: int | None = None, mesher: str | None = None, **options) -> Mesh:
-    """Build the mesh `encode` would store, without packing it. Takes encode's size
-    options (points, max_error, max_rms, quality) and its sample types (float and signed
-    data give values in data units)."""
+def build_mesh(image: np.ndarray, *, points: int | None = None, mesher: str = "adaptive", **options) -> Mesh:
+    """The mesh the mesher makes of a whole image in one piece: points as for `encode`,
+    and the mesher's options (codec.settings.mesher_option_names). With encode's size
+    bounds (max_error, max_rms, quality), or float or signed samples, it is the mesh
+    `encode` stores (refined to the bound, one band), its values in data units."""
     from . import encoder, terrain
+    from .settings import Settings, mesher_option_names
 
     if terrain.needs_encoder(image, options):
         return terrain.build_mesh(image, points=points, mesher=mesher, **options)
-    return encoder.mesh(image, points=points, mesher=mesher or encoder.DEFAULT_MESHER, **options)
+    allowed = mesher_option_names(mesher) if isinstance(mesher, str) else ()
+    other = sorted(set(options) - set(allowed))
+    if other:
+        raise OptionError(
+            f"build_mesh takes points, mesher and the mesher's options ({', '.join(allowed) or 'none'}), "
+            f"max_error, max_rms or quality, not {', '.join(other)}"
+        )
+    return encoder.build_mesh(image, Settings.from_options(points=points, mesher=mesher, **options))
 
 
 def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:

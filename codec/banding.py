@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Mesh, without_vertices, segments as wall_steps
-from .triangulate import through_vertices, triangulate
+from .mesh import Mesh, without_vertices
+from .triangulate import through_vertices
 
 #: Default band size in pixels: bands of about a megapixel keep the encoder's working
 #: memory small while leaving the mesher room to place vertices freely.
@@ -32,7 +32,8 @@ def pin_top_row(mesh: Mesh, xs: np.ndarray, values: np.ndarray) -> Mesh:
     last row), so both bands decode that row identically.
 
     Vertices below the first row keep their positions and values; constraint polylines
-    lose their first-row vertices; only the triangles touching the first row change.
+    lose their first-row vertices. Triangles are left empty: the caller triangulates
+    once when the band's vertices are final (meshcode.in_stored_order).
     """
     keep = mesh.vertices[:, 1] > 0
     if mesh.height == 1:
@@ -42,9 +43,7 @@ def pin_top_row(mesh: Mesh, xs: np.ndarray, values: np.ndarray) -> Mesh:
     vertices = np.concatenate([top, base.vertices])
     vals = np.concatenate([values, base.values]).astype(mesh.dtype)
     constraints = [c + len(xs) for c in base.constraints]
-    segments = wall_steps(constraints) if constraints else None
-    triangles = triangulate(vertices, segments)
-    return Mesh(vertices, vals, triangles, mesh.width, mesh.height, constraints, mesh.holes)
+    return Mesh(vertices, vals, np.zeros((0, 3), np.int64), mesh.width, mesh.height, constraints, mesh.holes)
 
 
 def sample_last_row(mesh: Mesh, band: np.ndarray, tolerance: float) -> Mesh:
@@ -53,7 +52,9 @@ def sample_last_row(mesh: Mesh, band: np.ndarray, tolerance: float) -> Mesh:
     image everywhere (per channel), or every pixel of the row is a vertex.
 
     Greedy, coarse to fine: each round adds, between every two neighbouring row
-    vertices, the pixel of largest error if it is over the tolerance."""
+    vertices, the pixel of largest error if it is over the tolerance. A mesh that gets
+    vertices is returned with no triangles: the caller triangulates once when the
+    band's vertices are final (meshcode.in_stored_order)."""
     y = mesh.height - 1
     if y == 0 or mesh.width < 3:
         return mesh
@@ -92,6 +93,4 @@ def sample_last_row(mesh: Mesh, band: np.ndarray, tolerance: float) -> Mesh:
     values = np.concatenate([mesh.values, band[y, new]]).astype(mesh.dtype)
     # a new vertex may sit on a wall that runs along the row: the wall then passes it
     constraints = through_vertices(vertices, mesh.constraints)
-    segments = wall_steps(constraints) if constraints else None
-    triangles = triangulate(vertices, segments)
-    return Mesh(vertices, values, triangles, mesh.width, mesh.height, constraints, mesh.holes)
+    return Mesh(vertices, values, np.zeros((0, 3), np.int64), mesh.width, mesh.height, constraints, mesh.holes)

@@ -129,9 +129,11 @@ class Writer:
         """Whether the bands written so far reach the image's last row."""
         return self._rows_done == self.header.height
 
-    def write_band(self, y0: int, mesh: Mesh, step: int = 1) -> None:
+    def write_band(self, y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None,
+                   layout: meshcode.Layout | None = None) -> None:
         """Write the mesh of rows y0 .. y0 + mesh.height - 1, its samples as
-        meshcode.quantise(mesh, step, y0 > 0) left them (any samples with step 1)."""
+        meshcode.quantise(mesh, step, y0 > 0) left them (any samples with step 1);
+        delaunay and layout as for meshcode.encode_band."""
         h = self.header
         if y0 != self._next_y0:
             raise ValueError(f"band starts at row {y0}, expected {self._next_y0}")
@@ -147,7 +149,7 @@ class Writer:
             self._stream.write(_chunk(schema.MASK, frames.compress(mask)))
         elif mesh.holes is not None and mesh.holes.any():
             raise ValueError("a band with holes needs a header with a nodata value")
-        fields = meshcode.encode_band(y0, mesh, step)
+        fields = meshcode.encode_band(y0, mesh, step, delaunay, layout)
         raw = schema.MeshPayload.build(fields, **h._fields())
         frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
         if fields["connectivity"] == schema.DELAUNAY and len(mesh.vertices) > limits.max_rebuilt_vertices(len(frame)):

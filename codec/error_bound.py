@@ -1,5 +1,7 @@
-"""Error-bounded refinement (the seed's §3.3.1, coarse to fine): insert vertices where
-the decoded error is largest until a bound holds.
+"""Error-bounded refinement: insert vertices where the decoded error is largest until a
+bound holds (coarse to fine, as the refinement of section 3.3.1 that section 3.3.2.3
+of "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes" names for bounding
+its mesh's error).
 
 The error is measured on the image the decoder will produce (the exact CPU rule), so
 a bound reached here holds for every decode. Refinement always ends: at worst every
@@ -16,8 +18,8 @@ import numpy as np
 from . import decoder_cpu
 from .mesher import values as vertex_values
 from .errors import OptionError
-from .mesh import Mesh, segments as wall_steps
-from .triangulate import triangulate
+from . import meshcode
+from .mesh import Mesh
 
 
 @dataclass(frozen=True)
@@ -67,7 +69,7 @@ def _squared_errors(mesh: Mesh, image: np.ndarray) -> np.ndarray:
     return (diff * diff).reshape(mesh.height, mesh.width, -1)
 
 
-def refine(
+def refine_to_bound(
     mesh: Mesh,
     image: np.ndarray,
     bound: Bound,
@@ -76,8 +78,13 @@ def refine(
     pinned_rows: int = 0,
     last_band: bool = True,
     valid: np.ndarray | None = None,
-) -> Mesh:
-    """Insert vertices into `mesh` (of `image`) until `bound` holds.
+    delaunay: bool = False,
+) -> tuple[Mesh, bool]:
+    """Insert vertices into `mesh` (of `image`) until `bound` holds. Returns the mesh
+    (the same object if nothing changed) and whether its triangles are the ones a
+    decoder rebuilds: each round triangulates the vertices in stored order
+    (meshcode.in_stored_order), so this is `delaunay` (said of the given mesh) until
+    a round adds vertices, and True after.
 
     pinned_rows: the first rows are fixed (shared with the band above): no vertex is
         added there and their vertices keep their values.
@@ -88,7 +95,7 @@ def refine(
     valid: pixels that count (holes do not); `image` then holds filled values in holes.
     """
     if not bound.active:
-        return mesh
+        return mesh, delaunay
     h, w = mesh.height, mesh.width
     sq_limit = None if bound.max_error is None else bound.max_error**2
     rms_sq = None if bound.max_rms is None else bound.max_rms**2
@@ -96,9 +103,7 @@ def refine(
     if not last_band and h > 1:
         counted[-1] = False
     fixed = mesh.vertices[:, 1] < pinned_rows
-    fixed_values = mesh.values[fixed]
     walls = _segments_mask(mesh)
-    segments = wall_steps(mesh.constraints) if mesh.constraints else None
     sampled = np.zeros(len(mesh.vertices), bool)
     while True:
         sq = _squared_errors(mesh, image)
@@ -116,7 +121,7 @@ def refine(
                     bad[sel] |= worst[sel] > rms_sq
         bad[:pinned_rows] = False
         if not bad.any():
-            return mesh
+            return mesh, delaunay
         # a bad pixel that is already a vertex (fitted, not sampled) gets its own value
         vx, vy = mesh.vertices[:, 0], mesh.vertices[:, 1]
         at_vertex = bad[vy, vx] & ~fixed
@@ -127,23 +132,34 @@ def refine(
         if len(new) == 0 and not at_vertex.any():
             # only wall pixels are left: take them, splitting walls is better than failing
             new = _spread(np.where(bad & ~is_vertex, worst, 0.0), max(8, len(mesh.vertices) // 4))
-            segments = None
             mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [], mesh.holes)
-        vertices = np.concatenate([mesh.vertices, new]) if len(new) else mesh.vertices
-        triangles = triangulate(vertices, segments) if len(new) else mesh.triangles
+        # per vertex: sampled (its own pixel value from now on; so far, or now), its
+        # value so far (new ones: their pixel's), fixed
+        was_sampled = np.concatenate([sampled | at_vertex, np.zeros(len(new), bool)])
         sampled = np.concatenate([sampled | at_vertex, np.ones(len(new), bool)])
+        fixed = np.concatenate([fixed, np.zeros(len(new), bool)])
+        grown = Mesh(
+            np.concatenate([mesh.vertices, new]) if len(new) else mesh.vertices,
+            np.concatenate([mesh.values, image[new[:, 1], new[:, 0]]]) if len(new) else mesh.values,
+            mesh.triangles, w, h, mesh.constraints, mesh.holes,
+        )
+        if len(new):
+            # triangulated in stored order, as a decoder rebuilds it: the writer then
+            # need not triangulate again to check
+            order = meshcode.stored_permutation(grown)
+            grown = meshcode.in_stored_order(grown)
+            sampled, fixed, was_sampled = sampled[order], fixed[order], was_sampled[order]
+            delaunay = True
+        vertices, triangles = grown.vertices, grown.triangles
         if values == "sample":
-            vals = np.concatenate([mesh.values, image[new[:, 1], new[:, 0]]]) if len(new) else mesh.values.copy()
+            vals = grown.values.copy()
             vals[sampled] = image[vertices[sampled, 1], vertices[sampled, 0]]
         else:
             vals = vertex_values.fit(image, vertices, triangles, values)
             # vertices whose own pixel was off keep their pixel value from now on
-            old = np.zeros(len(vertices), bool)
-            old[: len(at_vertex)] = sampled[: len(at_vertex)]
-            vals[old] = image[vertices[old, 1], vertices[old, 0]]
-        fixed = np.concatenate([fixed, np.zeros(len(new), bool)])
-        vals[fixed] = fixed_values
-        mesh = Mesh(vertices, vals, triangles, w, h, mesh.constraints, mesh.holes)
+            vals[was_sampled] = image[vertices[was_sampled, 1], vertices[was_sampled, 0]]
+        vals[fixed] = grown.values[fixed]
+        mesh = Mesh(vertices, vals, triangles, w, h, grown.constraints, mesh.holes)
 
 
 def _spread(score: np.ndarray, count: int) -> np.ndarray:

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from .errors import ATMError
+from .decoding import render
 from .mesh import Mesh, edges
 
 #: ITU-R BT.601 luma weights, used as z for RGB vertices.
@@ -166,7 +167,7 @@ def overlay_png(
     import cv2
 
     if image is None:
-        image = mesh.render()
+        image = render(mesh)
     rgb = display_rgb(image, nodata)
     if scale > 1:
         rgb = cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)

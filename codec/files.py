@@ -41,7 +41,7 @@ IMAGE_SUFFIXES = frozenset(READABLE)
 #: O_TMPFILE where the platform has it (Linux); None selects named temporaries.
 UNNAMED = getattr(os, "O_TMPFILE", None)
 # where O_TMPFILE exists but this file system lacks it, open() fails with one of these
-_NO_TMPFILE = {errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL}
+_NO_TMPFILE = frozenset({errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL})
 _AT_FDCWD, _AT_EMPTY_PATH = -100, 0x1000
 
 

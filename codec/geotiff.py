@@ -11,6 +11,8 @@ from __future__ import annotations
 import io
 import math
 import warnings
+from collections.abc import Mapping
+from types import MappingProxyType
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +23,7 @@ from .errors import ATMError, UnsupportedError
 KEY = "geotiff"
 
 #: Record member -> (TIFF tag, TIFF type code): 12 = DOUBLE, 3 = SHORT, 2 = ASCII.
-TAGS: dict[str, tuple[int, int]] = {
+TAGS: Mapping[str, tuple[int, int]] = MappingProxyType({
     "ModelPixelScale": (33550, 12),
     "ModelTiepoint": (33922, 12),
     "ModelTransformation": (34264, 12),
@@ -30,7 +32,7 @@ TAGS: dict[str, tuple[int, int]] = {
     "GeoAsciiParams": (34737, 2),
     "GDAL_METADATA": (42112, 2),
     "GDAL_NODATA": (42113, 2),
-}
+})
 #: Members derived from the tags for display; never written back.
 SUMMARY = ("crs", "transform", "units")
 
@@ -41,7 +43,7 @@ MAGICS = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
 _MODEL_TYPE, _RASTER_TYPE, _GEOGRAPHIC, _PROJECTED, _LINEAR_UNITS, _ANGULAR_UNITS, _VERTICAL_UNITS = (
     1024, 1025, 2048, 3072, 3076, 2054, 4099,
 )
-_UNITS = {9001: "metre", 9002: "foot", 9003: "US survey foot", 9101: "radian", 9102: "degree"}
+_UNITS = MappingProxyType({9001: "metre", 9002: "foot", 9003: "US survey foot", 9101: "radian", 9102: "degree"})
 
 
 @dataclass(frozen=True)

@@ -12,10 +12,11 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ATMError
-from .mesh import Mesh, without_vertices, segments as wall_steps
-from .triangulate import through_vertices, triangulate
+from .mesh import Mesh, without_vertices
+from .meshcode import in_stored_order
+from .triangulate import through_vertices
 
-#: Simplification tolerance of hole outlines, in pixels (the seed's d for walls).
+#: Simplification tolerance of hole outlines, in pixels (the approximating error of the paper's edge polylines, section 3.3.2.1).
 OUTLINE_ERROR = 1.0
 
 
@@ -85,7 +86,9 @@ def _walls_clear_of(mesh: Mesh, blocked: np.ndarray) -> list[np.ndarray]:
 
 
 def cut(mesh: Mesh, holes: np.ndarray) -> Mesh:
-    """Give `mesh` (of the filled band) its holes: outline walls, no vertex inside."""
+    """Give `mesh` (of the filled band) its holes: outline walls, no vertex inside.
+    The result is in stored order, triangulated as a decoder rebuilds it
+    (meshcode.in_stored_order)."""
     if not holes.any():
         return mesh
     h, w = holes.shape
@@ -112,16 +115,11 @@ def cut(mesh: Mesh, holes: np.ndarray) -> Mesh:
             start += len(r)
         # through_vertices also drops the zero-length steps of rims that double back
         constraints = through_vertices(vertices, constraints)
-        segments = wall_steps(constraints) if constraints else None
-        try:
-            triangles = triangulate(vertices, segments)
-        except ATMError:
-            continue  # simplified rims crossed each other: trace them pixel by pixel
         values = np.zeros((len(vertices),) + mesh.values.shape[1:], mesh.dtype)
         values[remap] = base.values
-        return Mesh(vertices, values, triangles, w, h, constraints, holes)
+        try:
+            return in_stored_order(Mesh(vertices, values, np.zeros((0, 3), np.int64), w, h, constraints, holes))
+        except ATMError:
+            continue  # simplified rims crossed each other: trace them pixel by pixel
     # rims traced pixel by pixel never cross; if walls still do, keep the rims only
-    triangles = triangulate(vertices, None)
-    values = np.zeros((len(vertices),) + mesh.values.shape[1:], mesh.dtype)
-    values[remap] = base.values
-    return Mesh(vertices, values, triangles, w, h, [], holes)
+    return in_stored_order(Mesh(vertices, values, np.zeros((0, 3), np.int64), w, h, [], holes))

@@ -48,22 +48,6 @@ class Mesh:
             f"{self.dtype}, {self.channels} channel(s))"
         )
 
-    def render(self, backend: str = "cpu") -> np.ndarray:
-        """Rasterise the mesh to an image (see codec.decode for the backends)."""
-        from .decoding import render
-
-        return render(self, backend=backend)
-
-
-@dataclass(eq=False, repr=False)
-class MeasuredMesh(Mesh):
-    """A mesher's mesh with the mean squared error (over all pixels, against the image
-    it was made from) that decoding it gives, where the mesher's own statistics tell
-    it at no cost. Any change to the mesh makes a plain Mesh, so the figure never
-    outlives the mesh it describes (values must not be changed in place)."""
-
-    decoded_mse: float | None = None
-
 
 def doubled_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Signed doubled areas (x1-x0)(y2-y0) - (x2-x0)(y1-y0), exact in int64."""

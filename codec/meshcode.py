@@ -13,6 +13,8 @@ step (finer where the triangles are larger).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .format_spec import schema
@@ -35,7 +37,7 @@ from .triangulate import step_over_vertex, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
-_NAMES = [sub.name for sub in schema.MeshPayload.subcons]
+_NAMES = tuple(sub.name for sub in schema.MeshPayload.subcons)
 FIELDS = tuple(_NAMES[_NAMES.index("sample_step") + 1 :])
 
 
@@ -121,6 +123,7 @@ def _position_gaps(m, free: int, where: str) -> np.ndarray:
 #: x and y of a step turned by r quarter turns (x, y) -> (-y, x), by r
 _COS = np.array([1, 0, -1, 0])
 _SIN = np.array([0, 1, 0, -1])
+_COS.flags.writeable = _SIN.flags.writeable = False
 
 
 def quadrants(steps: np.ndarray) -> np.ndarray:
@@ -220,6 +223,26 @@ def _stored_order(mesh: Mesh):
     return order, inverse, keys[order], [inverse[c] for c in mesh.constraints]
 
 
+def stored_permutation(mesh: Mesh) -> np.ndarray:
+    """Old vertex index of each vertex in stored order (in_stored_order's)."""
+    return _stored_order(mesh)[0]
+
+
+def in_stored_order(mesh: Mesh, *, triangulate_again: bool = True) -> Mesh:
+    """The mesh with its vertices in stored order and its polylines renumbered to it;
+    triangulated from that order as a decoder rebuilds the triangles (or, with
+    triangulate_again=False, its own triangles renumbered). A mesh made this way needs
+    no check that a decoder gets its triangles (encode_band's `delaunay`)."""
+    order, inverse, _, lines = _stored_order(mesh)
+    vertices = mesh.vertices[order]
+    if triangulate_again:
+        flat = _flat(lines)
+        triangles = triangulate(vertices, chain_steps(flat, np.array([len(c) for c in lines], np.int64)))
+    else:
+        triangles = inverse[mesh.triangles]
+    return Mesh(vertices, mesh.values[order], triangles, mesh.width, mesh.height, lines, mesh.holes)
+
+
 def _flat(lines: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(lines) if lines else np.zeros(0, np.int64)
 
@@ -265,19 +288,61 @@ def tree_sums(increments: np.ndarray, parent: np.ndarray) -> np.ndarray:
     return sums.reshape(inc.shape)
 
 
-def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """How a band mesh is stored: its vertices' stored order (`order`, and `inverse`
+    from old to stored numbering), their pixel keys in that order, the polylines
+    renumbered (`lines`; `flat` one after another, of `lengths`) and their steps as
+    vertex pairs (`walls`), the canonical triangles and their doubled areas, and the
+    sample sequence (`seq`, the `free` vertices and their Hilbert keys, each sample's
+    `parents` place). It depends on the mesh's vertices, triangles and polylines, not
+    on its values: quantise and encode_band share one."""
+
+    order: np.ndarray
+    inverse: np.ndarray
+    sorted_keys: np.ndarray
+    vertices: np.ndarray
+    lines: list
+    flat: np.ndarray
+    lengths: np.ndarray
+    walls: np.ndarray
+    triangles: np.ndarray
+    areas: np.ndarray
+    seq: np.ndarray
+    free: np.ndarray
+    curve_keys: np.ndarray
+    parents: np.ndarray
+
+    def steps(self, step: int, top_pinned: bool) -> np.ndarray:
+        """Every stored vertex's quantisation step (vertex_steps)."""
+        return vertex_steps(self.vertices, self.triangles, step, top_pinned, self.areas)
+
+
+def layout(mesh: Mesh) -> Layout:
+    """The Layout of a band mesh."""
+    order, inverse, sorted_keys, lines = _stored_order(mesh)
+    vertices = mesh.vertices[order]
+    flat = _flat(lines)
+    lengths = np.array([len(c) for c in lines], dtype=np.int64)
+    triangles = canonical_triangles(inverse[mesh.triangles])
+    seq, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
+    return Layout(
+        order, inverse, sorted_keys, vertices, lines, flat, lengths, chain_steps(flat, lengths), triangles,
+        doubled_areas(vertices, triangles), seq, free, curve_keys, sample_parents(triangles, seq),
+    )
+
+
+def quantise(mesh: Mesh, step: int, top_pinned: bool, lay: Layout | None = None) -> Mesh:
     """A copy of the mesh with its samples as the decoder will rebuild them from residuals with
     base step `step` (closed-loop: each sample is coded against its parent as
     rebuilt, so rounding errors do not add up). Call with the final triangles; pass
-    the same step and top_pinned to the writer."""
+    the same step and top_pinned to the writer. lay: the mesh's layout(), if made."""
     if step == 1:
         return mesh
-    order, inverse, _, lines = _stored_order(mesh)
-    vertices = mesh.vertices[order]
-    seq, _, _ = _sample_order(vertices, _flat(lines), hilbert_levels(mesh.width, mesh.height))
-    triangles = inverse[mesh.triangles]
-    steps = vertex_steps(vertices, triangles, step, top_pinned)[seq].tolist()
-    parents = sample_parents(triangles, seq).tolist()
+    lay = layout(mesh) if lay is None else lay
+    order, inverse, seq = lay.order, lay.inverse, lay.seq
+    steps = lay.steps(step, top_pinned)[seq].tolist()
+    parents = lay.parents.tolist()
     top = int(np.iinfo(mesh.dtype).max)
     values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
     out = np.empty_like(values)
@@ -302,31 +367,34 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool) -> Mesh:
     return Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
 
 
-def encode_band(y0: int, mesh: Mesh, step: int = 1, rebuild: bool = True) -> dict:
+def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None,
+                lay: Layout | None = None, rebuild: bool = True) -> dict:
     """The MeshPayload fields for a validated band mesh whose samples are as
-    quantise(mesh, step, y0 > 0) left them (any samples with step 1). rebuild=False
-    lists the triangles even where a decoder could rebuild them (codec.limits)."""
+    quantise(mesh, step, y0 > 0) left them (any samples with step 1). delaunay: True
+    when the caller knows the triangles are the ones a decoder rebuilds (a mesh from
+    in_stored_order, or a mesher's Meshed.delaunay); otherwise it triangulates to
+    find out. lay: the mesh's layout(), if made (quantise's). rebuild=False lists the
+    triangles even where a decoder could rebuild them (codec.limits)."""
     n = len(mesh.vertices)
-    order, inverse, sorted_keys, lines = _stored_order(mesh)
-    vertices = mesh.vertices[order]
+    lay = layout(mesh) if lay is None else lay
+    order, sorted_keys, vertices, lines = lay.order, lay.sorted_keys, lay.vertices, lay.lines
     values = mesh.values[order].reshape(n, -1)
-    triangles = canonical_triangles(inverse[mesh.triangles])
-    flat = _flat(lines)
-    lengths = np.array([len(c) for c in lines], dtype=np.int64)
-    walls = chain_steps(flat, lengths)
+    triangles, flat, lengths, walls = lay.triangles, lay.flat, lay.lengths, lay.walls
 
-    try:
-        rebuilt = canonical_triangles(triangulate(vertices, walls)) if rebuild else None
-        delaunay = rebuild and rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
-    except ATMError:
+    if not rebuild:
         delaunay = False
+    elif not delaunay:
+        try:
+            rebuilt = canonical_triangles(triangulate(vertices, walls))
+            delaunay = rebuilt.shape == triangles.shape and bool((rebuilt == triangles).all())
+        except ATMError:
+            delaunay = False
     steps = vertices[walls[:, 1]] - vertices[walls[:, 0]]
     start_keys = sorted_keys[flat[np.cumsum(lengths) - lengths]]
 
-    seq_order, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
-    seq_steps = vertex_steps(vertices, triangles, step, y0 > 0)[seq_order][:, None]
+    seq_order, free, curve_keys, parents = lay.seq, lay.free, lay.curve_keys, lay.parents
+    seq_steps = lay.steps(step, y0 > 0)[seq_order][:, None]
     in_order = values[seq_order].astype(np.int64)
-    parents = sample_parents(triangles, seq_order)
     diffs = in_order - np.where(parents[:, None] >= 0, in_order[parents], 0)
     residuals = diffs // seq_steps
     if (residuals * seq_steps != diffs).any():

@@ -7,23 +7,14 @@ decoded rows as each band's chunk arrives.
 
 from __future__ import annotations
 
-import numbers
 from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import banding, container, encoder, error_bound, holes, integers, meshcode, quantise
-from .mesher import values as vertex_values
-from .errors import ATMError, OptionError, UnsupportedError
-from .image import SAMPLE_TYPES
+from . import container, integers, pipeline
+from .errors import ATMError, OptionError
 from .mesh import Mesh
-
-
-#: The automatic base value step, as a multiple of the first band's RMS error. Vertex
-#: steps vary around it with fan area (meshcode.vertex_steps); at 1.0 the rounding
-#: costs about a tenth of the squared error and buys more vertices than it costs
-#: (benchmarks/rate.py: lower RMS at equal bytes than 0.7 or 1.4 on the corpus).
-STEP_FACTOR = 1.0
+from .settings import Settings
 
 
 class StreamEncoder:
@@ -33,17 +24,23 @@ class StreamEncoder:
             for rows in source:          # any number of rows at a time
                 enc.write(rows)
 
-    The bytes equal `codec.encode(image, band_height=..., **options)` for the same image.
-    The writer never seeks; at most one band (band_height + 1 rows) is held in memory.
+    The bytes equal `codec.encode(image, band_height=..., **options)` for the same image:
+    both code each band with codec.pipeline.code_band; this object only gathers the
+    rows of a band. The writer never seeks; at most one band (band_height + 1 rows) is
+    held in memory.
 
-    Size knobs: `points` (target vertex count), or a bound that refinement guarantees on
-    the decoded image, per channel: `max_rms`, `max_error` (in sample units), or
+    Options (codec.settings.Settings, as keywords or as `settings`): the size knobs
+    `points` (target vertex count), or a bound that refinement guarantees on the
+    decoded image, per channel: `max_rms`, `max_error` (in sample units), or
     `quality` 1..100 (JPEG-like; an RMS bound, 100 = lossless).
 
     Float images (dtype float32/float64, one channel) are stored as 16-bit integers with
     a scale and offset: give `value_range=(lowest, highest)` and optionally `precision`
     (the quantisation step). `max_rms`/`max_error` are then in data units and include
     the quantisation error; decoding returns float32.
+
+    progress(rows_done, height) is called after each band is written; it watches the
+    work and never changes it, so the bytes are the same with or without it.
     """
 
     def __init__(
@@ -54,114 +51,41 @@ class StreamEncoder:
         *,
         dtype=np.uint8,
         channels: int = 1,
-        band_height: int | None = None,
-        points: int | None = None,
-        mesher: str | None = None,
-        quality: int | None = None,
-        max_rms: float | None = None,
-        max_error: float | None = None,
-        value_range: tuple[float, float] | None = None,
-        precision: float | None = None,
-        nodata: float | None = None,
-        metadata: dict | None = None,
         progress: Callable[[int, int], None] | None = None,
-        value_step: int | str = "auto",
+        settings: Settings | None = None,
         **options,
     ):
-        # progress(rows_done, height) is called after each band is written; it watches
-        # the work and never changes it, so the bytes are the same with or without it
-        for name, value in (("width", width), ("height", height)):
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-                raise OptionError(f"{name} must be a positive whole number, not {value!r}")
-        dtype = np.dtype(dtype)
-        self._quant = None
-        if integers.is_signed(dtype):
-            if channels != 1:
-                raise UnsupportedError("signed integer images must have one channel")
-            if precision is not None:
-                raise OptionError(f"{dtype} data is stored exactly; precision applies to float images only")
-            value_range = value_range if value_range is not None else integers.default_range(dtype)
-            if value_range is None:
-                raise OptionError(
-                    f"a {dtype} stream needs value_range=(lowest, highest) so that the header can "
-                    "carry the offset before the data arrives"
-                )
-            # whole numbers with scale 1: bounds in sample units are bounds on q as they are
-            self._quant = integers.plan(*value_range, dtype)
-        elif dtype.kind == "f":
-            if channels != 1:
-                raise UnsupportedError("float images must have one channel")
-            if value_range is None:
-                raise OptionError(
-                    "a float stream needs value_range=(lowest, highest) so that the header can "
-                    "carry the quantisation before the data arrives"
-                )
-            self._quant = quantise.plan(*value_range, precision=precision)
-            if quality is None:
-                max_rms, max_error = self._quant.integer_bounds(max_rms, max_error, self._quant.scale / 2)
-        elif value_range is not None or precision is not None:
-            raise OptionError("value_range applies to float and signed integer images; precision to float images only")
-        elif dtype not in SAMPLE_TYPES:
-            raise integers.unsupported(dtype)
-        storage = quantise.STORAGE if self._quant is not None else dtype
-        if nodata is not None and dtype.kind in "ui":
-            info = np.iinfo(dtype)
-            if not (isinstance(nodata, numbers.Real) and float(nodata).is_integer() and info.min <= nodata <= info.max):
-                raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
-        # float data always has a nodata value (NaN unless given), as NaN can turn up in
-        # any row; integer data has one when the user names it
-        self._nodata = (float("nan") if nodata is None else quantise.check_nodata(nodata)) if dtype.kind == "f" else nodata
-        if channels not in (1, 3):
-            raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
-        if band_height is None:
-            band_height = banding.default_band_height(width, height)
-        elif isinstance(band_height, bool) or not isinstance(band_height, numbers.Integral) or band_height < 1:
-            raise OptionError(f"band_height must be a positive whole number, not {band_height!r}")
-        self.width, self.height, self.dtype, self.channels = int(width), int(height), dtype, channels
-        self.band_height = int(min(band_height, max(height - 1, 1)))
-        self._mesher_name = mesher or encoder.DEFAULT_MESHER
-        if quality is not None:
-            if max_rms is not None:
-                raise OptionError("give quality or max_rms, not both")
-            max_rms = error_bound.quality_rms(quality, storage)
-        self._bound = error_bound.Bound(max_rms=max_rms, max_error=max_error)
-        if value_step != "auto" and (
-            isinstance(value_step, bool) or not isinstance(value_step, numbers.Integral) or not 1 <= value_step <= 65535
-        ):
-            raise OptionError(f"value_step must be 'auto' or a whole number 1..65535, not {value_step!r}")
-        # under an error bound, refinement decides every value exactly
-        self._step = 1 if self._bound.active else (None if value_step == "auto" else int(value_step))
-        self._build = encoder.mesher_build(self._mesher_name, options)
-        self._values = encoder.values_method(self._build, options)
-        self._options = options
-        if points is None:
-            points = (
-                encoder.start_points(width, height)
-                if self._bound.active
-                else encoder.default_points(width, height)
-            )
-        elif isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 1:
-            raise OptionError(f"points must be a positive whole number, not {points!r}")
-        self._points = int(points)
+        if settings is None:
+            settings = Settings.from_options(**options)
+        elif options:
+            Settings.from_options(**options)  # names checked, and listed if unknown
+            settings = settings.replace(**{k: v for k, v in options.items() if v is not None})
+        self._plan = pipeline.plan(settings, width, height, dtype, channels)
+        p = self._plan
+        self.width, self.height, self.dtype, self.channels = p.width, p.height, p.dtype, p.channels
+        self.band_height = p.band_height
+        self._nodata = p.nodata
+        self._quant = p.quant
         header = container.Header(
-            width,
-            height,
-            np.dtype(np.float32) if dtype.kind == "f" else dtype,
-            channels,
-            quant=self._quant,
-            nodata=None if self._nodata is None else float(self._nodata),
-            metadata=metadata,
+            p.width,
+            p.height,
+            np.dtype(np.float32) if p.dtype.kind == "f" else p.dtype,
+            p.channels,
+            quant=p.quant,
+            nodata=None if p.nodata is None else float(p.nodata),
+            metadata=settings.metadata,
         )
-        if metadata is not None:
-            container.encode_metadata(metadata)  # checked before anything is written
+        if settings.metadata is not None:
+            container.encode_metadata(settings.metadata)  # checked before anything is written
         self._writer = container.Writer(fileobj, header)
-        shape = (self.band_height + 1, width) + ((channels,) if channels > 1 else ())
-        self._buf = np.empty(shape, storage)
+        shape = (self.band_height + 1, p.width) + ((p.channels,) if p.channels > 1 else ())
+        self._buf = np.empty(shape, p.storage)
         self._holes = np.zeros(shape[:2], bool)
         self._filled = 0  # rows of the current band in _buf
         self._y0 = 0  # image row of _buf[0]
         self._received = 0
         self._top: tuple[np.ndarray, np.ndarray] | None = None
+        self._step = p.step
         self._closed = False
         self._progress = progress
         #: Totals over the bands written so far (shared-row vertices count in both bands).
@@ -214,77 +138,27 @@ class StreamEncoder:
     def _flush(self) -> None:
         if self._filled < 2 and self.height > 1:
             return  # only the shared row of a band already written
-        band = self._buf[: self._filled]
         band_holes = self._holes[: self._filled]
-        has_holes = bool(band_holes.any())
-        valid_share = 1.0 - band_holes.mean() if has_holes else 1.0
-        share = self._points * valid_share * (self._filled - (self._y0 > 0)) / self.height
-        if has_holes:
-            band = holes.fill(band, band_holes)
-        mesh = self._build(band, max(4, round(share)), **self._options)
-        if has_holes:
-            mesh = holes.cut(mesh, band_holes.copy())
-        if self._top is not None:
-            mesh = banding.pin_top_row(mesh, *self._top)
-        if self._received < self.height:
-            # the next band starts from this band's last row: make that row good
-            mesh = banding.sample_last_row(mesh, band, self._row_tolerance(mesh, band))
-        if has_holes:
-            fitted = vertex_values.fit(band, mesh.vertices, mesh.triangles, self._values)
-            if self._top is not None:
-                top = mesh.vertices[:, 1] == 0
-                fitted[top] = mesh.values[top]
-            mesh.values = fitted
-        mesh = self._quantise(mesh, band, band_holes if has_holes else None)
-        mesh = error_bound.refine(
-            mesh,
-            band,
-            self._bound,
-            values=self._values,
-            pinned_rows=1 if self._top is not None else 0,
-            last_band=self._received == self.height,
-            valid=~band_holes if has_holes else None,
+        coded = pipeline.code_band(
+            self._buf[: self._filled],
+            band_holes if band_holes.any() else None,
+            self._plan,
+            y0=self._y0,
+            top=self._top,
+            last=self._received == self.height,
+            step=self._step,
         )
-        self._writer.write_band(self._y0, mesh, self._step)
+        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout)
         self.bands += 1
-        self.vertices += len(mesh.vertices)
-        self.triangles += len(mesh.triangles)
-        self._top = banding.bottom_row(mesh)
+        self.vertices += len(coded.mesh.vertices)
+        self.triangles += len(coded.mesh.triangles)
+        self._top, self._step = coded.bottom_row(), coded.step
         self._buf[0] = self._buf[self._filled - 1]
         self._holes[0] = self._holes[self._filled - 1]
         self._y0 += self._filled - 1
         self._filled = 1
         if self._progress is not None:
             self._progress(self._y0 + 1, self.height)
-
-    def _row_tolerance(self, mesh: Mesh, band: np.ndarray) -> float:
-        """How closely a shared row must follow the image: the error bound if there is
-        one, else twice the band's RMS error (the row should not be the band's worst)."""
-        if self._bound.max_error is not None:
-            return float(self._bound.max_error)
-        if self._bound.max_rms is not None:
-            return float(self._bound.max_rms)
-        from . import decoder_cpu
-
-        diff = decoder_cpu.render(mesh).astype(np.float64) - band
-        return max(1.0, 2.0 * float(np.sqrt(np.mean(diff**2))))
-
-    def _quantise(self, mesh: Mesh, band: np.ndarray, band_holes: np.ndarray | None) -> Mesh:
-        """Quantise the vertex values as the file will store them (meshcode.quantise;
-        pinned first-row values stay exact), with the base step set by the first
-        band at STEP_FACTOR times its RMS error, or given."""
-        if self._step is None:
-            mse = getattr(mesh, "decoded_mse", None) if band_holes is None else None
-            if mse is None:
-                from . import decoder_cpu
-
-                diff = decoder_cpu.render(mesh).astype(np.float64) - band
-                diff = diff.reshape(mesh.height, mesh.width, -1)
-                if band_holes is not None:
-                    diff = diff[~band_holes]
-                mse = float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
-            self._step = max(1, int(STEP_FACTOR * np.sqrt(mse)))
-        return meshcode.quantise(mesh, self._step, self._top is not None)
 
     def close(self) -> None:
         """Finish the file. Raises ATMError if fewer rows came than were declared."""

@@ -201,14 +201,14 @@ def build_mesh(image, **options) -> Mesh:
     encode option: points, max_error, max_rms, quality, nodata, precision, ..."""
     from . import encoder
     from .image import as_image
+    from .settings import Settings
     from .stream import merge_bands
 
     img = as_image(image, allow_nan=True)
     height = img.shape[0]
     options.setdefault("band_height", max(height - 1, 1))
-    if options.get("mesher") is None:
-        options["mesher"] = encoder.DEFAULT_MESHER
-    reader = container.Reader(io.BytesIO(encoder.encode(img, **options)))
+    options = {k: v for k, v in options.items() if v is not None}  # encode's defaults
+    reader = container.Reader(io.BytesIO(encoder.encode(img, Settings.from_options(**options))))
     mesh = merge_bands(list(reader))
     values = data_values(mesh.values, reader.header)
     dtype = reader.header.dtype

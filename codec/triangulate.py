@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 import triangle
 
@@ -16,12 +14,9 @@ from .mesh import segments
 #: floating-point predicates are exact (see triangulate).
 EXACT_EXTENT = 4095
 
-# one remembered triangulation per thread (triangulate(remember=True))
-_memo = threading.local()
-
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
-                remember: bool = False, exact: bool = False) -> np.ndarray:
+                exact: bool = False) -> np.ndarray:
     """Triangulate integer (x, y) vertices, keeping every segment (pairs of vertex
     indices) as an edge. Returns M x 3 positively oriented triangles, or none when all
     vertices lie on one row or column (a one-pixel-wide image needs no triangles).
@@ -30,25 +25,13 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     (crossing segments) is refused, because vertices must stay on pixel centres.
 
     Triangle's exact arithmetic is skipped where that provably changes nothing
-    (exact=True keeps it, for tests: the result is identical). remember: keep the
-    result so that the next call in this thread, if it has the same vertices and
-    segments in the same order, gets it without triangulating again (any call
-    forgets it).
+    (exact=True keeps it, for tests: the result is identical).
     """
     vertices = np.asarray(vertices, dtype=np.int64)
     if segments is not None:
         segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
         if len(segments) == 0:
             segments = None
-    last, _memo.entry = getattr(_memo, "entry", None), None
-    if (
-        last is not None
-        and np.array_equal(last[0], vertices)
-        and (last[1] is None if segments is None else last[1] is not None and np.array_equal(last[1], segments))
-    ):
-        # Triangle is deterministic (and skipping exact arithmetic provably changes
-        # nothing): equal input, equal output
-        return last[2].copy()
     if len(vertices) < 3 or np.ptp(vertices[:, 0]) == 0 or np.ptp(vertices[:, 1]) == 0:
         return np.zeros((0, 3), dtype=np.int64)
     coords, switches = vertices, "Q"
@@ -83,8 +66,6 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     # ties between cocircular vertices are Triangle's to break as its input order falls:
     # the format's own rule decides them (ATM.md section 4.2.5)
     triangles = canonicalise(vertices, triangles, result.get("segments"))
-    if remember:
-        _memo.entry = (vertices.copy(), None if segments is None else segments.copy(), triangles.copy())
     return triangles
 
 

@@ -74,7 +74,7 @@ def random_mesh(seed: int, width: int, height: int, *, dtype=np.uint8, channels:
 
 @pytest.fixture(scope="session")
 def corpus() -> dict[str, np.ndarray]:
-    """The public test images named in DESIGN.md, as uint8 gray arrays."""
+    """The public test corpus (tests/corpus.py), as uint8 gray arrays."""
     from tests.synthetic import range_scene
     from tests.corpus import load_corpus
 

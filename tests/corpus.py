@@ -1,4 +1,5 @@
-"""The public corpus of DESIGN.md (scikit-image's bundled images, in the test extra)."""
+"""The public test corpus: scikit-image's bundled images (in the test extra) and its
+motorcycle disparity map."""
 
 from __future__ import annotations
 

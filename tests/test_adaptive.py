@@ -139,7 +139,7 @@ def check_exact_away_from_steps(m, img) -> None:
 def test_planar_steps_are_walls_and_exact_away_from_them(seed):
     """The walls make the mesh exact away from the steps, with least-squares values
     (the default: step pixels, which no wall can follow, do not pull the vertices
-    beside them) as with the pixel values (the seed's)."""
+    beside them) as with the pixel values (the paper's)."""
     img = planar_steps(160, 120, seed=seed)
     m = codec.build_mesh(img, points=600)
     check_tiling(m)
@@ -304,18 +304,20 @@ def test_fast_triangulation_equals_exact(seed, extent, walls):
 
 def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
     """The mesher's vertices come in raster order and its triangles are the constrained
-    Delaunay triangulation of them with the wall steps in their order: what
-    codec.meshcode stores without triangles and checks by triangulating again, which
-    then needs no second run of Triangle."""
+    Delaunay triangulation of them with the wall steps in their order, and it says so
+    (Meshed.delaunay): codec.meshcode then stores the band without triangles and
+    without running Triangle again to check."""
     from codec import meshcode, triangulate as tri
     from codec.mesh import segments
     from codec.format_spec import schema
 
     img = corpus["camera"][:200, :300]
-    m = codec.build_mesh(img, points=1500)
+    meshed = adaptive.build(img, 1500)
+    m = meshed.mesh
+    assert meshed.delaunay
     keys = m.vertices[:, 1] * m.width + m.vertices[:, 0]
     assert (np.diff(keys) > 0).all()
-    rebuilt = tri.triangulate(m.vertices, segments(m.constraints))  # the memo is spent
+    rebuilt = tri.triangulate(m.vertices, segments(m.constraints))
     assert np.array_equal(rebuilt, m.triangles)
     calls = []
     run = tri.triangle.triangulate
@@ -324,13 +326,14 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
         calls.append(1)
         return run(*args)
 
-    m = codec.build_mesh(img, points=1500)
     try:
         tri.triangle.triangulate = counted
-        fields = meshcode.encode_band(0, m)
+        told = meshcode.encode_band(0, m, delaunay=True)
+        checked = meshcode.encode_band(0, m)
     finally:
         tri.triangle.triangulate = run
-    assert fields["connectivity"] == schema.DELAUNAY and not calls
+    assert told == checked and told["connectivity"] == schema.DELAUNAY
+    assert len(calls) == 1  # only the call that checked
 
 
 @pytest.mark.parametrize("name", ["camera", "moon", "scene0"])
@@ -338,9 +341,9 @@ def test_decoded_mse_matches_decoding(name, corpus):
     """The squared error the mesher reports (used for the automatic value step instead
     of decoding the band) is the decoded image's to within pixel rounding."""
     img = corpus[name]
-    m = codec.build_mesh(img, points=round(0.01 * img.size))
-    decoded = np.mean((render(m).astype(np.float64) - img) ** 2)
-    assert abs(m.decoded_mse - decoded) <= 0.01 * decoded + 0.1, (m.decoded_mse, decoded)
+    meshed = adaptive.build(img, round(0.01 * img.size))
+    decoded = np.mean((render(meshed.mesh).astype(np.float64) - img) ** 2)
+    assert abs(meshed.mse - decoded) <= 0.01 * decoded + 0.1, (meshed.mse, decoded)
 
 
 def test_effort_trades_time_for_error():

@@ -70,7 +70,7 @@ def test_uniform_rms_on_camera_matches_the_baseline(corpus):
     image = corpus["camera"]
     out = codec.decode(codec.encode(image, points=4000, mesher="uniform"))
     rms = np.sqrt(np.mean((out.astype(float) - image) ** 2))
-    assert 15 < rms < 25  # a 63 x 63 grid with pixel values: the seed's baseline
+    assert 15 < rms < 25  # a 63 x 63 grid with pixel values: the paper's uniform baseline
 
 
 def test_every_pixel_as_vertex_is_lossless():
@@ -103,8 +103,10 @@ def test_bad_options_raise_option_error():
         codec.encode(image, mesher="nope")
     with pytest.raises(OptionError, match="points"):
         codec.encode(image, points=0)
-    with pytest.raises(OptionError, match="no option colour"):
+    with pytest.raises(OptionError, match="unknown encoder option colour; the options are: points, quality"):
         codec.encode(image, mesher="uniform", colour=1)
+    with pytest.raises(OptionError, match="mesher 'uniform' has no option effort; its options are: values"):
+        codec.encode(image, mesher="uniform", effort=3)
     with pytest.raises(OptionError, match="backend"):
         codec.decode(codec.encode(image), backend="nope")
 

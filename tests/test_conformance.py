@@ -9,6 +9,7 @@ import pytest
 
 import codec
 from codec import frames
+from codec.decoding import render
 from codec.files import read_image
 from codec.format_spec import schema
 from tests.conftest import chunks
@@ -57,7 +58,7 @@ def test_decoding_rule_by_hand():
     vertices = np.array([[0, 0], [2, 0], [0, 2], [2, 2]])
     triangles = np.array([[0, 1, 3], [0, 3, 2]])
     m = Mesh(vertices, np.array([0, 1, 2, 4], np.uint8), triangles, 3, 3)
-    out = m.render()
+    out = render(m)
     # (1, 0) halfway between values 0 and 1 -> 0.5 rounds up to 1
     assert out[0, 1] == 1
     # (1, 1) on the diagonal, halfway between 0 and 4 -> 2

@@ -9,6 +9,7 @@ import pytest
 
 import codec
 from codec import export
+from codec.decoding import render
 from codec.files import read_image
 from tests.conftest import random_mesh
 from tests.test_cli import atm
@@ -68,7 +69,7 @@ def test_svg_draws_every_edge_once_and_the_walls():
 
 def test_overlay_draws_over_the_decoded_image():
     m = random_mesh(5, 40, 30, extra=20)
-    base = export.display_rgb(m.render())
+    base = export.display_rgb(render(m))
     out = export.overlay_png(m, scale=2)
     assert out.shape == (60, 80, 3) and out.dtype == np.uint8
     enlarged = np.repeat(np.repeat(base, 2, 0), 2, 1)

@@ -1,21 +1,23 @@
-"""The discontinuity-preserving adaptive mesher (the seed's §3.3.2), the default.
+"""The default mesher: the discontinuity-preserving adaptive mesher of section 3.3.2
+of the paper "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes".
 
 Stages, each in its own module: Canny edges (codec.mesher.edges), edge polylines by the
-seed's segment rule (codec.mesher.polylines), their unfolding into parallel polylines that
+paper's segment rule (codec.mesher.polylines), their unfolding into parallel polylines that
 become the walls (codec.mesher.unfold), curvature-driven region sampling over tiles
 (codec.mesher.sampling), then a constrained Delaunay triangulation with the walls as
 constraint segments and the image corners included (codec.triangulate).
 
-Beyond the seed: a vertex budget (`points`) shared between the stages, error-driven
+Beyond the paper: a vertex budget (`points`) shared between the stages, error-driven
 refinement that spends what the edges and regions left over where the mesh is worst
-(the seed's coarse-to-fine refinement of §3.3.1, in batches), and least-squares
+(codec.mesher.refine: the paper's coarse-to-fine refinement of section 3.3.1, in
+batches), and least-squares
 vertex values (codec.mesher.values).
 """
 
 from __future__ import annotations
 
-import itertools
 import math
+from types import MappingProxyType
 
 import numpy as np
 
@@ -25,9 +27,10 @@ from . import sampling
 from . import values as vertex_values
 from ..errors import OptionError
 from ..image import structure
-from ..mesh import MeasuredMesh, Mesh
-from .elements import Statistics, concat, element_sse, line_raster, triangle_raster
-from ..triangulate import split_at_vertices, triangulate
+from ..mesh import Mesh
+from . import Meshed
+from .elements import Statistics, element_sse, line_raster, triangle_raster
+from .refine import FOCUSED_ROUNDS, ROUNDS, merge, refine_to_budget, run_breaks
 from .unfold import Walls, unfold
 
 #: Default shares of the vertex budget: at most EDGE_SHARE on walls, REGION_SHARE on
@@ -39,21 +42,12 @@ REGION_SHARE = 0.3
 TRACED = 8
 #: Side of a tile in pixels when tiles are chosen automatically.
 TILE = 80
-#: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
-#: from round to round (later rounds see the effect of the earlier ones).
-ROUNDS = 3
-DECAY = 0.7
-#: When the elements that would get a quarter of the refinement budget hold at least
-#: this share of the squared error (steps in a piecewise-smooth image rather than
-#: texture), insertions crowd each other and the budget goes in FOCUSED_ROUNDS rounds.
-CONCENTRATED = 0.7
-FOCUSED_ROUNDS = 6
 #: effort -> (region share, rounds, focused rounds). Error-driven refinement places
 #: vertices better than curvature sampling but costs a triangulation and a measure
 #: per round: effort 3 leaves it 90 % of the budget in up to 8 rounds, for 2-5 %
 #: lower RMS at equal bytes on the corpus and about 1.5x the encode time of effort 2
 #: (the default); effort 1 is the quickest (benchmarks/quality.py, rate.py --effort).
-EFFORTS = {1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, ROUNDS, 8)}
+EFFORTS = MappingProxyType({1: (0.5, 2, 3), 2: (REGION_SHARE, ROUNDS, FOCUSED_ROUNDS), 3: (0.1, ROUNDS, 8)})
 #: Piecewise-smooth images (range images: surfaces and steps) keep less than
 #: SMOOTH_OFF_EDGES of their curvature energy away from their edges. Curvature
 #: sampling then has nothing to follow off the walls, and refinement places the
@@ -138,187 +132,14 @@ def _corners(width: int, height: int) -> np.ndarray:
     return c[np.unique(c[:, 1] * width + c[:, 0], return_index=True)[1]]
 
 
-def _merge(width: int, *groups: np.ndarray) -> np.ndarray:
-    """Concatenate point groups keeping the first of any points on the same pixel and
-    the order of the groups (the first group's indices stay valid)."""
-    pts = np.concatenate(groups)
-    _, first = np.unique(pts[:, 1] * width + pts[:, 0], return_index=True)
-    return pts[np.sort(first)]
-
-
-def _run_breaks(segments: np.ndarray) -> np.ndarray:
-    """Where a run of segments that continue each other ends and the next begins."""
-    return np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1
-
-
 def _chains(segments: np.ndarray) -> list[np.ndarray]:
     """Constraint polylines: the runs of segments that continue each other."""
     if len(segments) == 0:
         return []
-    ends = np.r_[_run_breaks(segments), len(segments)]
+    ends = np.r_[run_breaks(segments), len(segments)]
     # each run's first vertices, then its last segment's end
     flat = np.insert(segments[:, 0], ends, segments[ends - 1, 1])
     return np.split(flat, ends[:-1] + np.arange(1, len(ends)))
-
-
-def _keys(pixel: np.ndarray, triangles: np.ndarray, base: int) -> np.ndarray | None:
-    """One integer per triangle from its corners' pixel numbers (`pixel`, below
-    `base`), whichever corner it is listed from and however the vertices are numbered,
-    or None when they would overflow int64."""
-    if base**3 >= 2**62:
-        return None
-    a, b, c = pixel[triangles].T
-    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-    return (low * base + (a + b + c - low - high)) * base + high
-
-
-class _Cache:
-    """Statistics and squared errors (against the mesh through the sampled values) of
-    the triangles of the last triangulation, by triangle, so that a triangle that
-    survives a round is not measured again."""
-
-    def __init__(self, layout: Statistics):
-        self.layout = layout
-        self.keys = np.zeros(0, np.int64)  # sorted
-        self.stats = np.zeros((0, layout.width))
-        self.sse = np.zeros(0)
-
-    def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
-                last: bool = False):
-        """(statistics and squared error of every triangle, indices of the new ones, a
-        raster of the new ones). last: no round follows, so the squared errors are not
-        needed (None) and the cache is not updated."""
-        keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
-        known = np.zeros(len(triangles), bool)
-        pos = np.zeros(len(triangles), np.int64)
-        if keys is not None:
-            # looked up in key order: sorted queries make the binary searches cheap
-            by_key = np.argsort(keys)
-            sorted_keys = keys[by_key]
-            if len(self.keys):
-                found = np.minimum(np.searchsorted(self.keys, sorted_keys), len(self.keys) - 1)
-                pos[by_key] = found
-                known[by_key] = self.keys[found] == sorted_keys
-        fresh = np.flatnonzero(~known)
-        raster = triangle_raster(vertices, triangles[fresh], width, height)
-        stats = np.empty((len(triangles), self.layout.width))
-        sse = np.empty(len(triangles))
-        measured = self.layout(raster)
-        stats[fresh] = measured
-        if known.any():
-            stats[known] = np.take(self.stats, pos[known], axis=0)
-        if last:
-            return stats, None, fresh, raster
-        sse[fresh] = element_sse(raster, measured, z)
-        if known.any():
-            sse[known] = self.sse[pos[known]]
-        if keys is not None:
-            # the cache for the next round: this triangulation's triangles (the
-            # surviving entries and the new ones), in key order
-            self.keys = sorted_keys
-            self.stats = np.take(stats, by_key, axis=0)
-            self.sse = sse[by_key]
-        return stats, sse, fresh, raster
-
-
-def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, height):
-    """(triangle, x, y, |error|) of the worst pixel of each candidate triangle (sorted),
-    from the raster of the new triangles where the candidate is one of them."""
-    where = np.searchsorted(fresh, cand)
-    is_new = (where < len(fresh)) & (fresh[np.minimum(where, len(fresh) - 1)] == cand) if len(fresh) else np.zeros(len(cand), bool)
-    e1, x1, y1, err1 = fresh_raster.worst_pixels(gray, z, where[is_new])
-    old = cand[~is_new]
-    e2, x2, y2, err2 = triangle_raster(vertices, tris[old], width, height).worst_pixels(gray, z, np.arange(len(old)))
-    return np.r_[fresh[e1], old[e2]], np.r_[x1, x2], np.r_[y1, y2], np.r_[err1, err2]
-
-
-def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_walls: bool = False):
-    """(vertices in raster order, the segments renumbered and cut at the vertices on
-    them, the new position of every old vertex): the vertex order and wall steps a
-    band's MESH chunk stores, which codec.meshcode triangulates again to check that a
-    decoder rebuilds the same triangles. sort_walls: also put the runs of segments
-    (the stored polylines) in the raster order of their first vertices, so that their
-    stored starts are small forward gaps (about 30 % fewer bytes for them); only before
-    a triangulation, which with cocircular vertices may depend on the segment order."""
-    order = np.argsort(vertices[:, 1] * width + vertices[:, 0], kind="stable")
-    renumber = np.empty(len(order), np.int64)
-    renumber[order] = np.arange(len(order))
-    vertices = vertices[order]
-    segments = split_at_vertices(vertices, renumber[segments], width)
-    if sort_walls and len(segments):
-        firsts = np.r_[0, _run_breaks(segments)]
-        first_vertex = np.repeat(segments[firsts, 0], np.diff(np.r_[firsts, len(segments)]))
-        segments = segments[np.argsort(first_vertex, kind="stable")]
-    return vertices, segments, renumber
-
-
-def refine(
-    gray: np.ndarray,
-    vertices: np.ndarray,
-    segments: np.ndarray,
-    target: int,
-    layout: Statistics,
-    rounds: int = ROUNDS,
-    focused_rounds: int = FOCUSED_ROUNDS,
-):
-    """Add vertices until there are `target`: in each round, the elements with the
-    largest squared error (against the mesh through the sampled pixel values) each get
-    a vertex at their worst pixel. Pixels beside walls may get one: where a wall's
-    straight segments cut a corner of the true edge, that is where the error is.
-    Rounds: `rounds`, or `focused_rounds` where the error is CONCENTRATED.
-
-    Returns (vertices, segments, triangles, raster, stats): the final vertices in
-    raster order, the wall segments cut at the vertices on them, their triangulation
-    (remembered by codec.triangulate for the MESH chunk's check), a raster of its
-    elements (triangles then border lines; the triangles' spans are not kept) and
-    every element's statistics (`layout`, which must have `gray` as its structure
-    plane).
-    """
-    height, width = gray.shape
-    cache = _Cache(layout)
-    ordered = False
-    for r in itertools.count():
-        if r == rounds or target <= len(vertices):
-            # the last triangulation: made as the MESH chunk's check will make it
-            vertices, segments, _ = _raster_order(vertices, segments, width, sort_walls=True)
-            ordered = True
-        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        tris = triangulate(vertices, segments, remember=ordered)
-        tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height, ordered)
-        missing = target - len(vertices)
-        if ordered:
-            break
-        lines = line_raster(vertices, width, height)
-        sse = np.r_[tri_sse, element_sse(lines, layout(lines), z)]
-        if r == 0:
-            quarter = min(len(sse), math.ceil(missing / 4))
-            if np.partition(sse, len(sse) - quarter)[len(sse) - quarter :].sum() >= CONCENTRATED * sse.sum():
-                rounds = max(rounds, focused_rounds)
-        weights = DECAY ** np.arange(rounds - r)
-        batch = math.ceil(missing * weights[0] / weights.sum())
-        if batch < len(sse):
-            # the batch largest, ties to the lower index (as a stable sort would)
-            cut = -np.partition(-sse, batch - 1)[batch - 1]
-            above = np.flatnonzero(sse > cut)
-            cand = np.r_[above, np.flatnonzero(sse == cut)[: batch - len(above)]]
-        else:
-            cand = np.arange(len(sse))
-        cand = np.sort(cand[sse[cand] > 0])
-        on_tri = cand[cand < len(tris)]
-        t, x, y, err = _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, on_tri, width, height)
-        _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
-        order = np.argsort(t, kind="stable")
-        x, y, err = np.r_[x[order], lx], np.r_[y[order], ly], np.r_[err[order], lerr]
-        big = err > 0.5
-        if not big.any():
-            # nothing worth a vertex: keep this triangulation, in raster order
-            vertices, segments, renumber = _raster_order(vertices, segments, width)
-            tris = renumber[tris]
-            break
-        vertices = _merge(width, vertices, np.stack([x[big], y[big]], axis=1))
-    lines = line_raster(vertices, width, height)
-    elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, segments, tris, elements, np.concatenate([tri_stats, layout(lines)])
 
 
 def build(
@@ -334,10 +155,10 @@ def build(
     region_share: float | None = None,
     values: str = "lsq",
     effort: int = 2,
-) -> Mesh:
+) -> Meshed:
     """Mesh `image` with about `points` vertices, walls along its discontinuities.
 
-    segment_length, segment_error: the seed's edge polyline rule (pixels).
+    segment_length, segment_error: the paper's edge polyline rule (section 3.3.2.1; pixels).
     tiles=(H, V), per_tile=(R, Z): region sampling grid and samples per tile (by default
     chosen from `points`). canny=(low, high): edge thresholds in 8-bit gray levels
     (default: automatic). edge_share, region_share: parts of the budget for the walls
@@ -345,7 +166,7 @@ def build(
     images); the rest goes to error-driven refinement. effort: 1 (quickest), 2
     (default) or 3 (lowest error per byte, about 1.5x slower): how much of the budget
     refinement places, in how many rounds.
-    values: "lsq" (least squares, default) or "sample" (the pixel values, as the seed).
+    values: "lsq" (least squares, default) or "sample" (the pixel values, as the paper).
     Explicit tiles and per_tile are honoured even when they give more than `points`.
     """
     if values not in vertex_values.METHODS:
@@ -390,10 +211,10 @@ def build(
         per_tile = (r, max(1, round(each / r)))
     dens = sampling.density(sampling.curvature(gray), excluded)
     samples = sampling.sample(dens, tiles, per_tile) if region > 0 else np.zeros((0, 2), np.int64)
-    vertices = _merge(width, wall_pts, corners, samples)
+    vertices = merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
     layout = Statistics(image if image.ndim == 2 else gray, fit)
-    vertices, segments, triangles, elements, stats = refine(
+    vertices, segments, triangles, elements, stats, delaunay = refine_to_budget(
         gray, vertices, segments, points, layout, rounds, focused_rounds
     )
     if values == "lsq":
@@ -408,4 +229,4 @@ def build(
         # exactly; decoders round each pixel to a level, which adds about 1/12 (an
         # error uniform over +-0.5) where the mesh does not reproduce the image
         mse = float(element_sse(elements, stats, vals).sum()) / (width * height) + 1 / 12
-    return MeasuredMesh(vertices, vals, triangles, width, height, _chains(segments), decoded_mse=mse)
+    return Meshed(Mesh(vertices, vals, triangles, width, height, _chains(segments)), mse, delaunay)

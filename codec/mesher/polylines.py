@@ -1,9 +1,11 @@
-"""Stage 2: edge polylines by the seed's rule (§3.3.2.1, "Edge Adaptive Sampling").
+"""Stage 2: edge polylines by the rule of the paper
+"Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes",
+section 3.3.2.1, "Edge Adaptive Sampling".
 
 The edge map is thinned to one pixel, cut at bifurcations (pixels with three or more
 8-neighbours) into simple chains, and each chain is ordered from its start point: its
 first end in scan-line order (for a closed chain, its first pixel, the chain then
-returning to it). Along a chain the seed's rule picks the control points: from the
+returning to it). Along a chain the paper's rule picks the control points: from the
 starting point A a reference point C `segment_length` pixels ahead; while every pixel
 between A and C is within `segment_error` of segment AC, C advances by
 `segment_length`; otherwise the first offending pixel becomes the next starting point.
@@ -78,6 +80,10 @@ def _kernel(weights) -> np.ndarray:
 _CODE = _kernel(1 << np.arange(8))
 _COUNT = _kernel(np.ones(8))
 _REDUNDANT_U8 = _REDUNDANT.astype(np.uint8)
+# constant tables, shared by every call and thread: frozen
+for _table in (_OFFSETS, _REDUNDANT, _CODE, _COUNT, _REDUNDANT_U8):
+    _table.flags.writeable = False
+del _table
 
 
 def _filtered(grid: _Grid, kernel: np.ndarray) -> np.ndarray:
@@ -205,7 +211,7 @@ def _order_chains(simple: np.ndarray, shape: tuple[int, int], offsets: np.ndarra
 
 
 def _attach(flat_order, chain, closed, junction: np.ndarray, offsets: np.ndarray):
-    """Close loops and end chains at an adjacent bifurcation pixel, as the seed does."""
+    """Close loops and end chains at an adjacent bifurcation pixel, as the paper does."""
     nchains = int(chain.max()) + 1 if len(chain) else 0
     first = np.searchsorted(chain, np.arange(nchains), side="left")
     last = np.searchsorted(chain, np.arange(nchains), side="right") - 1
@@ -237,7 +243,7 @@ _LOOKAHEAD = 6
 
 
 def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int, d: float):
-    """The seed's segment rule on all chains at once: indices into xy of the control
+    """The paper's segment rule (section 3.3.2.1) on all chains at once: indices into xy of the control
     points, in chain order.
 
     Each round tries the next _LOOKAHEAD reference points C, C + k, ... of every chain

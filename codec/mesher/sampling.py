@@ -1,4 +1,6 @@
-"""Stage 4: region sampling driven by curvature (the seed's §3.3.1.1, as in DESIGN.md).
+"""Stage 4: region sampling driven by curvature (section 3.3.2.1 of the paper
+"Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes", which
+applies the adaptive sampling of its section 3.3.1.1 between the edges).
 
 A curvature image (the norm of the Hessian of the smoothed image: how much the image
 surface bends, which is where a piecewise-linear surface needs its vertices) gives a

@@ -91,7 +91,7 @@ def opposite_points(
     opp = np.where(take_a[:, None], qa[rows, ia], qb[rows, ib])
     stuck = (opp == p).all(axis=1)  # both sides clipped away (a 1-pixel-wide image)
     opp[stuck] = p[stuck]
-    # the seed's swap: each polyline keeps the points on its own side of the edge
+    # the paper's swap (section 3.3.2.1): each polyline keeps the points on its own side of the edge
     rel = opp - p
     on_left = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1] > 0
     left = np.where(on_left[:, None], opp, p)

@@ -1,4 +1,5 @@
-"""The uniform mesher: a regular grid of samples, the seed's comparison baseline."""
+"""The uniform mesher: a regular grid of samples, the comparison baseline of section 3.3.2.3 of
+"Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular Meshes"."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 
 from . import values as vertex_values
 from ..mesh import Mesh
+from . import Meshed
 from ..triangulate import triangulate
 
 
@@ -32,14 +34,15 @@ def grid_shape(width: int, height: int, points: int) -> tuple[int, int]:
     return best[1], best[2]
 
 
-def build(image: np.ndarray, points: int, *, values: str = "sample") -> Mesh:
+def build(image: np.ndarray, points: int, *, values: str = "sample") -> Meshed:
     """Mesh `image` with a uniform grid of about `points` vertices."""
     height, width = image.shape[:2]
     nx, ny = grid_shape(width, height, points)
     xs = np.unique(np.round(np.linspace(0, width - 1, nx)).astype(np.int64))
     ys = np.unique(np.round(np.linspace(0, height - 1, ny)).astype(np.int64))
     gx, gy = np.meshgrid(xs, ys)
+    # row by row: raster order, the stored order, so this is the decoder's triangulation
     vertices = np.stack([gx.ravel(), gy.ravel()], axis=1)
     triangles = triangulate(vertices)
     vals = vertex_values.fit(image, vertices, triangles, values)
-    return Mesh(vertices, vals, triangles, width, height)
+    return Meshed(Mesh(vertices, vals, triangles, width, height), delaunay=True)

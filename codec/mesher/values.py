@@ -33,7 +33,7 @@ LOST = 1.0
 
 
 def sample(image: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-    """The pixel value under each vertex (the seed's choice)."""
+    """The pixel value under each vertex (the paper's choice, section 3.3.2.2)."""
     return image[vertices[:, 1], vertices[:, 0]].copy()
 
 

@@ -1,0 +1,254 @@
+"""The encoder's band pipeline: a band of rows in, its coded mesh out.
+
+    plan = pipeline.plan(settings, width, height, dtype, channels)     # once an image
+    coded = pipeline.code_band(rows, holes, plan, y0=..., top=..., last=..., step=...)
+
+`code_band` is a pure function: what one band passes to the next (the shared row's
+vertices, the base value step) goes in and comes out as values, so `codec.encode` and
+`codec.StreamEncoder` (a row buffer around it) run the same code. Its stages: fill
+holes, mesh (codec.mesher), cut the holes out (codec.holes), pin the first row to
+the band above and sample the last row for the band below (codec.banding), fit values
+in holed bands, quantise the values as stored (codec.meshcode.quantise), refine to an
+error bound (codec.error_bound).
+"""
+
+from __future__ import annotations
+
+import inspect
+import numbers
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import banding, error_bound, holes as hole_stage, integers, meshcode, quantise
+from .errors import OptionError, UnsupportedError
+from .image import SAMPLE_TYPES
+from .mesh import Mesh, segments
+from .mesher import Meshed, builder
+from .mesher import values as vertex_values
+from .settings import Settings
+from .triangulate import triangulate
+
+#: Vertex density used when no size is asked for (the 2.8 % at which the paper,
+#: "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular
+#: Meshes", meshes its Lenna test image).
+DEFAULT_DENSITY = 0.028
+#: Vertex density of the starting mesh when refinement to a bound decides the size.
+START_DENSITY = 0.002
+#: The automatic base value step, as a multiple of the first band's RMS error. Vertex
+#: steps vary around it with fan area (meshcode.vertex_steps); at 1.0 the rounding
+#: costs about a tenth of the squared error and buys more vertices than it costs
+#: (benchmarks/rate.py: lower RMS at equal bytes than 0.7 or 1.4 on the corpus).
+STEP_FACTOR = 1.0
+
+
+def default_points(width: int, height: int) -> int:
+    """The vertex budget of an image when none is asked for."""
+    return max(4, round(DEFAULT_DENSITY * width * height))
+
+
+def start_points(width: int, height: int) -> int:
+    """The vertex budget of the first mesh when refinement to a bound decides the size."""
+    return max(4, round(START_DENSITY * width * height))
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What every band of one image shares, fixed before the first band is coded.
+
+    storage: the dtype of the samples the mesher sees (uint16 levels for float data,
+    through `quant`); points: the whole image's vertex budget; step: the base value
+    step when it is fixed in advance (None: the first band sets it)."""
+
+    settings: Settings
+    width: int
+    height: int
+    dtype: np.dtype
+    channels: int
+    storage: np.dtype
+    band_height: int
+    points: int
+    bound: error_bound.Bound
+    step: int | None
+    values: str
+    quant: quantise.Quantiser | None
+    nodata: float | None
+
+
+def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: int = 1) -> Plan:
+    """The Plan of an image of this geometry under `settings`; OptionError or
+    UnsupportedError if they do not fit together."""
+    for name, value in (("width", width), ("height", height)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+            raise OptionError(f"{name} must be a positive whole number, not {value!r}")
+    dtype = np.dtype(dtype)
+    s = settings
+    quant = None
+    max_rms, max_error = s.max_rms, s.max_error
+    if integers.is_signed(dtype):
+        # whole numbers with scale 1: bounds in sample units are bounds on q as they are
+        quant = integers.plan_stream(dtype, channels, s.value_range, s.precision)
+    elif dtype.kind == "f":
+        if channels != 1:
+            raise UnsupportedError("float images must have one channel")
+        if s.value_range is None:
+            raise OptionError(
+                "a float stream needs value_range=(lowest, highest) so that the header can "
+                "carry the quantisation before the data arrives"
+            )
+        quant = quantise.plan(*s.value_range, precision=s.precision)
+        if s.quality is None:
+            max_rms, max_error = quant.integer_bounds(max_rms, max_error, quant.scale / 2)
+    elif s.value_range is not None or s.precision is not None:
+        raise OptionError("value_range applies to float and signed integer images; precision to float images only")
+    elif dtype not in SAMPLE_TYPES:
+        raise integers.unsupported(dtype)
+    if channels not in (1, 3):
+        raise UnsupportedError(f"{channels} channels; .atm stores 1 (gray) or 3 (RGB)")
+    storage = quantise.STORAGE if quant is not None else dtype
+    nodata = s.nodata
+    if nodata is not None and dtype.kind in "ui":
+        info = np.iinfo(dtype)
+        if not (float(nodata).is_integer() and info.min <= nodata <= info.max):
+            raise OptionError(f"nodata must be a {dtype} value, not {nodata!r}")
+    # float data always has a nodata value (NaN unless given), as NaN can turn up in
+    # any row; integer data has one when the user names it
+    if dtype.kind == "f":
+        nodata = float("nan") if nodata is None else quantise.check_nodata(nodata)
+    band_height = s.band_height or banding.default_band_height(width, height)
+    if s.quality is not None:
+        max_rms = error_bound.quality_rms(s.quality, storage)
+    bound = error_bound.Bound(max_rms=max_rms, max_error=max_error)
+    # under an error bound, refinement decides every value exactly
+    step = 1 if bound.active else (None if s.value_step == "auto" else int(s.value_step))
+    points = s.points
+    if points is None:
+        points = start_points(width, height) if bound.active else default_points(width, height)
+    # refinement picks new vertices' values as the mesher does: as given, or by its
+    # build()'s default
+    values = s.values or inspect.signature(builder(s.mesher)).parameters["values"].default
+    return Plan(
+        s, int(width), int(height), dtype, channels, np.dtype(storage),
+        int(min(band_height, max(height - 1, 1))), int(points), bound, step, values, quant, nodata,
+    )
+
+
+@dataclass(frozen=True)
+class CodedBand:
+    """A band's mesh as it will be stored, and what the next band and the writer need.
+
+    mesh: in stored order (vertices in raster order), values quantised as stored.
+    step: the base value step it was quantised with (the next bands use the same).
+    delaunay: the triangles are the ones a decoder rebuilds (meshcode.encode_band).
+    layout: the mesh's meshcode.Layout, which quantising it made (None if not made).
+    """
+
+    y0: int
+    mesh: Mesh
+    step: int
+    delaunay: bool
+    layout: meshcode.Layout | None = None
+
+    def bottom_row(self) -> tuple[np.ndarray, np.ndarray]:
+        """The last row's vertices (x sorted) and values, which the next band shares."""
+        return banding.bottom_row(self.mesh)
+
+
+def _decoded_mse(mesh: Mesh, band: np.ndarray, valid: np.ndarray | None) -> float:
+    """The smallest channel's mean squared error of the decoded mesh over the valid
+    pixels (the decoder's own rule)."""
+    from . import decoder_cpu
+
+    diff = decoder_cpu.render(mesh).astype(np.float64) - band
+    diff = diff.reshape(mesh.height, mesh.width, -1)
+    if valid is not None:
+        diff = diff[valid]
+    return float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
+
+
+def _row_tolerance(plan: Plan, mesh: Mesh, band: np.ndarray, pinned: bool) -> float:
+    """How closely a shared row must follow the image: the error bound if there is
+    one, else twice the band's RMS error as decoded (the row should not be the band's
+    worst). pinned: the mesh's first row was just pinned and it has no triangles yet;
+    the pinning's error counts (a row sampled more closely than that costs more bytes
+    than it saves error: 6 % more bytes on camera in 16 bands), so it is triangulated
+    to be measured."""
+    if plan.bound.max_error is not None:
+        return float(plan.bound.max_error)
+    if plan.bound.max_rms is not None:
+        return float(plan.bound.max_rms)
+    from . import decoder_cpu
+
+    if pinned:
+        mesh = Mesh(mesh.vertices, mesh.values, triangulate(mesh.vertices, segments(mesh.constraints)),
+                    mesh.width, mesh.height, mesh.constraints, mesh.holes)
+    diff = decoder_cpu.render(mesh).astype(np.float64) - band
+    return max(1.0, 2.0 * float(np.sqrt(np.mean(diff**2))))
+
+
+def code_band(
+    rows: np.ndarray,
+    holes: np.ndarray | None,
+    plan: Plan,
+    *,
+    y0: int,
+    top: tuple[np.ndarray, np.ndarray] | None,
+    last: bool,
+    step: int | None,
+) -> CodedBand:
+    """The coded mesh of `rows` (image rows y0 .. y0 + len(rows) - 1, in the plan's
+    storage dtype; `holes`: pixels without data, or None).
+
+    top: the previous band's bottom_row() (None for the first band), which this band's
+    first row takes exactly; last: whether the band ends the image (otherwise its last
+    row is sampled closely for the next band); step: the base value step chosen so far
+    (None: this band chooses it)."""
+    has_holes = holes is not None and bool(holes.any())
+    count = len(rows) - (y0 > 0)
+    valid_share = 1.0 - holes.mean() if has_holes else 1.0
+    share = max(4, round(plan.points * valid_share * count / plan.height))
+    band = hole_stage.fill(rows, holes) if has_holes else rows
+    meshed: Meshed = builder(plan.settings.mesher)(band, share, **plan.settings.mesher_options())
+    mesh, delaunay = meshed.mesh, meshed.delaunay
+    # the mesher's own measure of its error, while the mesh is the one it describes
+    mse = meshed.mse if not has_holes else None
+    if has_holes:
+        mesh = hole_stage.cut(mesh, holes.copy())
+        delaunay = True
+    reshaped = mesh
+    if top is not None:
+        reshaped = banding.pin_top_row(reshaped, *top)
+    if not last:
+        # the next band starts from this band's last row: make that row good
+        reshaped = banding.sample_last_row(reshaped, band, _row_tolerance(plan, reshaped, band, top is not None))
+    if reshaped is not mesh:
+        # one triangulation for both rows' changes, in the order a decoder rebuilds
+        mesh, delaunay, mse = meshcode.in_stored_order(reshaped), True, None
+    if has_holes:
+        fitted = vertex_values.fit(band, mesh.vertices, mesh.triangles, plan.values)
+        if top is not None:
+            pinned = mesh.vertices[:, 1] == 0
+            fitted[pinned] = mesh.values[pinned]
+        mesh = Mesh(mesh.vertices, fitted, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
+    if step is None:
+        if mse is None:
+            mse = _decoded_mse(mesh, band, ~holes if has_holes else None)
+        step = max(1, int(STEP_FACTOR * np.sqrt(mse)))
+    # the values as the file will store them (pinned first-row values stay exact); the
+    # stored order and sample order made for that serve the writer too
+    mesh = meshcode.in_stored_order(mesh, triangulate_again=False)
+    layout = meshcode.layout(mesh)
+    mesh = meshcode.quantise(mesh, step, top is not None, layout)
+    refined, delaunay = error_bound.refine_to_bound(
+        mesh,
+        band,
+        plan.bound,
+        values=plan.values,
+        pinned_rows=1 if top is not None else 0,
+        last_band=last,
+        valid=~holes if has_holes else None,
+        delaunay=delaunay,
+    )
+    if refined is not mesh:
+        return CodedBand(y0, meshcode.in_stored_order(refined, triangulate_again=False), step, delaunay)
+    return CodedBand(y0, mesh, step, delaunay, layout)

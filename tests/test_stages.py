@@ -1,0 +1,212 @@
+"""Each stage of the encoder on small hand-made inputs whose right answer is known:
+edges, polylines, unfolding into walls, region sampling, vertex values, refinement
+to the budget, and the rows bands share."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from codec import banding
+from codec.mesh import Mesh
+from codec.mesher import edges, polylines, refine, sampling, unfold, values
+from codec.mesher.elements import Statistics
+from codec.triangulate import triangulate
+
+
+def _step(height: int = 20, width: int = 24, at: int = 12, low: float = 0, high: float = 200) -> np.ndarray:
+    image = np.full((height, width), low, np.float32)
+    image[:, at:] = high
+    return image
+
+
+def _flat_magnitude(mask: np.ndarray) -> np.ndarray:
+    return np.ones(mask.shape, np.float32)
+
+
+# edges ---------------------------------------------------------------------------
+
+
+def test_a_vertical_step_is_one_edge_column_on_its_dark_side():
+    found, magnitude, (low, high) = edges.detect(_step(), 255.0)
+    assert found[:, 11].all()  # the last dark column, every row
+    found[:, 11] = False
+    assert not found.any()
+    assert 0 < low <= high and magnitude[:, 11].min() > magnitude[:, 5].max()
+
+
+def test_a_flat_image_has_no_edges():
+    found, _, _ = edges.detect(np.full((16, 16), 90, np.float32), 255.0)
+    assert not found.any()
+
+
+# polylines ---------------------------------------------------------------------------
+
+
+def test_a_straight_edge_is_one_segment_between_its_ends():
+    mask = np.zeros((12, 24), bool)
+    mask[5, 2:20] = True
+    lines = polylines.trace(mask, _flat_magnitude(mask))
+    assert len(lines) == 1
+    assert lines.line(0).tolist() == [[2, 5], [19, 5]]
+    assert sorted(map(tuple, lines.pixels.tolist())) == [(x, 5) for x in range(2, 20)]
+
+
+def _distance_to_polyline(p: np.ndarray, line: np.ndarray) -> float:
+    a, b = line[:-1].astype(float), line[1:].astype(float)
+    d = b - a
+    t = np.clip(((p - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-12), 0, 1)
+    return float(np.min(np.hypot(*(a + t[:, None] * d - p).T)))
+
+
+def test_a_bent_edge_keeps_every_pixel_within_the_segment_error():
+    mask = np.zeros((20, 20), bool)
+    mask[3, 3:15] = True
+    mask[3:16, 14] = True
+    lines = polylines.trace(mask, _flat_magnitude(mask), segment_length=4, segment_error=1.0)
+    assert len(lines) == 1
+    line = lines.line(0)
+    assert line[0].tolist() == [3, 3] and line[-1].tolist() == [14, 15]  # the chain's ends
+    assert len(line) > 2  # the bend needs control points between them
+    # the rule's promise: no edge pixel further than segment_error from the polyline
+    assert max(_distance_to_polyline(p.astype(float), line) for p in lines.pixels) <= 1.0 + 1e-9
+
+
+def test_edges_shorter_than_min_pixels_are_dropped():
+    mask = np.zeros((10, 10), bool)
+    mask[4, 4:6] = True  # two pixels
+    assert len(polylines.trace(mask, _flat_magnitude(mask), min_pixels=3)) == 0
+
+
+# unfolding ------------------------------------------------------------------------
+
+
+def test_an_edge_unfolds_into_one_wall_on_each_side():
+    image = _step()
+    mask = np.zeros(image.shape, bool)
+    mask[2:18, 11] = True
+    lines = polylines.trace(mask, _flat_magnitude(mask))
+    walls = unfold.unfold(lines, image)
+    assert sorted(walls.wall.tolist()) == [0, 1]  # the left and the right wall of polyline 0
+    for k in (0, 1):
+        feet = walls.points[np.unique(walls.segments[walls.wall == k])]
+        side = image[feet[:, 1], feet[:, 0]]
+        assert len(set(side.tolist())) == 1  # each wall stands on one side only
+        assert sorted(feet[:, 1].tolist()) == [2, 17]  # as long as the edge
+    dark = walls.points[np.unique(walls.segments[walls.wall == 0])]
+    bright = walls.points[np.unique(walls.segments[walls.wall == 1])]
+    assert {image[p[1], p[0]] for p in dark} != {image[p[1], p[0]] for p in bright}
+    assert np.abs(dark[:, 0] - bright[:, 0]).max() == 1  # a pixel apart: the step between
+
+
+# region sampling ----------------------------------------------------------------
+
+
+def test_no_samples_where_the_density_is_excluded():
+    curv = np.ones((40, 40))
+    excluded = np.zeros((40, 40), bool)
+    excluded[:, :20] = True
+    dens = sampling.density(curv, excluded)
+    assert (dens[:, :20] == 0).all() and (dens[:, 20:] > 0).all()
+    pts = sampling.sample(dens, (2, 2), (3, 3))
+    assert len(pts) and (pts[:, 0] >= 20).all()
+
+
+def test_samples_follow_the_density():
+    dens = np.zeros((30, 30))
+    dens[:, 7] = 1.0  # all the density in one column
+    pts = sampling.sample(dens, (1, 1), (2, 4))
+    assert len(pts) and (pts[:, 0] == 7).all()
+
+
+def test_curvature_is_where_the_surface_bends():
+    assert np.abs(sampling.curvature(np.full((20, 20), 50, np.float32))).max() < 1e-3
+    yy, xx = np.mgrid[0:40, 0:40].astype(np.float32)
+    plane = sampling.curvature(3 * xx + 2 * yy)[8:-8, 8:-8]
+    bowl = sampling.curvature(0.1 * ((xx - 20) ** 2 + (yy - 20) ** 2))[8:-8, 8:-8]
+    assert plane.max() < 0.2 * bowl.min()
+
+
+# vertex values ----------------------------------------------------------------------
+
+
+def _grid_mesh(width: int, height: int, step: int):
+    xs = np.unique(np.r_[np.arange(0, width, step), width - 1])
+    ys = np.unique(np.r_[np.arange(0, height, step), height - 1])
+    vertices = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2).astype(np.int64)
+    return vertices, triangulate(vertices)
+
+
+def test_least_squares_values_of_a_plane_are_the_plane():
+    yy, xx = np.mgrid[0:21, 0:25]
+    image = (2 * xx + 3 * yy + 10).astype(np.uint8)
+    vertices, triangles = _grid_mesh(25, 21, 6)
+    fitted = values.fit(image, vertices, triangles, "lsq")
+    np.testing.assert_array_equal(fitted, image[vertices[:, 1], vertices[:, 0]])
+
+
+def test_sampled_values_are_the_pixels_and_least_squares_beats_them_on_noise():
+    rng = np.random.default_rng(1)
+    image = np.clip(100 + rng.normal(0, 20, (21, 25)), 0, 255).astype(np.uint8)
+    vertices, triangles = _grid_mesh(25, 21, 6)
+    sampled = values.fit(image, vertices, triangles, "sample")
+    np.testing.assert_array_equal(sampled, image[vertices[:, 1], vertices[:, 0]])
+    from codec.decoder_cpu import render
+
+    def sse(v):
+        return float(((render(Mesh(vertices, v, triangles, 25, 21)).astype(float) - image) ** 2).sum())
+
+    assert sse(values.fit(image, vertices, triangles, "lsq")) < sse(sampled)
+
+
+# refinement to the budget --------------------------------------------------------
+
+
+def test_refinement_puts_the_vertex_at_the_worst_pixel():
+    gray = np.full((15, 20), 40, np.float32)
+    gray[5, 7] = 240  # the only pixel the corners' mesh gets wrong
+    corners = np.array([[0, 0], [19, 0], [0, 14], [19, 14]], np.int64)
+    vertices, segments, triangles, _, _, delaunay = refine.refine_to_budget(
+        gray, corners, np.zeros((0, 2), np.int64), 5, Statistics(gray, None)
+    )
+    assert sorted(map(tuple, vertices.tolist())) == sorted([(0, 0), (19, 0), (0, 14), (19, 14), (7, 5)])
+    keys = vertices[:, 1] * 20 + vertices[:, 0]
+    assert (np.diff(keys) > 0).all() and delaunay  # stored order, the decoder's triangles
+    np.testing.assert_array_equal(triangles, triangulate(vertices))
+
+
+def test_refinement_stops_early_when_nothing_is_wrong():
+    gray = np.full((15, 20), 40, np.float32)
+    corners = np.array([[0, 0], [19, 0], [0, 14], [19, 14]], np.int64)
+    vertices, _, _, _, _, _ = refine.refine_to_budget(gray, corners, np.zeros((0, 2), np.int64), 50, Statistics(gray, None))
+    assert len(vertices) == 4  # a flat image: the corners are exact
+
+
+# the rows bands share ----------------------------------------------------------------
+
+
+def test_default_band_height_is_about_a_megapixel():
+    assert banding.default_band_height(1024, 5000) == 1024
+    assert banding.default_band_height(1 << 20, 10) == banding.MIN_BAND_HEIGHT
+
+
+def test_pinned_first_row_is_exactly_the_row_given():
+    vertices = np.array([[0, 0], [5, 0], [9, 0], [0, 6], [9, 6], [4, 3]], np.int64)
+    mesh = Mesh(vertices, np.arange(6, dtype=np.uint8) * 10, triangulate(vertices), 10, 7)
+    pinned = banding.pin_top_row(mesh, np.array([0, 3, 9]), np.array([7, 8, 9], np.uint8))
+    xs, vals = banding.bottom_row(Mesh(pinned.vertices[::-1] * [1, -1] + [0, 6], pinned.values[::-1],
+                                       np.zeros((0, 3), np.int64), 10, 7))
+    assert xs.tolist() == [0, 3, 9] and vals.tolist() == [7, 8, 9]
+    below = pinned.vertices[:, 1] > 0
+    assert sorted(map(tuple, pinned.vertices[below].tolist())) == [(0, 6), (4, 3), (9, 6)]
+    assert len(pinned.triangles) == 0  # triangulated once, when the band is final
+
+
+def test_last_row_gets_a_vertex_where_it_bends_and_none_where_it_is_straight():
+    vertices = np.array([[0, 0], [15, 0], [0, 4], [15, 4]], np.int64)
+    band = np.tile(np.arange(16, dtype=np.uint8) * 10, (5, 1))  # linear along x
+    mesh = Mesh(vertices, band[vertices[:, 1], vertices[:, 0]], triangulate(vertices), 16, 5)
+    assert banding.sample_last_row(mesh, band, 1.0) is mesh
+    band[4, 6] = 250  # a spike on the last row
+    grown = banding.sample_last_row(mesh, band, 1.0)
+    xs, vals = banding.bottom_row(grown)
+    assert 6 in xs.tolist() and vals[xs.tolist().index(6)] == 250
