@@ -17,6 +17,7 @@ import signal
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from codec.errors import ATMError
 from codec.files import IMAGE_SUFFIXES
 
 GLOB_CHARS = set("*?[")
+WORKER_DIED = "not converted: a worker process ended abruptly (killed, out of memory, or a crash); rerun it with --jobs 1"
 
 
 def is_batch(inputs: list[str], output: str) -> bool:
@@ -163,14 +165,15 @@ def run(args: argparse.Namespace, command: str) -> int:
         fmt = args.format or "png"
         options = {"format": fmt, "backend": args.backend}
         suffix = "." + fmt
+    # checked before the output directory is made: a usage error leaves nothing behind
+    jobs = args.jobs if args.jobs is not None else os.cpu_count() or 1
+    if jobs < 1:
+        raise UsageError(f"--jobs must be at least 1, not {jobs}")
     pairs = plan(expand(args.inputs, command), outdir, suffix)
     try:
         outdir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ATMError(f"cannot create {outdir}: {exc.strerror}") from None
-    jobs = args.jobs or os.cpu_count() or 1
-    if jobs < 1:
-        raise UsageError(f"--jobs must be at least 1, not {jobs}")
     bar = Progress(len(pairs), quiet=args.quiet)
     start = time.monotonic()
     results: list[Result] = []
@@ -190,11 +193,17 @@ def run(args: argparse.Namespace, command: str) -> int:
     else:
         pool = ProcessPoolExecutor(min(jobs, len(pairs)), initializer=_worker_setup)
         try:
-            pending = {pool.submit(_work, command, str(s), str(d), options) for s, d in pairs}
+            sources = {pool.submit(_work, command, str(s), str(d), options): str(s) for s, d in pairs}
+            pending = set(sources)
             while pending:
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for future in done:
-                    record(future.result())
+                    try:
+                        record(future.result())
+                    except BrokenProcessPool:
+                        # a worker died (killed, out of memory, a crash in native code):
+                        # the pool is gone, and with it every file not yet converted
+                        record(Result(sources[future], False, error=WORKER_DIED))
         except BaseException:
             # Ctrl-C, SIGTERM or a broken pool: no file may be written after this returns
             _stop(pool)

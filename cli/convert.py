@@ -66,6 +66,8 @@ def encode_options(args: argparse.Namespace) -> dict:
             options["metadata"] = json.loads(options["metadata"])
         except ValueError as exc:
             raise codec.OptionError(f"--metadata is not JSON: {exc}") from None
+        except RecursionError:
+            raise codec.OptionError("--metadata is nested too deeply") from None
     return options
 
 

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from codec.errors import ATMError
-from codec.files import IMAGE_SUFFIXES
+from codec.files import IMAGE_NAMES
 
 
 class UsageError(ATMError):
@@ -55,7 +55,7 @@ def refuse_misleading_name(output: str, writes_atm: bool, force: bool, what: str
         return
     suffix = Path(output).suffix.lower()
     stem = output[: len(output) - len(suffix)]
-    if writes_atm and suffix in IMAGE_SUFFIXES:
+    if writes_atm and suffix in IMAGE_NAMES:
         raise UsageError(
             f"{output} is named as a {suffix} image, but the output is an .atm file: "
             f"name it {stem}.atm, or give --force to write .atm data under this name"

@@ -12,7 +12,7 @@ import numpy as np
 
 from codec import geotiff, integers, quantise
 from codec.errors import ATMError, UnsupportedError
-from codec.files import decode_image
+from codec.files import decode_image, npy_header
 
 #: Rows handed to the encoder at a time when reading a stream.
 BLOCK_ROWS = 64
@@ -113,19 +113,17 @@ def _pnm_source(f: BinaryIO, magic: bytes, name: str) -> RowSource:
 
 def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
     if path is not None:
-        array = np.load(path, mmap_mode="r", allow_pickle=False)  # pages in as rows are read
+        try:
+            array = np.load(path, mmap_mode="r", allow_pickle=False)  # pages in as rows are read
+        except (ValueError, SyntaxError, EOFError) as exc:
+            # a header that lies about the data's size, or one cut short
+            raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
         shape, dtype = array.shape, array.dtype
     else:
         try:
-            version = np.lib.format.read_magic(f)
-            header = (
-                np.lib.format.read_array_header_1_0(f)
-                if version == (1, 0)
-                else np.lib.format.read_array_header_2_0(f)
-            )
+            shape, fortran, dtype = npy_header(f)
         except (ValueError, SyntaxError) as exc:
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
-        shape, fortran, dtype = header
         if fortran:
             raise UnsupportedError(f"{name}: Fortran-ordered .npy cannot be streamed")
         array = None
@@ -139,7 +137,7 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
         for y in range(0, height, BLOCK_ROWS):
             n = min(BLOCK_ROWS, height - y)
             if array is not None:
-                yield np.ascontiguousarray(array[y : y + n])
+                yield np.ascontiguousarray(array[y : y + n], dtype.newbyteorder("="))
             else:
                 data = _read_exact(f, n * row_items * dtype.itemsize, name)
                 yield np.frombuffer(data, dtype).reshape((n,) + tuple(shape[1:])).astype(dtype.newbyteorder("="))

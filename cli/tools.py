@@ -78,6 +78,12 @@ def compare(a: np.ndarray, b: np.ndarray) -> dict:
     PSNR's peak is the sample type's largest value (255, 65535), or the range of a's
     values for float data; pixels that are NaN (holes) in either image are left out.
     """
+    for image in (a, b):
+        if image.ndim not in (2, 3) or image.dtype.kind not in "uif":
+            raise UnsupportedError(
+                f"cannot compare an array of shape {image.shape} and type {image.dtype}: "
+                "images are 2-D (or 3-D with channels) of integer or float samples"
+            )
     if a.shape != b.shape:
         raise ATMError(f"the images differ in shape: {_describe(a)} against {_describe(b)}")
     if a.dtype != b.dtype and not (a.dtype.kind == b.dtype.kind == "f"):

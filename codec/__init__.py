@@ -96,20 +96,21 @@ def encode(
 
 def build_mesh(image: np.ndarray, *, points: int | None = None, mesher: str = "adaptive", **options) -> Mesh:
     """The mesh the mesher makes of a whole image in one piece: points as for `encode`,
-    and the mesher's options (codec.settings.mesher_option_names). With encode's size
-    bounds (max_error, max_rms, quality), or float or signed samples, it is the mesh
-    `encode` stores (refined to the bound, one band), its values in data units."""
+    and the mesher's options (codec.settings.mesher_option_names). With a size bound
+    (max_error, max_rms, quality) or samples the file stores with an offset or scale
+    (float, signed), it is the mesh `encode` stores, its values in data units."""
     from . import encoder, terrain
     from .settings import Settings, mesher_option_names
 
     if terrain.needs_encoder(image, options):
         return terrain.build_mesh(image, points=points, mesher=mesher, **options)
+
     allowed = mesher_option_names(mesher) if isinstance(mesher, str) else ()
     other = sorted(set(options) - set(allowed))
     if other:
         raise OptionError(
             f"build_mesh takes points, mesher and the mesher's options ({', '.join(allowed) or 'none'}), "
-            f"max_error, max_rms or quality, not {', '.join(other)}"
+            f"not {', '.join(other)}"
         )
     return encoder.build_mesh(image, Settings.from_options(points=points, mesher=mesher, **options))
 
@@ -138,8 +139,7 @@ def decode_mesh(data: bytes) -> Mesh:
 
 def info(data: bytes) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
-    vertices, triangles, constraints, bytes, nodata, metadata, and for float data its
-    precision (the quantisation step; signed integers: offset). Read from the header and
+    vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
     each band's count fields (checksums and limits checked, no mesh decoded)."""
     from . import container
 

@@ -16,36 +16,38 @@ cpdef enum Varints:
 
 def unvarints(const uint8_t[::1] data, int64_t count, int64_t longest):
     """(status, values): exactly `count` unsigned LEB128 numbers filling `data`, none
-    longer than `longest` bytes (<= 9, so every value fits an int64)."""
+    longer than `longest` bytes (<= 9, so every value fits an int64). The count is
+    checked before anything is allocated: a file cannot make it allocate more than
+    its own length (values is None on an error)."""
     cdef int64_t n = data.shape[0], i, k = 0, ends = 0, length = 0
     cdef uint64_t value = 0
     cdef int shift = 0
-    cdef Varints status = VARINTS_OK
-    out = np.empty(count if count >= 0 else 0, dtype=np.int64)
-    cdef int64_t[::1] o = out
     if longest > 9 or count < 0:
         raise ValueError("unvarints: at most 9 bytes a number, and a count >= 0")
     with nogil:
         # the count first: the number of last bytes, and a last byte at the end
         for i in range(n):
             ends += data[i] < 0x80
-        if ends != count or (n and data[n - 1] >= 0x80):
-            status = VARINTS_COUNT
-        else:
-            for i in range(n):
-                value |= <uint64_t>(data[i] & 0x7F) << shift
-                shift += 7
-                length += 1
-                if data[i] < 0x80:
-                    o[k] = <int64_t>value
-                    k += 1
-                    value = 0
-                    shift = 0
-                    length = 0
-                elif length >= longest:
-                    status = VARINTS_LONG
-                    break
-    return status, out
+    if ends != count or (n and data[n - 1] >= 0x80):
+        return VARINTS_COUNT, None
+    out = np.empty(count, dtype=np.int64)
+    cdef int64_t[::1] o = out
+    with nogil:
+        for i in range(n):
+            value |= <uint64_t>(data[i] & 0x7F) << shift
+            shift += 7
+            length += 1
+            if data[i] < 0x80:
+                o[k] = <int64_t>value
+                k += 1
+                value = 0
+                shift = 0
+                length = 0
+            elif length >= longest:
+                break
+    if length:  # stopped inside a number longer than `longest`
+        return VARINTS_LONG, None
+    return VARINTS_OK, out
 
 
 def sample_parents(const int64_t[:, ::1] triangles, const int64_t[::1] seq_order):

@@ -3,9 +3,10 @@ GIL released (see codec.decoder_cpu for the rule it implements, ATM.md §5).
 
 Every quantity is an int64 integer: the pixel centres and vertices are integer
 points, so a span's ends and a pixel's value are exact fractions, walked from row to
-row and pixel to pixel as quotient and remainder (one division per triangle edge and
-per span, none per pixel). Bounds: with W*H <= 2**32 and samples below 2**16, every
-numerator is below 2**53 (see _plane)."""
+row and pixel to pixel as quotient and remainder (a float64 division, corrected to
+the exact floor, per triangle edge and per span; none per pixel). Bounds: with
+W*H <= 2**32 and samples below 2**16, every numerator is below 2**53 (see the plane
+in _triangles), so the float64 quotients are off by at most one before correction."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t
 
@@ -52,11 +53,12 @@ cdef inline void _walk_init(Walk* w, int64_t num, int64_t den, int64_t step) noe
 
 
 cdef inline void _walk_step(Walk* w) noexcept nogil:
+    cdef int64_t carry
     w.q += w.dq
     w.r += w.dr
-    if w.r >= w.den:
-        w.r -= w.den
-        w.q += 1
+    carry = w.r >= w.den  # without a branch: it goes either way from row to row
+    w.r -= carry * w.den
+    w.q += carry
 
 
 cdef inline int64_t _ceil(Walk* w) noexcept nogil:
@@ -90,6 +92,8 @@ cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
     cdef int64_t gc[4]
     cdef int64_t qa[4]
     cdef int64_t ra[4]
+    cdef int64_t qs[4]
+    cdef int64_t rs[4]
     cdef Walk long_edge, short_edge
     cdef bint el, es
     cdef uint8_t seen
@@ -154,23 +158,38 @@ cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
                 hi = w
             if lo < hi:
                 row = y * w
-                for x in range(row + lo, row + hi):
-                    seen = cover[x]
-                    cover[x] = seen + 1 if seen < 2 else 2
+                # the value at (lo, y) of each channel as quotient and remainder over
+                # 2D, then stepped along the row without a branch to mispredict; one
+                # loop over the span, so that only its exit is hard to predict
                 for ch in range(c):
-                    # the value at (lo, y) as quotient and remainder over 2D, then
-                    # stepped along the row without a branch to mispredict
                     n = ga[ch] * lo + gb[ch] * y + gc[ch]
-                    q = _floor_div_fast(n, d2)
-                    r = n - q * d2
-                    p = pixels + (row + lo) * c + ch
-                    for x in range(hi - lo):
-                        p[x * c] = <sample_t>q
-                        q += qa[ch]
-                        r += ra[ch]
+                    qs[ch] = _floor_div_fast(n, d2)
+                    rs[ch] = n - qs[ch] * d2
+                if c == 1:
+                    q = qs[0]
+                    r = rs[0]
+                    for x in range(row + lo, row + hi):
+                        seen = cover[x]
+                        cover[x] = seen + 1 if seen < 2 else 2
+                        pixels[x] = <sample_t>q
+                        q += qa[0]
+                        r += ra[0]
                         carry = r >= d2
                         q += carry
                         r -= carry * d2
+                else:
+                    p = pixels + (row + lo) * c
+                    for x in range(row + lo, row + hi):
+                        seen = cover[x]
+                        cover[x] = seen + 1 if seen < 2 else 2
+                        for ch in range(c):
+                            p[ch] = <sample_t>qs[ch]
+                            qs[ch] += qa[ch]
+                            rs[ch] += ra[ch]
+                            carry = rs[ch] >= d2
+                            qs[ch] += carry
+                            rs[ch] -= carry * d2
+                        p += c
             _walk_step(&long_edge)
             _walk_step(&short_edge)
     return OK

@@ -8,8 +8,8 @@ import zlib
 
 import numpy as np
 
-from . import _fields
 from .errors import CorruptError
+from .native import _fields
 
 #: Longest varint accepted: 5 bytes hold every value below 2**35.
 MAX_VARINT_BYTES = 5

@@ -10,11 +10,12 @@ from __future__ import annotations
 import gc
 import io
 import struct
+import zlib
 from dataclasses import dataclass
 from typing import BinaryIO, Iterator
 
 import numpy as np
-from construct import ChecksumError, ConstructError
+from construct import ConstructError
 
 from .format_spec import schema
 
@@ -74,8 +75,40 @@ def _stored_bound(size: int) -> int:
 
 
 #: The MESH payload's fixed fields (schema.MeshPayload up to sample_step), which say
-#: how large the rest can be.
-_MESH_FIXED = struct.Struct("<6IBBIH")
+#: how large the rest can be, and the names of all its fields, from the schema.
+_MESH_NAMES = [sub.name for sub in schema.MeshPayload.subcons]
+_MESH_FIXED = struct.Struct(
+    "<" + "".join({1: "B", 2: "H", 4: "I"}[sub.sizeof()] for sub in schema.MeshPayload.subcons[: len(_MESH_NAMES) - len(meshcode.FIELDS)])
+)
+#: schema.ChunkHead (length, type) as a struct: parsed once per chunk.
+_CHUNK_HEAD = struct.Struct("<I4s")
+assert _CHUNK_HEAD.size == schema.ChunkHead.sizeof()
+
+#: Frames up to this size are decompressed whole at once (cheaper than reading their
+#: fixed fields first); larger ones have their fixed fields checked first.
+_WHOLE_FRAME = 1 << 16
+
+
+class _MeshFields:
+    """A parsed MESH payload: the schema's field names as attributes (what
+    schema.MeshPayload.parse gives, without construct's per-field cost, which
+    dominated decoding files of many small bands)."""
+
+    def __init__(self, raw: bytes, where: str):
+        values = list(_MESH_FIXED.unpack_from(raw))
+        at = _MESH_FIXED.size
+        view = memoryview(raw)
+        for _ in meshcode.FIELDS:  # seven length-prefixed sections
+            if at + 4 > len(raw):
+                raise CorruptError(f"{where} is malformed: it ends inside a section's length")
+            (n,) = struct.unpack_from("<I", raw, at)
+            if at + 4 + n > len(raw):
+                raise CorruptError(f"{where} is malformed: a section of {n:,} bytes runs past its end")
+            values.append(bytes(view[at + 4 : at + 4 + n]))
+            at += 4 + n
+        if at != len(raw):
+            raise CorruptError(f"{where} has {len(raw) - at} bytes of trailing data")
+        self.__dict__.update(zip(_MESH_NAMES, values))
 
 
 def band_starts(height: int, band_height: int) -> list[int]:
@@ -233,6 +266,7 @@ class Reader:
         self._stream = _Counted(stream)
         #: metadata bytes (decompressed) still allowed in this file
         self._meta_budget = limits.MAX_METADATA_BYTES
+        self._dctx = frames.decompressor()  # this reader's own
         self.version = self._read_signature()
         ctype, payload, offset = self._next_chunk()
         if ctype != schema.HEADER:
@@ -301,14 +335,13 @@ class Reader:
             raise self._pending_error
         s = self._stream
         offset = s.offset
-        raw = s.read(schema.ChunkHead.sizeof())
+        raw = s.read(_CHUNK_HEAD.size)
         if not raw:
             raise TruncatedError(f"the file ends at byte {offset}, before its AEND chunk")
-        if len(raw) < schema.ChunkHead.sizeof():
+        if len(raw) < _CHUNK_HEAD.size:
             raise TruncatedError(f"the file ends inside a chunk header at byte {s.offset}")
-        parsed = schema.ChunkHead.parse(raw)
-        length, ctype = parsed.length, parsed.type
-        if not all(65 <= c <= 90 or 97 <= c <= 122 for c in ctype):
+        length, ctype = _CHUNK_HEAD.unpack(raw)
+        if not ctype.isalpha():  # bytes: ASCII letters only
             raise CorruptError(f"invalid chunk type {ctype!r} at byte {offset}")
         if length > limits.MAX_CHUNK_BYTES:
             raise LimitError(
@@ -326,13 +359,11 @@ class Reader:
         ctype, raw, length, offset = self._next_head()
         name = ctype.decode("latin-1")
         body = self._stream.read_exact(length + 4, f"chunk {name}")
-        try:
-            chunk = schema.Chunk.parse(raw + body)
-        except ChecksumError:
-            raise CorruptError(
-                f"chunk {name} at byte {offset} fails its CRC check (the file is damaged)"
-            ) from None
-        return ctype, chunk.payload, offset
+        payload = body[:length]
+        # the CRC as schema.Chunk defines it (type and payload), without construct's cost
+        if zlib.crc32(payload, zlib.crc32(ctype)) != int.from_bytes(body[length:], "little"):
+            raise CorruptError(f"chunk {name} at byte {offset} fails its CRC check (the file is damaged)")
+        return ctype, payload, offset
 
     @staticmethod
     def _parse_header(payload: bytes) -> "_RawHeader":
@@ -433,10 +464,11 @@ class Reader:
         per_vertex = v + h.storage.itemsize * h.channels + 2 * (2 * v) + 2 * v
         return 65 + nv * per_vertex + nt * 3 * v
 
-    def _check_frame(self, payload: bytes, where: str, y0_expected: int) -> int:
-        """The size a MESH frame declares, once it is known to fit what the image, the
-        chunk's stored bytes and the band's own counts allow (all before decompressing
-        more than the counts)."""
+    def _check_frame(self, payload: bytes, where: str, y0_expected: int, whole: bool = True) -> tuple[bytes, bytes]:
+        """(fixed fields, whole payload or b"" unless `whole`) of a MESH frame, once its
+        declared size is known to fit what the image, the chunk's stored bytes and the
+        band's own counts allow (all checked before decompressing more than the fixed
+        fields of a large frame)."""
         h = self.header
         size = frames.declared_size(payload, where)
         if size > limits.max_payload(len(payload)):
@@ -447,7 +479,8 @@ class Reader:
             )
         if size > min(self._payload_limit(), limits.MAX_PAYLOAD_BYTES):
             raise LimitError(f"{where} would decompress to {size:,} bytes, more than its image can need")
-        fixed = frames.head(payload, _MESH_FIXED.size, where)
+        raw = frames.decompress(payload, size, where, self._dctx) if size <= _WHOLE_FRAME else b""
+        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where)
         if len(fixed) < _MESH_FIXED.size:
             raise CorruptError(f"{where} is malformed: it ends inside its fixed fields")
         y0, rows, n, nt, lines, points, connectivity, _, _, _ = _MESH_FIXED.unpack(fixed)
@@ -470,24 +503,15 @@ class Reader:
                 + (24 * n + 7) // 8 + v * n * h.channels + 3 * v * nt)
         if size > need:
             raise CorruptError(f"{where} declares {size:,} bytes; its counts can use at most {need:,}")
-        return size
+        if whole and not raw:
+            raw = frames.decompress(payload, size, where, self._dctx)
+        return fixed, raw
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
         h = self.header
         where = f"MESH chunk at byte {offset}"
-        size = self._check_frame(payload, where, y0_expected)
-        raw = frames.decompress(payload, size, where)
-        stream = io.BytesIO(raw)
-        fields = h._fields()
-        try:
-            m = schema.MeshPayload.parse_stream(stream, **fields)
-        except ConstructError as exc:
-            raise CorruptError(
-                f"MESH chunk at byte {offset} is malformed: {str(exc).splitlines()[0]}"
-            ) from None
-        _release_cycles(len(raw))
-        if stream.tell() != len(raw):
-            raise CorruptError(f"MESH chunk at byte {offset} has {len(raw) - stream.tell()} bytes of trailing data")
+        _, raw = self._check_frame(payload, where, y0_expected)
+        m = _MeshFields(raw, where)
         if m.y0 != y0_expected:
             raise CorruptError(f"MESH chunk at byte {offset} starts at row {m.y0}, expected {y0_expected}")
         if m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
@@ -564,8 +588,8 @@ def summarise(reader: Reader) -> Summary:
         if ctype == schema.MESH:
             if finished:
                 raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
-            reader._check_frame(payload, f"MESH chunk at byte {offset}", next_y0)
-            y0, rows, n, nt, lines, *_ = _MESH_FIXED.unpack(frames.head(payload, _MESH_FIXED.size, ""))
+            fixed, _ = reader._check_frame(payload, f"MESH chunk at byte {offset}", next_y0, whole=False)
+            y0, rows, n, nt, lines, *_ = _MESH_FIXED.unpack(fixed)
             bands, vertices, triangles, polylines = bands + 1, vertices + n, triangles + nt, polylines + lines
             next_y0, finished = y0 + rows - 1, y0 + rows == h.height
         elif ctype == schema.END:

@@ -41,15 +41,7 @@ import numpy as np
 
 from .errors import CorruptError, UnsupportedError
 from .mesh import Mesh
-
-try:
-    from . import _rasterise
-except ImportError as exc:  # pragma: no cover - depends on how the package was installed
-    raise ImportError(
-        "codec's compiled rasteriser (codec._rasterise) is not built: install the package "
-        "with `pip install -e .` (or `pip install .`) from its source folder, which compiles "
-        f"it (a C compiler is needed when no wheel fits this platform); {exc}"
-    ) from exc
+from .native import _rasterise
 
 #: The sample types the kernel writes (ATM.md §3: the stored sample types).
 _SAMPLES = (np.dtype(np.uint8), np.dtype(np.uint16))

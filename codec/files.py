@@ -17,11 +17,13 @@ import functools
 import os
 import secrets
 import stat
+import struct
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
 import numpy as np
 
+from . import limits
 from .errors import ATMError, OptionError, UnsupportedError
 
 #: Extensions of the image files `atm encode` reads (OpenCV's formats, TIFF through
@@ -34,15 +36,24 @@ READABLE = (
 
 #: Extensions an image can be written as, by OpenCV.
 WRITABLE = (".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff")
-#: Extensions that name image files (what OpenCV reads, and .npy): .atm bytes written
-#: under one of these would be mistaken for an image, and the other way round.
+#: Extensions of the image files the codec reads (batch mode picks these out of a folder).
 IMAGE_SUFFIXES = frozenset(READABLE)
+#: Extensions that name an image or raster format: .atm bytes written under one of
+#: these would be taken for that format (and may replace the user's original).
+IMAGE_NAMES = IMAGE_SUFFIXES | {
+    ".jfif", ".exr", ".hdr", ".heic", ".heif", ".jxl", ".dng", ".raw", ".npz", ".img",
+    ".asc", ".dem", ".flt",
+}  # fmt: skip
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 #: O_TMPFILE where the platform has it (Linux); None selects named temporaries.
 UNNAMED = getattr(os, "O_TMPFILE", None)
 # where O_TMPFILE exists but this file system lacks it, open() fails with one of these
 _NO_TMPFILE = frozenset({errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL})
 _AT_FDCWD, _AT_EMPTY_PATH = -100, 0x1000
+# linkat() of an unnamed file refused outright (no privilege, no /proc, a sandbox)
+_CANNOT_LINK = frozenset({errno.EPERM, errno.EACCES, errno.ENOENT, errno.EXDEV, errno.ENOSYS, errno.EOPNOTSUPP, errno.EINVAL})
 
 
 class WriteError(ATMError, OSError):
@@ -76,22 +87,28 @@ class _Output:
         self.name = name
 
     def write(self, data) -> int:
-        n = len(memoryview(data).cast("B"))
-        self._pending += data
-        if len(self._pending) >= self.BUFFER:
+        view = memoryview(data).cast("B")
+        if len(self._pending) + len(view) < self.BUFFER:
+            self._pending += view
+        else:  # a large piece goes straight out, not copied into the buffer first
             self.flush()
-        return n
+            self._write_all(view)
+        return len(view)
 
     def flush(self) -> None:
-        view = memoryview(self._pending)
         try:
-            while view:
-                view = view[os.write(self._fd, view):]
-        except OSError as exc:
-            raise write_error(self.name, exc) from None
+            self._write_all(self._pending)
         finally:
-            view.release()
             self._pending.clear()
+
+    def _write_all(self, data) -> None:
+        with memoryview(data) as view:
+            done = 0
+            try:
+                while done < len(view):
+                    done += os.write(self._fd, view[done:])
+            except OSError as exc:
+                raise write_error(self.name, exc) from None
 
     def fileno(self) -> int:
         return self._fd
@@ -109,9 +126,8 @@ def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
         raise WriteError("the output file name is empty", errno.ENOENT)
     if name.endswith(os.sep):
         raise WriteError(f"cannot write {name}: a file name cannot end with {os.sep}", errno.EISDIR, name)
-    target = os.path.realpath(name)
     try:
-        st = os.stat(target)
+        st = os.stat(name)  # through any links, as the kernel resolves them
     except FileNotFoundError:
         st = None
     except OSError as exc:
@@ -119,18 +135,19 @@ def atomic_open(path: str | os.PathLike) -> Iterator[BinaryIO]:
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise WriteError(f"cannot write {name}: it is a directory", errno.EISDIR, name)
     if st is not None and not stat.S_ISREG(st.st_mode):
-        with _through(name, target) as f:
+        # /dev/stdout on a pipe has no path realpath() could name: open it as it is
+        with _through(name) as f:
             yield f
         return
-    with _replacing(name, target, st) as f:
+    with _replacing(name, os.path.realpath(name), st) as f:
         yield f
 
 
 @contextlib.contextmanager
-def _through(name: str, target: str) -> Iterator[BinaryIO]:
+def _through(name: str) -> Iterator[BinaryIO]:
     # a device or FIFO has no contents to keep: replacing it would only break it
     try:
-        fd = os.open(target, os.O_WRONLY | os.O_CLOEXEC)
+        fd = os.open(name, os.O_WRONLY | os.O_CLOEXEC)
     except OSError as exc:
         raise write_error(name, exc) from None
     try:
@@ -203,7 +220,9 @@ def _link_unnamed(fd: int, directory: str, target: str) -> None:
         return
     except FileExistsError:
         pass
-    except OSError:
+    except OSError as exc:
+        if exc.errno not in _CANNOT_LINK:
+            raise
         _copy_to(fd, directory, target)  # no way to name it on this system: copy it
         return
     # linkat never replaces: name it beside the target and rename that over it (the
@@ -266,7 +285,7 @@ def refuse_image_name(path: str | os.PathLike) -> None:
     """OptionError if `path` has an image extension: .atm bytes written there would be
     taken for that format (and an image of that name may be the user's original)."""
     suffix = Path(os.fsdecode(os.fspath(path))).suffix.lower()
-    if suffix in IMAGE_SUFFIXES:
+    if suffix in IMAGE_NAMES:
         raise OptionError(
             f"{os.fsdecode(os.fspath(path))} has the image extension {suffix}, but .atm data would be written "
             "there: use a name ending in .atm (or force=True to write it all the same)"
@@ -279,15 +298,33 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> None:
         f.write(data)
 
 
+def npy_header(stream: BinaryIO) -> tuple[tuple[int, ...], bool, np.dtype]:
+    """(shape, fortran_order, dtype) from the start of an .npy stream, which is left at
+    the array data. ValueError (or SyntaxError) if it is not one."""
+    version = np.lib.format.read_magic(stream)
+    if version == (1, 0):
+        return np.lib.format.read_array_header_1_0(stream)
+    return np.lib.format.read_array_header_2_0(stream)
+
+
 def decode_image(data: bytes, name: str = "input") -> np.ndarray:
     """Decode image-file bytes (any format OpenCV reads, or .npy) to gray or RGB."""
+    # the size a header declares is checked before any pixel is allocated: a small file
+    # may declare a huge image (a PNG of zeros compresses about 1000:1)
     if data[:6] == b"\x93NUMPY":
         import io
 
         try:
+            shape = npy_header(io.BytesIO(data))[0]
+            if len(shape) in (2, 3):
+                limits.check_image_size(int(shape[1]), int(shape[0]))
             return np.load(io.BytesIO(data), allow_pickle=False)
+        except ATMError:
+            raise
         except Exception as exc:  # numpy raises several types for a bad .npy
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
+    if data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR" and len(data) >= 24:
+        limits.check_image_size(*struct.unpack(">II", data[16:24]))
     from . import geotiff
 
     if geotiff.is_tiff(data):

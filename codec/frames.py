@@ -84,8 +84,14 @@ def head(frame: bytes, n: int, what: str) -> bytes:
         raise CorruptError(f"{what} does not decompress: {exc}") from None
 
 
-def decompress(frame: bytes, limit: int, what: str) -> bytes:
-    """The data of one zstd frame that declares a size of at most `limit` bytes."""
+def decompressor() -> zstandard.ZstdDecompressor:
+    """A decompressor for one reader to own and reuse (not to share between threads)."""
+    return zstandard.ZstdDecompressor()
+
+
+def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompressor | None = None) -> bytes:
+    """The data of one zstd frame that declares a size of at most `limit` bytes; dctx:
+    the caller's own decompressor to reuse."""
     size = declared_size(frame, what)
     if size > min(limit, limits.MAX_PAYLOAD_BYTES):
         raise LimitError(
@@ -93,7 +99,7 @@ def decompress(frame: bytes, limit: int, what: str) -> bytes:
             "(a decompression bomb?)"
         )
     try:
-        data = zstandard.ZstdDecompressor().decompress(frame, max_output_size=max(size, 1))
+        data = (dctx or zstandard.ZstdDecompressor()).decompress(frame, max_output_size=max(size, 1))
     except zstandard.ZstdError as exc:
         raise CorruptError(f"{what} does not decompress: {exc}") from None
     if len(data) != size:

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import io
 import math
-import warnings
 from collections.abc import Mapping
 from types import MappingProxyType
+import warnings
 from dataclasses import dataclass
 
 import numpy as np

@@ -87,21 +87,3 @@ def value_range(blocks, nodata: float | None = None) -> tuple[float, float]:
         if v.size:
             lo, hi = min(lo, float(v.min())), max(hi, float(v.max()))
     return (lo, hi) if lo <= hi else (0.0, 0.0)
-
-
-def plan_stream(dtype, channels: int, value_range: tuple[float, float] | None, precision: float | None) -> Quantiser:
-    """The quantiser of a stream of signed integer rows: its value_range, else the
-    whole type's where that fits 16 bits (int8, int16). OptionError or
-    UnsupportedError naming the fix when the stream cannot be stored exactly."""
-    dtype = np.dtype(dtype)
-    if channels != 1:
-        raise UnsupportedError("signed integer images must have one channel")
-    if precision is not None:
-        raise OptionError(f"{dtype} data is stored exactly; precision applies to float images only")
-    value_range = value_range if value_range is not None else default_range(dtype)
-    if value_range is None:
-        raise OptionError(
-            f"a {dtype} stream needs value_range=(lowest, highest) so that the header can "
-            "carry the offset before the data arrives"
-        )
-    return plan(*value_range, dtype)

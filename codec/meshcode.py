@@ -19,7 +19,7 @@ import numpy as np
 
 from .format_spec import schema
 
-from . import _fields, frames, limits
+from . import frames, limits
 from .coding import (
     canonical_triangles,
     hilbert_keys,
@@ -33,6 +33,7 @@ from .coding import (
 )
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, chain_steps, doubled_areas
+from .native import _fields
 from .triangulate import step_over_vertex, triangulate
 
 
@@ -281,7 +282,9 @@ def tree_sums(increments: np.ndarray, parent: np.ndarray) -> np.ndarray:
     in one pass in sequence order (a compiled kernel; CorruptError if a parent is not
     earlier)."""
     inc = np.asarray(increments, dtype=np.int64)
-    sums = _fields.tree_sums(np.ascontiguousarray(inc.reshape(len(inc), -1)),
+    # rows of all channels (explicitly: -1 cannot be inferred when there are no rows)
+    rows = inc.reshape(inc.shape[0], int(np.prod(inc.shape[1:], dtype=np.int64)))
+    sums = _fields.tree_sums(np.ascontiguousarray(rows),
                              np.ascontiguousarray(parent, dtype=np.int64))
     if sums is None:
         raise CorruptError("a sample's parent does not come before it")

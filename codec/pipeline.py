@@ -86,8 +86,18 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
     quant = None
     max_rms, max_error = s.max_rms, s.max_error
     if integers.is_signed(dtype):
+        if channels != 1:
+            raise UnsupportedError("signed integer images must have one channel")
+        if s.precision is not None:
+            raise OptionError(f"{dtype} data is stored exactly; precision applies to float images only")
+        value_range = s.value_range if s.value_range is not None else integers.default_range(dtype)
+        if value_range is None:
+            raise OptionError(
+                f"a {dtype} stream needs value_range=(lowest, highest) so that the header can "
+                "carry the offset before the data arrives"
+            )
         # whole numbers with scale 1: bounds in sample units are bounds on q as they are
-        quant = integers.plan_stream(dtype, channels, s.value_range, s.precision)
+        quant = integers.plan(*value_range, dtype)
     elif dtype.kind == "f":
         if channels != 1:
             raise UnsupportedError("float images must have one channel")

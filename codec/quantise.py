@@ -99,7 +99,7 @@ def plan(lo: float, hi: float, precision: float | None = None) -> Quantiser:
         # a constant image is exact at any step; a tiny one keeps every bound reachable
         step = span / LEVELS if span > 0 else min(max(abs(lo), 1.0) * 2.0**-30, (F32_MAX - abs(lo)) / LEVELS)
     else:
-        if isinstance(precision, bool) or not isinstance(precision, (int, float)) or not precision > 0:
+        if isinstance(precision, bool) or not isinstance(precision, numbers.Real) or not precision > 0:
             raise OptionError(f"precision must be a number > 0, not {precision!r}")
         finest = span / LEVELS
         if precision < finest * (1 - 1e-12):
@@ -109,25 +109,29 @@ def plan(lo: float, hi: float, precision: float | None = None) -> Quantiser:
             )
         step = float(precision)
     top = abs(lo) + LEVELS * step
-    if not (step > 0 and top <= F32_MAX):
-        extreme = lo if abs(lo) >= abs(hi) else hi
-        if abs(extreme) >= F32_ROUNDS_TO_INF:
-            raise OptionError(
-                f"the value {extreme:g} is beyond float32's range, which .atm decodes to; if it "
-                "marks missing data, set those samples to NaN (holes), otherwise scale the data"
-            )
-        if precision is not None and abs(lo) + span <= F32_MAX:
-            cause = f"with precision {precision:g} the {LEVELS + 1:,} levels from {lo:g} reach {top:.9g}"
-        elif step > 0:
-            cause = f"the values {lo:g} .. {hi:g} need levels up to {top:.9g}"
-        else:
-            cause = f"the value {lo:.9g} leaves no room for a level step below float32's largest"
+    if step > 0 and top <= F32_MAX:
+        return Quantiser(float(lo), float(step), float(hi))
+    if precision is not None and abs(lo) + span <= F32_MAX:
         raise OptionError(
-            f"{cause}, beyond the largest float32 ({F32_MAX:.9g}) that .atm can store; if {extreme:g} "
-            f"marks missing data, pass it as nodata (--nodata {shortest(extreme)}), otherwise "
-            + ("give a finer precision" if precision is not None and abs(lo) + span <= F32_MAX else "narrow the range")
+            f"precision {precision:g} is too coarse: the {LEVELS + 1:,} levels from {lo:g} would reach "
+            f"{top:.9g}, beyond the largest float32 ({F32_MAX:.9g}); give a precision of at most "
+            f"{(F32_MAX - abs(lo)) / LEVELS:.3g}"
         )
-    return Quantiser(float(lo), float(step), float(hi))
+    extreme = lo if abs(lo) >= abs(hi) else hi
+    if abs(extreme) >= F32_ROUNDS_TO_INF:
+        raise OptionError(
+            f"the value {extreme:g} is beyond float32's range, which .atm decodes to; if it "
+            "marks missing data, set those samples to NaN (holes), otherwise scale the data"
+        )
+    cause = (
+        f"the values {lo:g} .. {hi:g} need levels up to {top:.9g}"
+        if step > 0
+        else f"the value {lo:.9g} leaves no room for a level step below float32's largest"
+    )
+    raise OptionError(
+        f"{cause}, beyond the largest float32 ({F32_MAX:.9g}) that .atm can store; if {extreme:g} "
+        f"marks missing data, pass it as nodata (--nodata {shortest(extreme)}), otherwise narrow the range"
+    )
 
 
 def shortest(x: float) -> str:

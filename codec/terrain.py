@@ -207,8 +207,10 @@ def build_mesh(image, **options) -> Mesh:
     img = as_image(image, allow_nan=True)
     height = img.shape[0]
     options.setdefault("band_height", max(height - 1, 1))
-    options = {k: v for k, v in options.items() if v is not None}  # encode's defaults
-    reader = container.Reader(io.BytesIO(encoder.encode(img, Settings.from_options(**options))))
+    options = {k: v for k, v in options.items() if v is not None}
+    mask = options.pop("mask", None)
+    settings = Settings.from_options(also=("mask",), **options)
+    reader = container.Reader(io.BytesIO(encoder.encode(img, settings, mask)))
     mesh = merge_bands(list(reader))
     values = data_values(mesh.values, reader.header)
     dtype = reader.header.dtype

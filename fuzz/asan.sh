@@ -24,8 +24,10 @@ git ls-files -z --cached --others --exclude-standard | tar -c --null -T - -f - |
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
 "$venv/bin/pip" install -q --disable-pip-version-check --upgrade pip
 "$venv/bin/pip" install -q --disable-pip-version-check "$src[test]"
-# then the package again, instrumented; not editable, so the kernels live in the venv
-# and not beside the sources
+# then the package again, instrumented (compiled anew: the build objects of the first
+# install would be reused); not editable, so the kernels live in the venv and not
+# beside the sources
+rm -rf "$src/build"
 CC="$cc" CFLAGS="-fsanitize=address -fno-omit-frame-pointer -g -O1" LDFLAGS="-fsanitize=address" \
   "$venv/bin/pip" install -q --disable-pip-version-check --no-cache-dir --force-reinstall --no-deps "$src"
 # The kernels the tests will import must be the instrumented ones, in the venv (from

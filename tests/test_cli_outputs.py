@@ -63,6 +63,7 @@ def test_a_name_claiming_another_kind_of_file_needs_force(scene, tmp_path):
     victim.write_bytes(b"a photo the user keeps")
     refused(atm("encode", scene, victim), "victim.png is named as a .png image", "victim.atm", "--force")
     assert victim.read_bytes() == b"a photo the user keeps"
+    refused(atm("encode", scene, tmp_path / "dem.exr"), "named as a .exr image")
     assert atm("encode", scene, victim, "--force").returncode == 0
     np.testing.assert_array_equal(codec.read(victim).shape, (32, 48))
 
@@ -74,11 +75,74 @@ def test_a_name_claiming_another_kind_of_file_needs_force(scene, tmp_path):
     assert r.returncode == 0 and (tmp_path / "keep.atm").read_bytes().startswith(b"\x89PNG")
 
 
+def feed_stalled(fifos: list[Path], proc: subprocess.Popen) -> list[int]:
+    """Open each FIFO for writing once a worker reads it, and send a PGM header and some
+    rows: the workers then wait, mid-file, with their outputs open. The open ends."""
+    writers = []
+    deadline = time.monotonic() + 60
+    for f in fifos:
+        while True:  # a FIFO opens for writing once a worker has opened it to read
+            try:
+                writers.append(os.open(f, os.O_WRONLY | os.O_NONBLOCK))
+                break
+            except OSError:
+                assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+                time.sleep(0.05)
+        os.write(writers[-1], b"P5\n64 64\n255\n" + bytes(64 * 10))
+    return writers
+
+
+def stalled_batch(tmp_path: Path) -> tuple[subprocess.Popen, list[int], Path]:
+    """`atm encode` of two FIFOs and four images with two workers, both stalled mid-file."""
+    src, out = tmp_path / "in", tmp_path / "out"
+    src.mkdir()
+    fifos = [src / "f1.pgm", src / "f2.pgm"]
+    for f in fifos:
+        os.mkfifo(f)
+    images = [src / f"img{i}.png" for i in range(4)]
+    for i, path in enumerate(images):
+        write_image(path, range_scene(40, 30, seed=i))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "-q"],
+        stderr=subprocess.PIPE, cwd=ROOT, start_new_session=True,
+    )
+    return proc, feed_stalled(fifos, proc), out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses FIFOs and /proc")
+def test_a_worker_that_dies_is_reported_per_file_not_a_traceback(tmp_path):
+    proc, writers, out = stalled_batch(tmp_path)
+    try:
+        worker = int(Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()[0])
+        os.kill(worker, signal.SIGKILL)  # as the kernel's out-of-memory killer would
+        code = proc.wait(60)
+    finally:
+        for fd in writers:
+            os.close(fd)
+    err = proc.stderr.read().decode()
+    assert code == 1 and "Traceback" not in err, err
+    assert "a worker process ended abruptly" in err and "file(s) failed" in err.splitlines()[-1]
+    assert all(line.startswith("atm: error: ") for line in err.strip().splitlines())
+    assert not any(name.startswith(".") for name in os.listdir(out))
+
+
+def test_dev_stdout_on_a_pipe_is_written_through(scene, tmp_path):
+    r = subprocess.run([sys.executable, "-m", "codec", "encode", scene, "/dev/stdout"], capture_output=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == codec.encode(codec.files.read_image(scene))
+
+
 def test_an_empty_output_name_is_refused(scene, tmp_path):
     refused(atm("encode", scene, "", cwd=tmp_path), "output file name is empty")
     refused(atm("decode", scene, "", cwd=tmp_path), "output file name is empty")
     refused(atm("encode", scene, scene, "", cwd=tmp_path), "output directory name is empty")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.png"]
+
+
+@pytest.mark.parametrize("jobs", [0, -2])
+def test_batch_refuses_a_job_count_below_one_and_makes_no_directory(scene, tmp_path, jobs):
+    refused(atm("encode", scene, scene, tmp_path / "new", "-j", jobs), f"--jobs must be at least 1, not {jobs}")
+    assert not (tmp_path / "new").exists()
 
 
 def test_batch_refuses_an_output_that_is_an_input_before_converting(tmp_path):
@@ -151,29 +215,7 @@ def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
     more files wait; Ctrl-C (SIGINT to the process group) or SIGTERM (to the command
     alone) must end the command promptly and nothing may be written afterwards, not even
     once the stalled inputs end."""
-    src, out = tmp_path / "in", tmp_path / "out"
-    src.mkdir()
-    fifos = [src / "f1.pgm", src / "f2.pgm"]
-    for f in fifos:
-        os.mkfifo(f)
-    images = [src / f"img{i}.png" for i in range(4)]
-    for i, path in enumerate(images):
-        write_image(path, range_scene(40, 30, seed=i))
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "-q"],
-        stderr=subprocess.PIPE, cwd=ROOT, start_new_session=True,
-    )
-    writers = []
-    deadline = time.monotonic() + 60
-    for f in fifos:
-        while True:  # a FIFO opens for writing once a worker has opened it to read
-            try:
-                writers.append(os.open(f, os.O_WRONLY | os.O_NONBLOCK))
-                break
-            except OSError:
-                assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
-                time.sleep(0.05)
-        os.write(writers[-1], b"P5\n64 64\n255\n" + bytes(64 * 10))
+    proc, writers, out = stalled_batch(tmp_path)
     try:
         if how == "ctrl-c":
             os.killpg(proc.pid, signal.SIGINT)

@@ -32,6 +32,13 @@ def test_malformed_varints_are_corrupt(data: bytes, count: int, message: str) ->
         coding.unvarints(data, count, "field")
 
 
+def test_a_count_the_bytes_cannot_hold_allocates_nothing() -> None:
+    """A file that declares 10**12 numbers in one byte is refused by the count check,
+    before an array of that count (8 TB) is asked for."""
+    with pytest.raises(CorruptError, match="1 bytes do not hold 1000000000000 numbers"):
+        coding.unvarints(b"\x01", 10**12, "field")
+
+
 def test_tree_sums_follow_deep_chains_and_wrap_like_int64() -> None:
     """A chain as deep as the sequence (each sample's parent the one before) and a
     sum past int64 that wraps as numpy's arithmetic does (the caller's range check
@@ -47,6 +54,14 @@ def test_tree_sums_follow_deep_chains_and_wrap_like_int64() -> None:
     assert one.tolist() == [3, 7, 8]
 
 
+def test_tree_sums_of_no_samples() -> None:
+    """A band without vertices has no samples: empty sums of the increments' shape,
+    not an error from reshaping nothing."""
+    for shape in [(0,), (0, 1), (0, 3)]:
+        sums = meshcode.tree_sums(np.zeros(shape, np.int64), np.zeros(0, np.int64))
+        assert sums.shape == shape
+
+
 def test_malformed_trees_are_corrupt() -> None:
     with pytest.raises(CorruptError, match="does not come before"):
         meshcode.tree_sums(np.zeros((3, 1), np.int64), np.array([-1, 2, 0]))
@@ -58,3 +73,20 @@ def test_malformed_trees_are_corrupt() -> None:
     vertices = np.array([[0, 0], [1, 0], [0, 1]])
     with pytest.raises(CorruptError, match="beyond"):
         meshcode.vertex_steps(vertices, np.array([[0, 1, 5]]), 4, False, areas=np.array([1]))
+
+
+def test_a_package_without_its_kernels_says_how_to_build_them(monkeypatch) -> None:
+    """No fallback: an install that skipped the build fails at import, saying what to
+    run (None in sys.modules, and no attribute on the package, make that import fail
+    as a missing file would)."""
+    import importlib
+    import sys
+
+    import codec
+
+    monkeypatch.setitem(sys.modules, "codec._fields", None)
+    monkeypatch.delattr(codec, "_fields")
+    monkeypatch.delitem(sys.modules, "codec.native")
+    with pytest.raises(ImportError, match=r"not built: install the package with `pip install -e \.`"):
+        importlib.import_module("codec.native")
+

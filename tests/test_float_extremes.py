@@ -66,8 +66,12 @@ def test_a_nodata_value_beyond_float32_is_refused_and_infinity_is_kept():
 def test_a_range_the_format_cannot_carry_is_refused_before_writing():
     with pytest.raises(OptionError, match="beyond the largest float32"):
         codec.StreamEncoder(__import__("io").BytesIO(), 4, 4, dtype=np.float32, value_range=(-3e38, 3e38))
-    with pytest.raises(OptionError, match="give a finer precision"):
+    with pytest.raises(OptionError, match="is too coarse.*give a precision of at most 5.19e\\+33"):
         codec.encode(np.zeros((4, 4), np.float32), value_range=(0, 1), precision=1e35)
+    with pytest.raises(OptionError, match="precision must be a finite number"):
+        codec.encode(np.zeros((4, 4), np.float32), value_range=(0, 1), precision=math.inf)
+    # numpy scalars are numbers too
+    assert codec.encode(dem(), precision=np.float32(0.125)) == codec.encode(dem(), precision=0.125)
     with pytest.raises(OptionError, match="that is the finest step for the value range"):
         codec.encode(dem(), value_range=(-1e38, 1000), max_error=1.0)
     # a constant image near float32's edge fits; at the very edge only as nodata (the

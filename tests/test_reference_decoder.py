@@ -24,7 +24,7 @@ from codec import container
 from codec.files import read_image
 from codec.mesh import Mesh
 from codec.triangulate import triangulate
-from format_spec import schema
+from codec.format_spec import schema
 from tests.conftest import chunks, random_mesh
 from tests.synthetic import range_scene
 

@@ -79,7 +79,7 @@ def test_unknown_options_list_the_valid_ones():
         with pytest.raises(OptionError, match="unknown encoder option colour; the options are: " + ", ".join(option_names())):
             call()
     with pytest.raises(OptionError, match="build_mesh takes points, mesher and the mesher's options"):
-        codec.build_mesh(image, colour=1)  # size bounds (quality, ...) it takes, as encode does (#22)
+        codec.build_mesh(image, metadata={"a": 1})
 
 
 @pytest.mark.parametrize(
