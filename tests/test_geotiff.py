@@ -177,3 +177,19 @@ def test_decoded_tif_names_its_holes_for_gis_software(tmp_path, dtype, nodata):
     else:
         assert tag == nodata
         np.testing.assert_array_equal(decoded == nodata, holes)
+
+
+def test_tiled_zstd_geotiff_reads_as_rasterio_reads_it(tmp_path):
+    """GDAL's cloud-optimised layout: tiles, ZSTD, horizontal predictor."""
+    z = np.round(dem(50, 70, seed=5)).astype(np.int16)
+    src = tmp_path / "tiled.tif"
+    with rasterio.open(
+        src, "w", driver="GTiff", width=70, height=50, count=1, dtype="int16", crs="EPSG:4326",
+        transform=Affine(0.001, 0.0, 7.0, 0.0, -0.001, 46.0), nodata=-32768,
+        tiled=True, blockxsize=16, blockysize=16, compress="zstd", predictor=2,
+    ) as dst:
+        dst.write(z, 1)
+    raster = geotiff.read(src.read_bytes(), src.name)
+    np.testing.assert_array_equal(raster.image, z)
+    assert raster.nodata == -32768 and raster.record["crs"] == "EPSG:4326"
+    assert raster.record["transform"] == [0.001, 0.0, 7.0, 0.0, -0.001, 46.0]

@@ -71,3 +71,31 @@ def test_dask_to_zarr_on_a_two_worker_local_cluster(tmp_path):
                    compressors=ATM(max_error=0.25), fill_value=np.nan)
         back = da.from_zarr(str(tmp_path / "big.zarr")).compute()
     assert np.abs(back - z).max() <= 0.25
+
+
+def test_zarr_format_3_array_with_the_atm_serializer(tmp_path):
+    pytest.importorskip("zarr.codecs.numcodecs")
+    from codec.zarr3 import ATM as ATM3
+
+    z = terrain(90, 110)
+    z[5:15, 20:40] = np.nan
+    with pytest.warns(UserWarning, match="not in the Zarr version 3 specification"):
+        serializer = ATM3(max_error=0.25)
+    a = zarr.create_array(tmp_path / "v3.zarr", shape=z.shape, chunks=(48, 64), dtype=z.dtype,
+                          serializer=serializer, compressors=None, fill_value=np.nan)
+    a[:] = z
+    # a new process's view: the array's metadata names the codec, the entry point finds it
+    code = (
+        "import sys, zarr, numpy as np; a = zarr.open_array(sys.argv[1], mode='r'); "
+        "np.save(sys.argv[2], a[:]); print(a.metadata.codecs[0].codec_name)"
+    )
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-W", "ignore", "-c", code, str(tmp_path / "v3.zarr"), str(tmp_path / "back.npy")],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == "numcodecs.atm"
+    out = np.load(tmp_path / "back.npy")
+    np.testing.assert_array_equal(np.isnan(out), np.isnan(z))
+    assert np.nanmax(np.abs(out - z)) <= 0.25
