@@ -88,7 +88,7 @@ def test_unknown_options_list_the_valid_ones():
         (dict(points=0), "points must be a positive whole number"),
         (dict(points=2.5), "points must be a positive whole number"),
         (dict(quality=101), "quality must be a whole number from 1 to 100"),
-        (dict(quality=50, max_rms=1.0), "give quality or max_rms, not both"),
+        (dict(quality=50, max_rms=1.0), "quality and max_rms both set the size"),
         (dict(max_rms=-1), "max_rms must be a finite number >= 0"),
         (dict(max_error=float("nan")), "max_error must be a finite number >= 0"),
         (dict(value_step=0), "value_step must be 'auto' or a whole number 1..65535"),
