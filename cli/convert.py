@@ -16,7 +16,7 @@ import numpy as np
 import codec
 from . import rowio
 from codec.errors import ATMError, UnsupportedError
-from codec.settings import cli_option_names
+from codec.settings import cli_option_names, size_conflict
 
 
 def open_input(name: str) -> BinaryIO:
@@ -51,13 +51,17 @@ class _Counter:
 
 #: Flags of `atm encode` that are not encoder options (every other flag must be one of
 #: codec.settings.cli_option_names(), which tests/test_settings.py checks).
-NOT_ENCODER_OPTIONS = ("inputs", "output", "verbose", "jobs", "quiet", "force")
+NOT_ENCODER_OPTIONS = ("inputs", "output", "output_option", "verbose", "jobs", "quiet", "force", "version")
 
 
 def encode_options(args: argparse.Namespace) -> dict:
     """The encoder options the command line sets (the ones left unset take the codec's
     defaults): every option of codec.settings that has a flag, by the same name."""
     options = {n: getattr(args, n) for n in cli_option_names() if getattr(args, n, None) is not None}
+    clash = size_conflict(options)
+    if clash:
+        a, b = (flag(n) for n in clash)
+        raise codec.OptionError(f"{a} and {b} both set the size: give one of them")
     if "value_range" in options:
         options["value_range"] = tuple(options["value_range"])
     if "metadata" in options:
@@ -65,7 +69,17 @@ def encode_options(args: argparse.Namespace) -> dict:
             options["metadata"] = json.loads(options["metadata"])
         except ValueError as exc:
             raise codec.OptionError(f"--metadata is not JSON: {exc}") from None
+        if not isinstance(options["metadata"], dict):
+            raise codec.OptionError(
+                f"--metadata takes a JSON object in braces, e.g. --metadata '{{\"units\": \"m\"}}', "
+                f"not {args.metadata}"
+            )
     return options
+
+
+def flag(name: str) -> str:
+    """The command-line flag of an encoder option (max_rms: --max-rms)."""
+    return "--" + name.replace("_", "-")
 
 
 def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> tuple[codec.StreamEncoder, int]:
@@ -96,6 +110,8 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
     return enc, out.count
 
 
+#: What `atm decode` writes (--format, or the output's extension).
+OUTPUT_FORMATS = ("png", "pgm", "ppm", "pnm", "tif", "tiff", "npy")
 STREAMED = {"pgm", "ppm", "pnm", "npy"}
 #: Output formats that keep float samples as they are.
 FLOAT_FORMATS = {"tif", "tiff", "npy"}
@@ -106,6 +122,15 @@ def output_format(output: str, fmt: str | None) -> str:
     if fmt:
         return fmt
     return Path(output).suffix.lstrip(".").lower() if output != "-" else "png"
+
+
+def check_output_format(fmt: str) -> None:
+    """UnsupportedError, listing what `atm decode` writes, if it cannot write `fmt`."""
+    if fmt not in OUTPUT_FORMATS:
+        raise UnsupportedError(
+            f"cannot write {'.' + fmt if fmt else 'an output without an extension'}: "
+            f"name it .{', .'.join(OUTPUT_FORMATS)}, or give --format"
+        )
 
 
 def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") -> int:

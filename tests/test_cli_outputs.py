@@ -160,7 +160,7 @@ def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
     for i, path in enumerate(images):
         write_image(path, range_scene(40, 30, seed=i))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "-q"],
+        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "--quiet"],
         stderr=subprocess.PIPE, cwd=ROOT, start_new_session=True,
     )
     writers = []
