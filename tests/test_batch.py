@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import pty
-import subprocess
 import sys
 
 import numpy as np
@@ -14,6 +11,7 @@ import pytest
 import codec
 from codec.files import read_image, write_image
 from tests.synthetic import range_scene
+from tests.terminal import run_on_a_terminal
 from tests.test_cli import atm
 
 
@@ -70,20 +68,8 @@ def test_batch_usage_errors(folder, tmp_path):
 
 def _on_a_terminal(*args) -> tuple[int, bytes]:
     """Run atm with its standard error on a pseudo-terminal; return (status, stderr)."""
-    master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "codec", *map(str, args)], stderr=slave, stdout=subprocess.DEVNULL)
-    os.close(slave)
-    chunks = []
-    while True:
-        try:
-            data = os.read(master, 4096)
-        except OSError:  # the other side closed
-            break
-        if not data:
-            break
-        chunks.append(data)
-    os.close(master)
-    return proc.wait(), b"".join(chunks)
+    status, err, _ = run_on_a_terminal(*args)
+    return status, err
 
 
 def test_progress_bar_on_a_terminal_only(folder, tmp_path):

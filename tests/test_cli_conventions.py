@@ -4,8 +4,6 @@
 from __future__ import annotations
 
 import io
-import os
-import pty
 import subprocess
 import sys
 
@@ -16,6 +14,7 @@ import codec
 from codec.cli.main import build_parser, main
 from codec.files import write_image
 from tests.synthetic import range_scene
+from tests.terminal import run_on_a_terminal
 
 
 @pytest.fixture(scope="module")
@@ -102,36 +101,15 @@ def test_encode_help_reads_like_an_encoders(capsys):
     assert "\n  --quiet" in text and "--version" in text
 
 
-def _stdout_on_a_terminal(*args) -> tuple[int, bytes, bytes]:
-    """Run atm with standard output on a pseudo-terminal: (status, what reached it, stderr)."""
-    master, slave = pty.openpty()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "codec", *map(str, args)], stdout=slave, stderr=subprocess.PIPE
-    )
-    os.close(slave)
-    seen = []
-    while True:
-        try:
-            chunk = os.read(master, 65536)
-        except OSError:  # the other side closed
-            break
-        if not chunk:
-            break
-        seen.append(chunk)
-    os.close(master)
-    err = proc.stderr.read()
-    return proc.wait(), b"".join(seen), err
-
-
 def test_binary_to_a_terminal_is_refused_unless_forced(png, tmp_path):
     data = tmp_path / "t.atm"
     data.write_bytes(codec.encode(range_scene(48, 40, seed=3), points=80))
-    status, seen, err = _stdout_on_a_terminal("decode", data, "-")
+    status, seen, err = run_on_a_terminal("decode", data, "-", stream="stdout")
     assert status == 2 and seen == b""
     assert b"terminal" in err and b"--force" in err and err.count(b"\n") == 1
-    status, seen, _ = _stdout_on_a_terminal("encode", png, "-")
+    status, seen, _ = run_on_a_terminal("encode", png, "-", stream="stdout")
     assert status == 2 and seen == b""
-    status, seen, _ = _stdout_on_a_terminal("decode", data, "-", "--force", "--format", "pgm")
+    status, seen, _ = run_on_a_terminal("decode", data, "-", "--force", "--format", "pgm", stream="stdout")
     assert status == 0 and seen.startswith(b"P5")
     # a pipe is not a terminal
     r = subprocess.run([sys.executable, "-m", "codec", "decode", str(data), "-", "--format", "npy"], capture_output=True)
