@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 import codec
-from . import batch, convert, outputs, signals, terminal, tools
+from . import batch, convert, outputs, pictures, signals, terminal, tools
 from .progress import Progress
 from codec.errors import ATMError
 
@@ -150,6 +150,11 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--metadata", metavar="JSON", help='a JSON object stored with the image, e.g. \'{"units": "m"}\'')
     enc.add_argument("--mesher", help="mesher: adaptive or uniform (default: the codec's default)")
     enc.add_argument("--effort", type=int, metavar="E", help="adaptive mesher: 1 (quickest), 2 (default) or 3 (smallest error per byte, about 1.5x slower)")
+    enc.add_argument(
+        "--alpha", choices=pictures.ALPHA,
+        help="an image with alpha (RGBA, gray+alpha): drop it, or flatten onto a white or black background",
+    )
+    enc.add_argument("--page", type=int, metavar="N", help="a multi-page or animated file: encode page N (from 0)")
     enc.add_argument("-v", "--verbose", action="store_true", help="print a summary line on standard error")
     _add_batch_options(enc)
     enc.set_defaults(run=cmd_encode)
