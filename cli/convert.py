@@ -14,10 +14,10 @@ from typing import BinaryIO
 import numpy as np
 
 import codec
-from . import rowio
+from . import pictures, rowio
 from codec import geotiff, integers
 from codec.errors import ATMError, UnsupportedError
-from codec.settings import cli_option_names
+from codec.settings import cli_option_names, size_conflict
 
 
 def open_input(name: str) -> BinaryIO:
@@ -52,13 +52,19 @@ class _Counter:
 
 #: Flags of `atm encode` that are not encoder options (every other flag must be one of
 #: codec.settings.cli_option_names(), which tests/test_settings.py checks).
-NOT_ENCODER_OPTIONS = ("inputs", "output", "verbose", "jobs", "quiet", "force")
+NOT_ENCODER_OPTIONS = ("inputs", "output", "output_option", "verbose", "jobs", "quiet", "force", "version", "alpha", "page")
+#: Flags that say how to read the input picture (cli/pictures.py), passed with the options.
+READING_OPTIONS = ("alpha", "page")
 
 
 def encode_options(args: argparse.Namespace) -> dict:
     """The encoder options the command line sets (the ones left unset take the codec's
     defaults): every option of codec.settings that has a flag, by the same name."""
     options = {n: getattr(args, n) for n in cli_option_names() if getattr(args, n, None) is not None}
+    clash = size_conflict(options)
+    if clash:
+        a, b = (flag(n) for n in clash)
+        raise codec.OptionError(f"{a} and {b} both set the size: give one of them")
     if "value_range" in options:
         options["value_range"] = tuple(options["value_range"])
     if "metadata" in options:
@@ -68,13 +74,27 @@ def encode_options(args: argparse.Namespace) -> dict:
             raise codec.OptionError(f"--metadata is not JSON: {exc}") from None
         except RecursionError:
             raise codec.OptionError("--metadata is nested too deeply") from None
+        if not isinstance(options["metadata"], dict):
+            raise codec.OptionError(
+                f"--metadata takes a JSON object in braces, e.g. --metadata '{{\"units\": \"m\"}}', "
+                f"not {args.metadata}"
+            )
+    options.update({n: getattr(args, n) for n in READING_OPTIONS if getattr(args, n, None) is not None})
     return options
+
+
+def flag(name: str) -> str:
+    """The command-line flag of an encoder option (max_rms: --max-rms)."""
+    return "--" + name.replace("_", "-")
 
 
 def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> tuple[codec.StreamEncoder, int]:
     """Encode one image (a path or -) to one .atm output (a path or -), band by band.
-    Returns the finished encoder (its statistics) and the bytes written."""
-    src = rowio.open_rows(src_name)
+    Returns the finished encoder (its statistics) and the bytes written. `options` may
+    also hold READING_OPTIONS (how to read a picture: cli/pictures.py)."""
+    options = dict(options)
+    reading = {n: options.pop(n) for n in READING_OPTIONS if n in options}
+    src = _picture_rows(src_name, reading) or rowio.open_rows(src_name)
     options = geotiff.source_options(src, options)
     if src.dtype.kind == "f":
         if "value_range" not in options and src.scan is None:
@@ -102,6 +122,24 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
     return enc, out.count
 
 
+#: What `atm decode` writes (--format, or the output's extension).
+OUTPUT_FORMATS = ("png", "pgm", "ppm", "pnm", "tif", "tiff", "npy")
+def _picture_rows(name: str, reading: dict) -> rowio.RowSource | None:
+    """A camera or web picture read through Pillow as one block of rows; None for what
+    the row reader takes (streams, PGM/PPM, .npy, single-page TIFF)."""
+    image = None
+    if name != "-" and pictures.claims(pictures.peek(name)):
+        image = pictures.read_file(name, **reading)
+    if image is None:
+        if "page" in reading:
+            raise codec.OptionError(f"--page picks a page of a multi-page file; {name} is not one")
+        return None
+    h, w = image.shape[:2]
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    scan = (lambda: [image]) if image.dtype.kind == "f" else None
+    return rowio.RowSource(w, h, image.dtype, channels, iter([image]), scan)
+
+
 STREAMED = {"pgm", "ppm", "pnm", "npy"}
 #: Output formats that keep float samples as they are.
 FLOAT_FORMATS = {"tif", "tiff", "npy"}
@@ -112,6 +150,15 @@ def output_format(output: str, fmt: str | None) -> str:
     if fmt:
         return fmt
     return Path(output).suffix.lstrip(".").lower() if output != "-" else "png"
+
+
+def check_output_format(fmt: str) -> None:
+    """UnsupportedError, listing what `atm decode` writes, if it cannot write `fmt`."""
+    if fmt not in OUTPUT_FORMATS:
+        raise UnsupportedError(
+            f"cannot write {'.' + fmt if fmt else 'an output without an extension'}: "
+            f"name it .{', .'.join(OUTPUT_FORMATS)}, or give --format"
+        )
 
 
 def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") -> int:

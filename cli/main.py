@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 import codec
-from . import batch, convert, outputs, signals, tools
+from . import batch, convert, outputs, pictures, signals, terminal, tools
 from .progress import Progress
 from codec import geotiff
 from codec.errors import ATMError
@@ -31,7 +31,8 @@ def cmd_encode(args: argparse.Namespace) -> int:
     (source,) = args.inputs
     outputs.refuse_overwriting_inputs([source], [args.output])
     outputs.refuse_misleading_name(args.output, True, args.force)
-    bar = Progress(1, quiet=args.quiet or args.verbose)
+    terminal.refuse_binary_to_terminal(args.output, "the .atm file", args.force)
+    bar = Progress(1, quiet=args.quiet)
     label = f"encoding {Path(source).name if source != '-' else 'standard input'}"
 
     def show(rows: int, height: int) -> None:
@@ -60,7 +61,11 @@ def cmd_decode(args: argparse.Namespace) -> int:
     fmt = convert.output_format(args.output, args.format)
     outputs.refuse_overwriting_inputs([source], [args.output])
     outputs.refuse_misleading_name(args.output, False, args.force, f"{fmt.upper()} data")
-    convert.decode_file(source, args.output, fmt, args.backend)
+    convert.check_output_format(fmt)
+    terminal.refuse_binary_to_terminal(args.output, f"the {fmt.upper()} image", args.force)
+    written = convert.decode_file(source, args.output, fmt, args.backend)
+    if args.verbose:
+        print(f"{source} -> {args.output}: {fmt.upper()}, {written:,} bytes", file=sys.stderr)
     return 0
 
 
@@ -101,13 +106,13 @@ BATCH_HELP = (
 
 FORCE_HELP = (
     "write even under a name that claims another kind of file (.atm data as x.png, an image as "
-    "x.atm); an output that is one of the inputs is refused all the same"
+    "x.atm), or binary data to a terminal; an output that is one of the inputs is refused all the same"
 )
 
 
 def _add_batch_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("-j", "--jobs", type=int, metavar="N", help="batch: worker processes (default: one per CPU)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and, in batch, no summary line")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and, in batch, no summary line")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
 
 
@@ -124,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc = sub.add_parser(
         "encode",
         help="encode images as .atm (one file, or many into a directory)",
-        usage="atm encode [options] IN OUT\n       atm encode [options] DIR_OR_GLOB... OUTDIR",
+        usage="atm encode [options] IN OUT   (or IN -o OUT)\n       atm encode [options] DIR_OR_GLOB... OUTDIR",
         description=(
             "Encode an image (any format OpenCV reads, or .npy) as .atm. Binary PGM/PPM and "
             ".npy input (a file or standard input) is read and encoded band by band, in "
@@ -134,9 +139,10 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .pfm, .jpg, .gif, .npy, ...)") + " " + EPILOG,
     )
     enc.add_argument("inputs", nargs="+", metavar="IN", help="image file, - for standard input, or (batch) directories, glob patterns, files")
-    enc.add_argument("output", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")
-    enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels)")
-    enc.add_argument("--quality", type=int, metavar="Q", help="1..100, like JPEG's (an RMS bound; 100 is lossless)")
+    enc.add_argument("output", nargs="?", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")
+    _add_output_option(enc, ".atm file")
+    enc.add_argument("-q", "--quality", type=int, metavar="Q", help="1..100, like JPEG's (an RMS bound; 100 is lossless)")
+    enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); not with a bound")
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
     enc.add_argument(
@@ -151,14 +157,19 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--metadata", metavar="JSON", help='a JSON object stored with the image, e.g. \'{"units": "m"}\'')
     enc.add_argument("--mesher", help="mesher: adaptive or uniform (default: the codec's default)")
     enc.add_argument("--effort", type=int, metavar="E", help="adaptive mesher: 1 (quickest), 2 (default) or 3 (smallest error per byte, about 1.5x slower)")
-    enc.add_argument("-v", "--verbose", action="store_true", help="print a summary line on stderr")
+    enc.add_argument(
+        "--alpha", choices=pictures.ALPHA,
+        help="an image with alpha (RGBA, gray+alpha): drop it, or flatten onto a white or black background",
+    )
+    enc.add_argument("--page", type=int, metavar="N", help="a multi-page or animated file: encode page N (from 0)")
+    enc.add_argument("-v", "--verbose", action="store_true", help="print a summary line on standard error")
     _add_batch_options(enc)
     enc.set_defaults(run=cmd_encode)
 
     dec = sub.add_parser(
         "decode",
         help="decode .atm files to images (one file, or many into a directory)",
-        usage="atm decode [options] IN OUT\n       atm decode [options] DIR_OR_GLOB... OUTDIR",
+        usage="atm decode [options] IN OUT   (or IN -o OUT)\n       atm decode [options] DIR_OR_GLOB... OUTDIR",
         description=(
             "Decode an .atm file to PNG, PGM/PPM, TIFF or .npy (chosen by the output's "
             "extension or --format). PGM/PPM and .npy output is written band by band as the "
@@ -167,9 +178,11 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=BATCH_HELP.format(out="OUTDIR/NAME.png (or --format)", kind=".atm files") + " " + EPILOG,
     )
     dec.add_argument("inputs", nargs="+", metavar="IN", help=".atm file, - for standard input, or (batch) directories, glob patterns, files")
-    dec.add_argument("output", metavar="OUT", help="image file, - for standard output (PNG unless --format), or (batch) the output directory")
+    dec.add_argument("output", nargs="?", metavar="OUT", help="image file, - for standard output (PNG unless --format), or (batch) the output directory")
+    _add_output_option(dec, "image file")
     dec.add_argument("--backend", default="cpu", help="decoder: cpu (default) or gl (OpenGL via EGL, same pixels)")
-    dec.add_argument("--format", choices=["png", "pgm", "ppm", "pnm", "tif", "tiff", "npy"], help="output format")
+    dec.add_argument("--format", choices=list(convert.OUTPUT_FORMATS), help="output format")
+    dec.add_argument("-v", "--verbose", action="store_true", help="print a summary line on standard error")
     _add_batch_options(dec)
     dec.set_defaults(run=cmd_decode)
 
@@ -187,7 +200,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
     )
     msh.add_argument("input", help=".atm file, or - for standard input")
-    msh.add_argument("output", help="OUT.obj, OUT.ply, OUT.svg or OUT.png, or - with --format")
+    msh.add_argument("output", nargs="?", metavar="OUT", help="OUT.obj, OUT.ply, OUT.svg or OUT.png, or - with --format")
+    _add_output_option(msh, "mesh file")
     msh.add_argument("--format", choices=list(tools.MESH_FORMATS), help="output format (default: the extension)")
     msh.add_argument("--scale", type=int, metavar="K", help="PNG: enlarge the image K times (default: to about 1024 pixels)")
     msh.add_argument("--force", action="store_true", help=FORCE_HELP)
@@ -217,12 +231,46 @@ def build_parser() -> argparse.ArgumentParser:
     inf.add_argument("input", help=".atm file, or - for standard input")
     inf.add_argument("--json", action="store_true", help="print JSON (width, height, vertices, triangles, bytes, ...)")
     inf.set_defaults(run=cmd_info)
+    for p in sub.choices.values():
+        p.add_argument("--version", action="version", version=f"atm {codec.__version__}")
     return parser
+
+
+def _add_output_option(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("-o", "--output", dest="output_option", metavar="OUT", help=f"the output ({what}), instead of the last argument")
+
+
+def _resolve_output(parser: argparse.ArgumentParser, args: argparse.Namespace, extra: list[str]) -> None:
+    """args.output from -o OUT or else the last argument (with -o every argument is an
+    input). argparse leaves the arguments after an option (IN --points 5 OUT) in `extra`."""
+    unknown = [a for a in extra if a.startswith("-") and a != "-"]
+    if unknown:
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    rest = ([args.output] if args.output is not None else []) + extra
+    given = args.output_option
+    usage = f"atm {args.command} IN OUT, or atm {args.command} IN -o OUT"
+    if "input" in vars(args):  # atm mesh: one input, one output
+        outs = rest + ([given] if given is not None else [])
+        if len(outs) != 1:
+            parser.error(f"give {'one output' if outs else 'an output'}: {usage}")
+        args.output = outs[0]
+        return
+    paths = args.inputs + rest
+    if given is not None:
+        args.inputs, args.output = paths, given
+    elif len(paths) > 1:
+        args.inputs, args.output = paths[:-1], paths[-1]
+    else:
+        parser.error(f"give an output: {usage}")
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if "output_option" in vars(args):
+        _resolve_output(parser, args, extra)
+    elif extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     try:
         with signals.terminate_as_exception():
             return args.run(args)

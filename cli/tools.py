@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import codec
-from . import convert, outputs
+from . import convert, outputs, terminal
 from codec.errors import ATMError, UnsupportedError
 
 MESH_FORMATS = ("obj", "ply", "svg", "png", "terrain")
@@ -34,6 +34,8 @@ def cmd_mesh(args: argparse.Namespace) -> int:
         )
     outputs.refuse_overwriting_inputs([args.input], [args.output])
     outputs.refuse_misleading_name(args.output, False, args.force, f"{fmt.upper()} data")
+    if fmt in ("png", "ply"):  # OBJ and SVG are text
+        terminal.refuse_binary_to_terminal(args.output, f"the {fmt.upper()} file", args.force)
     data = _read_bytes(args.input)
     dem = terrain.load(data)  # z in data units (metres for a float or quantised DEM)
     mesh = dem.mesh

@@ -10,9 +10,10 @@ Heavy modules (OpenCV, triangle, OpenGL) load on first use, not at import.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
-from typing import NoReturn
+from typing import BinaryIO, NoReturn, Union
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from .errors import (
     UnsupportedError,
 )
 from .mesh import Mesh
+
+#: What decode, check, info and decode_mesh take: any object with the buffer protocol.
+Buffer = Union[bytes, bytearray, memoryview, np.ndarray, "mmap.mmap"]
 
 
 def __getattr__(name: str):
@@ -115,21 +119,31 @@ def build_mesh(image: np.ndarray, *, points: int | None = None, mesher: str = "a
     return encoder.build_mesh(image, Settings.from_options(points=points, mesher=mesher, **options))
 
 
-def decode(data: bytes, *, backend: str = "cpu") -> np.ndarray:
-    """Decode .atm bytes to an array of the encoded shape and dtype (float32 for float
+def decode(data: Buffer, *, out: np.ndarray | None = None, backend: str = "cpu") -> np.ndarray:
+    """Decode .atm data to an array of the encoded shape and dtype (float32 for float
     data; hole pixels hold the file's nodata value, NaN for float data).
 
+    data: any buffer (bytes, bytearray, memoryview, a numpy uint8 array, an mmap).
+    out: an array to fill in place and return, as imagecodecs' decoders take: of the
+    decoded dtype and shape, or (H, W, 1) for a gray image (the file does not record
+    whether a gray image had that trailing axis, so without `out` it comes back (H, W)).
     backend: "cpu" (exact integer scanline decoder) or "gl" (OpenGL through EGL; the
     same pixels, BackendError where no GL context can be made).
     """
-    import io
+    from .stream import StreamDecoder
 
-    from .stream import decode_all
+    dec = StreamDecoder(io.BytesIO(_as_bytes(data)), backend=backend)
+    return _decode_into(dec, out)
 
-    return decode_all(io.BytesIO(_as_bytes(data)), backend=backend)[0]
+
+def check(data: Buffer) -> bool:
+    """Whether `data` (any buffer, as for `decode`) starts with the .atm signature."""
+    from .format_spec.schema import SIGNATURE
+
+    return _as_bytes(data, len(SIGNATURE)) == SIGNATURE
 
 
-def decode_mesh(data: bytes) -> Mesh:
+def decode_mesh(data: Buffer) -> Mesh:
     """Parse .atm bytes into one validated Mesh of the whole image (bands merged)."""
     from . import container
     from .stream import merge_bands
@@ -137,7 +151,7 @@ def decode_mesh(data: bytes) -> Mesh:
     return merge_bands(container.unpack(_as_bytes(data))[1])
 
 
-def info(data: bytes) -> dict:
+def info(data: Buffer) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
     vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
     each band's count fields (checksums and limits checked, no mesh decoded)."""
@@ -177,17 +191,40 @@ def _sample_mapping(header) -> dict:
     return {"precision": q.scale, "offset": q.offset}
 
 
-def read(path: str | os.PathLike, *, backend: str = "cpu", metadata: bool = False):
-    """Read and decode an .atm file; with metadata=True, return (image, metadata dict)."""
-    from .stream import decode_all
+def read(source: str | os.PathLike | BinaryIO, *, out: np.ndarray | None = None, backend: str = "cpu", metadata: bool = False):
+    """Read and decode an .atm file: a path, or a binary file object (read from where it
+    is). out and backend as for `decode`; with metadata=True, return (image, metadata dict)."""
+    from .stream import StreamDecoder
 
-    try:
-        f = open(path, "rb")
-    except OSError as exc:
-        raise ATMError(f"cannot read {path}: {exc.strerror}") from None
-    with f:
-        image, meta = decode_all(f, backend=backend)
-    return (image, meta) if metadata else image
+    if isinstance(source, (bytes, bytearray, memoryview)) and check(source):
+        raise ATMError("codec.read takes a path or a binary file object; for .atm bytes in memory use codec.decode(data)")
+    if isinstance(source, (str, bytes, os.PathLike)):
+        name = os.fsdecode(source)
+        try:
+            f = open(source, "rb")
+        except OSError as exc:
+            raise ATMError(f"cannot read {name}: {exc.strerror}") from None
+        except ValueError as exc:  # a NUL in the name
+            raise ATMError(f"cannot read {name!r}: {exc}") from None
+    elif callable(getattr(source, "read", None)):
+        name = getattr(source, "name", None) or "the file object"
+        if isinstance(source, io.TextIOBase):
+            raise ATMError(f"{name} is open in text mode; open it with open(path, 'rb')")
+        f = contextlib.nullcontext(source)
+    else:
+        raise ATMError(
+            f"codec.read takes a path or a binary file object, not {type(source).__name__}; "
+            "for .atm bytes in memory use codec.decode(data)"
+        )
+    with f as fileobj:
+        try:
+            dec = StreamDecoder(fileobj, backend=backend)
+            image = _decode_into(dec, out)
+        except OSError as exc:
+            if isinstance(exc, ATMError):
+                raise
+            raise ATMError(f"cannot read {name}: {exc.strerror or exc}") from None
+    return (image, dec.metadata) if metadata else image
 
 
 def write(path: str | os.PathLike, image, *, force: bool = False, **options) -> None:
@@ -201,10 +238,46 @@ def write(path: str | os.PathLike, image, *, force: bool = False, **options) -> 
     atomic_write(path, encode(image, **options))
 
 
-def _as_bytes(data) -> bytes:
-    if isinstance(data, (bytes, bytearray, memoryview)):
-        return bytes(data)
-    raise ATMError(f"expected .atm bytes, got {type(data).__name__}")
+def _as_bytes(data: Buffer, limit: int | None = None) -> bytes:
+    """The bytes of any buffer (the first `limit` of them), or an ATMError saying what
+    is accepted."""
+    try:
+        view = memoryview(data)
+    except TypeError:
+        hint = "; to decode a file by name use codec.read(path)" if isinstance(data, (str, os.PathLike)) else ""
+        raise ATMError(
+            f"expected .atm data (bytes, bytearray, memoryview, a numpy uint8 array or an mmap), "
+            f"got {type(data).__name__}{hint}"
+        ) from None
+    with view:
+        if not view.contiguous:
+            raise ATMError("the .atm data buffer is not contiguous; pass a contiguous copy (e.g. bytes(data))")
+        flat = view.cast("B") if view.format != "B" or view.ndim != 1 else view
+        return flat[:limit].tobytes() if limit is not None else flat.tobytes()
+
+
+def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
+    """Decode a StreamDecoder's bands into `out` (checked first) or a new array."""
+    shape, dtype = tuple(dec.shape), np.dtype(dec.dtype)
+    if out is None:
+        target = np.empty(shape, dtype)
+    else:
+        if not isinstance(out, np.ndarray):
+            raise ATMError(f"out must be a numpy array, not {type(out).__name__}")
+        shapes = (shape, shape + (1,)) if len(shape) == 2 else (shape,)
+        if out.shape not in shapes or out.dtype != dtype:
+            want = " or ".join(str(s) for s in shapes)
+            raise ATMError(
+                f"out is a {out.shape} {out.dtype} array; this image needs shape {want}, dtype {dtype} "
+                f"(e.g. numpy.empty({shape}, numpy.{dtype}))"
+            )
+        if not out.flags.writeable:
+            raise ATMError("out is read-only; pass a writeable array")
+        # a view, whatever the strides: the gray image fills the one channel in place
+        target = out[..., 0] if out.ndim != len(shape) else out
+    for y0, rows in dec:
+        target[y0 : y0 + len(rows)] = rows
+    return out if out is not None else target
 
 
 __all__ = [
@@ -221,6 +294,7 @@ __all__ = [
     "UnsupportedError",
     "decode",
     "build_mesh",
+    "check",
     "decode_mesh",
     "encode",
     "info",

@@ -63,7 +63,8 @@ _MIN_K = 0.02
 
 INSTALL_HINT = (
     "install Mesa's EGL and software renderer (Debian/Ubuntu: apt-get install libegl1 "
-    "libegl-mesa0 libgl1-mesa-dri) or decode with backend='cpu'"
+    "libegl-mesa0 libgl1-mesa-dri) or use the CPU decoder: --backend cpu on the command line, "
+    "backend='cpu' in Python"
 )
 
 _VS = """

@@ -40,9 +40,11 @@ MODES = {
     (np.dtype(np.float32), 1): ("F", "F"),
 }
 
-#: encoderinfo keys Pillow itself handles or passes to every format's save; they are
-#: not encoder options, so they are left out rather than refused.
-PILLOW_KEYS = frozenset({"append", "append_images"})
+#: encoderinfo keys Pillow itself handles or passes to every format's save, and the
+#: format-neutral ones generic pipelines give any format (optimize, dpi, icc_profile,
+#: exif, xmp, comment: .atm has nowhere to keep them); left out, not refused, while an
+#: unknown .atm option is still refused by codec.encode.
+PILLOW_KEYS = frozenset({"append", "append_images", "optimize", "dpi", "icc_profile", "exif", "xmp", "comment"})
 
 
 @functools.cache

@@ -54,7 +54,7 @@ class Settings:
     """
 
     points: int | None = _option(
-        None, "target vertex count, within 10 % (default: 2.8 % of the pixels, or 0.2 % as the start of refinement to a bound)", cli=True
+        None, "target vertex count, within 10 % (default: 2.8 % of the pixels); not with an error bound, which sets the count itself", cli=True
     )
     quality: int | None = _option(None, "1..100, like JPEG's: an RMS bound (100 is lossless)", cli=True)
     max_rms: float | None = _option(None, "largest RMS error of the decoded image, per channel, in sample (float data: data) units", cli=True)
@@ -94,8 +94,9 @@ class Settings:
             _whole(self.band_height, "band_height")
         if self.quality is not None:
             _whole(self.quality, "quality", 1, 100)
-            if self.max_rms is not None:
-                raise OptionError("give quality or max_rms, not both")
+        clash = size_conflict(n for n in ("points", "quality", "max_rms", "max_error") if getattr(self, n) is not None)
+        if clash:
+            raise OptionError(f"{clash[0]} and {clash[1]} both set the size: give one of them")
         for name in ("max_rms", "max_error", "precision"):
             if getattr(self, name) is not None:
                 _number(getattr(self, name), name)
@@ -160,6 +161,17 @@ class Settings:
     def bounded(self) -> bool:
         """Whether refinement to an error bound decides the mesh's size."""
         return self.quality is not None or self.max_rms is not None or self.max_error is not None
+
+
+def size_conflict(given) -> tuple[str, str] | None:
+    """The first pair of the given size options (by name) that cannot go together:
+    `points` fixes the vertex count, so it takes no error bound, and `quality` is an RMS
+    bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met."""
+    given = list(given)
+    for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms")):
+        if a in given and b in given:
+            return a, b
+    return None
 
 
 def option_names() -> tuple[str, ...]:

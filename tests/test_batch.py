@@ -3,10 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import pty
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -14,6 +10,7 @@ import pytest
 import codec
 from codec.files import read_image, write_image
 from tests.synthetic import range_scene
+from tests.terminal import run_on_a_terminal
 from tests.test_cli import atm
 
 
@@ -44,7 +41,7 @@ def test_directory_converts_with_a_failing_file_named(folder, tmp_path):
         assert decoded.shape == original.shape and decoded.dtype == original.dtype
     # and back: a glob of .atm files, decoded into another directory, all succeed
     back = tmp_path / "back"
-    r = atm("decode", str(out / "*.atm"), back, "--format", "tif", "-q")
+    r = atm("decode", str(out / "*.atm"), back, "--format", "tif", "--quiet")
     assert r.returncode == 0 and r.stderr == b""
     assert sorted(p.name for p in back.iterdir()) == ["a.tif", "b.tif", "c.tif"]
     np.testing.assert_array_equal(read_image(back / "b.tif"), codec.read(out / "b.atm"))
@@ -70,26 +67,14 @@ def test_batch_usage_errors(folder, tmp_path):
 
 def _on_a_terminal(*args) -> tuple[int, bytes]:
     """Run atm with its standard error on a pseudo-terminal; return (status, stderr)."""
-    master, slave = pty.openpty()
-    proc = subprocess.Popen([sys.executable, "-m", "codec", *map(str, args)], stderr=slave, stdout=subprocess.DEVNULL)
-    os.close(slave)
-    chunks = []
-    while True:
-        try:
-            data = os.read(master, 4096)
-        except OSError:  # the other side closed
-            break
-        if not data:
-            break
-        chunks.append(data)
-    os.close(master)
-    return proc.wait(), b"".join(chunks)
+    status, err, _ = run_on_a_terminal(*args)
+    return status, err
 
 
 def test_progress_bar_on_a_terminal_only(folder, tmp_path):
     status, err = _on_a_terminal("encode", folder, tmp_path / "o", "--points", 100)
     assert status == 1 and b"\r[" in err and b"100%" in err
-    status, err = _on_a_terminal("encode", folder, tmp_path / "q", "--points", 100, "-q")
+    status, err = _on_a_terminal("encode", folder, tmp_path / "q", "--points", 100, "--quiet")
     assert status == 1 and b"\r[" not in err and b"broken.png" in err
 
 
@@ -136,7 +121,7 @@ def test_compare_reports_colour_per_channel(tmp_path):
 
 def test_an_existing_directory_as_output_takes_a_single_file(folder, tmp_path):
     (tmp_path / "dir").mkdir()
-    r = atm("encode", folder / "a.png", tmp_path / "dir", "-q")
+    r = atm("encode", folder / "a.png", tmp_path / "dir", "--quiet")
     assert r.returncode == 0, r.stderr
     assert [p.name for p in (tmp_path / "dir").iterdir()] == ["a.atm"]
 

@@ -103,7 +103,7 @@ def stalled_batch(tmp_path: Path) -> tuple[subprocess.Popen, list[int], Path]:
     for i, path in enumerate(images):
         write_image(path, range_scene(40, 30, seed=i))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "-q"],
+        [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "--quiet"],
         stderr=subprocess.PIPE, cwd=ROOT, start_new_session=True,
     )
     return proc, feed_stalled(fifos, proc), out

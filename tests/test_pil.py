@@ -106,3 +106,12 @@ def test_import_codec_does_not_import_pillow():
     code = "import sys, codec; codec.decode; print('PIL' in sys.modules, 'cv2' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
+
+
+def test_save_ignores_the_options_generic_pipelines_pass(tmp_path):
+    im = Image.fromarray(range_scene(32, 24, seed=8))
+    path = tmp_path / "generic.atm"
+    im.save(path, optimize=True, dpi=(72, 72), points=80)
+    assert codec.info(path.read_bytes())["width"] == 32
+    with pytest.raises(codec.OptionError, match="quailty"):
+        im.save(tmp_path / "typo.atm", optimize=True, quailty=50)
