@@ -10,11 +10,14 @@ frames is refused unless --page picks one. Single-page TIFF is left to the TIFF 
 from __future__ import annotations
 
 import io
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from codec.errors import ATMError, OptionError, UnsupportedError
+from codec.errors import ATMError, LimitError, OptionError, UnsupportedError
+from codec import limits
+from codec.files import check_png_size
 
 #: --alpha choices: drop the alpha channel, or flatten onto this background.
 ALPHA = ("drop", "white", "black")
@@ -39,8 +42,14 @@ def read(data: bytes, name: str, *, alpha: str | None = None, page: int | None =
 
     if alpha is not None and alpha not in ALPHA:
         raise OptionError(f"--alpha takes {', '.join(ALPHA)}, not {alpha}")
+    check_png_size(data)
     try:
-        im = Image.open(io.BytesIO(data))
+        with warnings.catch_warnings():
+            # the codec's own pixel limit decides, below, with its own message
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(io.BytesIO(data))
+        # Image.open reads the header only: refuse a bomb before anything decodes
+        limits.check_image_size(*im.size)
         pages = getattr(im, "n_frames", 1)
         if im.format == "TIFF" and pages == 1 and page is None:
             return None
@@ -57,6 +66,8 @@ def read(data: bytes, name: str, *, alpha: str | None = None, page: int | None =
             im.seek(page)
         im = ImageOps.exif_transpose(im)
         return _samples(im, name, alpha)
+    except Image.DecompressionBombError as exc:
+        raise LimitError(f"{name}: {exc}") from None
     except (UnidentifiedImageError, OSError, ValueError, EOFError) as exc:
         if isinstance(exc, ATMError):
             raise

@@ -66,6 +66,13 @@ class WriteError(ATMError, OSError):
         self.path = name
 
 
+
+def check_png_size(data: bytes) -> None:
+    """LimitError if `data` is a PNG whose header declares more pixels than codec.limits
+    allows: checked before any reader decodes (or allocates for) it."""
+    if data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR" and len(data) >= 24:
+        limits.check_image_size(*struct.unpack(">II", data[16:24]))
+
 def write_error(name: str, exc: OSError) -> WriteError:
     """A WriteError naming the user's path (never a temporary file's) and the cause."""
     reason = exc.strerror or str(exc)
@@ -323,8 +330,7 @@ def decode_image(data: bytes, name: str = "input") -> np.ndarray:
             raise
         except Exception as exc:  # numpy raises several types for a bad .npy
             raise ATMError(f"{name}: not a readable .npy array: {exc}") from None
-    if data[:8] == PNG_SIGNATURE and data[12:16] == b"IHDR" and len(data) >= 24:
-        limits.check_image_size(*struct.unpack(">II", data[16:24]))
+    check_png_size(data)
     from . import geotiff
 
     if geotiff.is_tiff(data):

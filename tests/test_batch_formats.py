@@ -40,9 +40,9 @@ def test_batch_takes_every_format_single_file_encode_takes(tmp_path: Path):
     for ext in READABLE:
         atomic_write(src / f"img_{ext[1:]}{ext}", sample(ext))
     for path in sorted(src.iterdir()):
-        assert main(["encode", "-q", str(path), str(tmp_path / "single.atm"), "--points", "40"]) == 0, path.name
+        assert main(["encode", "--quiet", str(path), str(tmp_path / "single.atm"), "--points", "40"]) == 0, path.name
     out = tmp_path / "out"
-    assert main(["encode", "-q", "--jobs", "1", str(src), str(out), "--points", "40"]) == 0
+    assert main(["encode", "--quiet", "--jobs", "1", str(src), str(out), "--points", "40"]) == 0
     made = sorted(p.name for p in out.iterdir())
     assert made == sorted(f"img_{ext[1:]}.atm" for ext in READABLE)
     pfm = codec.read(out / "img_pfm.atm")

@@ -43,3 +43,16 @@ def test_an_image_header_over_the_pixel_limit_is_refused_before_decoding(tmp_pat
     with pytest.raises(LimitError, match="20000x20000"):
         read_image(tmp_path / "bomb.npy")
     assert not (tmp_path / "x.atm").exists()
+
+
+def test_a_picture_header_over_the_pixel_limit_is_one_line(tmp_path):
+    """A GIF whose header declares 20000 x 20000 pixels: refused from its header with one
+    line naming the file (Pillow's own bomb check raised a traceback), nothing written."""
+    def gif(side: int) -> bytes:
+        return (b"GIF89a" + struct.pack("<HHBBB", side, side, 0, 0, 0) + b"\x2c"
+                + struct.pack("<HHHHB", 0, 0, side, side, 0) + b"\x08\x02\x4c\x01\x00\x3b")
+
+    (tmp_path / "bomb.gif").write_bytes(gif(20000))
+    r = atm("encode", tmp_path / "bomb.gif", tmp_path / "x.atm")
+    assert r.returncode == 1 and r.stderr.count(b"\n") == 1 and b"bomb.gif" in r.stderr, r.stderr
+    assert not (tmp_path / "x.atm").exists()

@@ -130,4 +130,4 @@ def test_build_mesh_takes_encode_bounds_and_sample_types(dtype):
     assert mesh.dtype == (np.float32 if np.dtype(dtype).kind == "f" else dtype)
     at = image[mesh.vertices[:, 1], mesh.vertices[:, 0]].astype(np.float64)
     assert np.abs(mesh.values.astype(np.float64) - at).max() <= bound + 1e-4  # data units
-    assert len(codec.build_mesh(image, points=200, quality=90).vertices) >= 3
+    assert len(codec.build_mesh(image, quality=90).vertices) >= 3
