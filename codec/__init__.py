@@ -78,7 +78,7 @@ def encode(
 
     Size: `points` (target vertex count, within 10 %; default 2.8 % of the pixels), or
     a bound that refinement guarantees on the decoded image, per channel: `quality`
-    (1..100, like JPEG's: an RMS bound, 100 lossless), `max_rms`, `max_error` (sample
+    (1..100 on JPEG's scale: an RMS bound at about JPEG's error, 100 lossless), `max_rms`, `max_error` (sample
     units; float data: data units). The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an
     unknown one is refused with the list of valid ones).
