@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -91,6 +92,7 @@ def refine_to_bound(
     last_band: bool = True,
     valid: np.ndarray | None = None,
     delaunay: bool = False,
+    progress: Callable[[float], None] | None = None,
 ) -> tuple[Mesh, bool]:
     """Insert vertices into `mesh` (of `image`) until `bound` holds. Returns the mesh
     (the same object if nothing changed) and whether its triangles are the ones a
@@ -105,6 +107,8 @@ def refine_to_bound(
         the last row alone, so that the bound holds over the whole image.
     values: how new vertex values are chosen ("sample" or "lsq", as the mesher did).
     valid: pixels that count (holes do not); `image` then holds filled values in holes.
+    progress: called after each round with the share of the work done, 0..1 (how far
+        the pixels over the bound have shrunk from the first round's), never falling.
     """
     if not bound.active:
         return mesh, delaunay
@@ -117,6 +121,7 @@ def refine_to_bound(
     fixed = mesh.vertices[:, 1] < pinned_rows
     walls = _segments_mask(mesh)
     sampled = np.zeros(len(mesh.vertices), bool)
+    first_bad, done = None, 0.0
     while True:
         sq = _squared_errors(mesh, image)
         if valid is not None:
@@ -134,6 +139,11 @@ def refine_to_bound(
         bad[:pinned_rows] = False
         if not bad.any():
             return mesh, delaunay
+        if progress is not None:
+            count = int(bad.sum())
+            first_bad = first_bad or count
+            done = max(done, 1.0 - count / first_bad)
+            progress(done)
         # a bad pixel that is already a vertex (fitted, not sampled) gets its own value
         vx, vy = mesh.vertices[:, 0], mesh.vertices[:, 1]
         at_vertex = bad[vy, vx] & ~fixed
