@@ -124,10 +124,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="encode images as .atm (one file, or many into a directory)",
         usage="atm encode [options] IN OUT   (or IN -o OUT)\n       atm encode [options] DIR_OR_GLOB... OUTDIR",
         description=(
-            "Encode an image (any format OpenCV reads, or .npy) as .atm. Binary PGM/PPM and "
-            ".npy input (a file or standard input) is read and encoded band by band, in "
-            "memory bounded by the band; other formats (PNG, TIFF, ...) are read whole. "
-            "On a terminal a long encode shows its progress band by band."
+            "Encode an image as .atm: JPEG, PNG, WebP, GIF or BMP (read through Pillow, upright "
+            "as its EXIF orientation says), TIFF or any other format OpenCV reads, PGM/PPM or "
+            ".npy. Binary PGM/PPM and .npy input (a file or standard input) is read and encoded "
+            "band by band, in memory bounded by the band; other formats are read whole. "
+            "On a terminal a long encode shows its progress, within a band too."
         ),
         epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .jpg, .npy, ...)") + " " + EPILOG,
     )

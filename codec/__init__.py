@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import mmap
 import os
 from typing import BinaryIO, NoReturn, Union
 
@@ -30,7 +31,7 @@ from .errors import (
 from .mesh import Mesh
 
 #: What decode, check, info and decode_mesh take: any object with the buffer protocol.
-Buffer = Union[bytes, bytearray, memoryview, np.ndarray, "mmap.mmap"]
+Buffer = Union[bytes, bytearray, memoryview, np.ndarray, mmap.mmap]
 
 
 def __getattr__(name: str):
