@@ -44,7 +44,7 @@ class Bound:
 
 #: (quality, RMS): JPEG's error at that quality, the median over the test corpus
 #: (tests/corpus.py: camera, coins, moon, text, astronaut, motorcycle disparity; OpenCV's
-#: libjpeg, 4:2:0 n/a as all are gray), so that `quality` gives about JPEG's error at the
+#: libjpeg; all gray, so no chroma subsampling), so that `quality` gives about JPEG's error at the
 #: same quality (not its size: .atm is smaller on range data and larger on texture).
 #: 100 is lossless, which JPEG never is. Between the points: linear.
 JPEG_RMS = (
