@@ -45,7 +45,7 @@ class Bound:
 #: (quality, RMS): JPEG's error at that quality, the median over the test corpus
 #: (tests/corpus.py: camera, coins, moon, text, astronaut, motorcycle disparity; OpenCV's
 #: libjpeg; all gray, so no chroma subsampling), so that `quality` gives about JPEG's error at the
-#: same quality (not its size: .atm is smaller on range data and larger on texture).
+#: same quality, not its size (camera at 50: 57.6 KB at RMS 5.1, JPEG 22 KB at 6.0).
 #: 100 is lossless, which JPEG never is. Between the points: linear.
 JPEG_RMS = (
     (1, 17.37), (5, 12.61), (10, 9.41), (20, 7.35), (30, 6.41), (40, 5.81), (50, 5.34),
