@@ -128,7 +128,18 @@ def _picture_rows(name: str, reading: dict) -> rowio.RowSource | None:
     """A camera or web picture read through Pillow as one block of rows; None for what
     the row reader takes (streams, PGM/PPM, .npy, single-page TIFF)."""
     image = None
-    if name != "-" and pictures.claims(pictures.peek(name)):
+    if name == "-":
+        # standard input cannot be read twice: only a picture that is surely Pillow's
+        # is taken here (TIFF stays with the row reader unless --page)
+        head = _peek(sys.stdin.buffer)
+        if pictures.claims(head) and (not head.startswith(pictures.TIFF) or "page" in reading):
+            data = sys.stdin.buffer.read()
+            image = pictures.read(data, "standard input", **reading)
+            if image is None:  # 16-bit colour PNG, a single-page TIFF: OpenCV's
+                from codec.files import decode_image
+
+                image = decode_image(data, "standard input")
+    elif pictures.claims(pictures.peek(name)):
         image = pictures.read_file(name, **reading)
     if image is None:
         if "page" in reading:
@@ -138,6 +149,14 @@ def _picture_rows(name: str, reading: dict) -> rowio.RowSource | None:
     channels = 1 if image.ndim == 2 else image.shape[2]
     scan = (lambda: [image]) if image.dtype.kind == "f" else None
     return rowio.RowSource(w, h, image.dtype, channels, iter([image]), scan)
+
+
+def _peek(stream: BinaryIO, size: int = 16) -> bytes:
+    """The next bytes of a buffered stream, left in it (b"" if it cannot peek)."""
+    try:
+        return stream.peek(size)[:size]
+    except (AttributeError, OSError, ValueError):
+        return b""
 
 
 STREAMED = {"pgm", "ppm", "pnm", "npy"}

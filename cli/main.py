@@ -131,17 +131,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="encode images as .atm (one file, or many into a directory)",
         usage="atm encode [options] IN OUT   (or IN -o OUT)\n       atm encode [options] DIR_OR_GLOB... OUTDIR",
         description=(
-            "Encode an image (any format OpenCV reads, or .npy) as .atm. Binary PGM/PPM and "
-            ".npy input (a file or standard input) is read and encoded band by band, in "
-            "memory bounded by the band; other formats (PNG, TIFF, ...) are read whole. "
-            "On a terminal a long encode shows its progress band by band."
+            "Encode an image as .atm: JPEG, PNG, WebP, GIF or BMP (read through Pillow, upright "
+            "as its EXIF orientation says), TIFF or any other format OpenCV reads, PGM/PPM or "
+            ".npy. Binary PGM/PPM and .npy input (a file or standard input) is read and encoded "
+            "band by band, in memory bounded by the band; other formats are read whole. "
+            "On a terminal a long encode shows its progress, within a band too."
         ),
         epilog=BATCH_HELP.format(out="OUTDIR/NAME.atm", kind="image files (.png, .tif, .pgm, .pfm, .jpg, .gif, .npy, ...)") + " " + EPILOG,
     )
     enc.add_argument("inputs", nargs="+", metavar="IN", help="image file, - for standard input, or (batch) directories, glob patterns, files")
     enc.add_argument("output", nargs="?", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")
     _add_output_option(enc, ".atm file")
-    enc.add_argument("-q", "--quality", type=int, metavar="Q", help="1..100, like JPEG's (an RMS bound; 100 is lossless)")
+    enc.add_argument("-q", "--quality", type=int, metavar="Q", help="1..100 on JPEG's scale: about JPEG's error at the same quality (an RMS bound; 100 is lossless)")
     enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); not with a bound")
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")

@@ -23,7 +23,7 @@ from codec.files import check_png_size
 ALPHA = ("drop", "white", "black")
 #: Signatures of the formats read here (TIFF only with several pages or --page).
 _SIGNATURES = (b"\xff\xd8\xff", b"\x89PNG\r\n\x1a\n", b"GIF87a", b"GIF89a", b"BM")
-_TIFF = (b"II*\x00", b"MM\x00*")
+TIFF = (b"II*\x00", b"MM\x00*")
 
 
 def claims(head: bytes) -> bool:
@@ -31,7 +31,7 @@ def claims(head: bytes) -> bool:
     here (read() still hands back single-page TIFF and 16-bit colour PNG)."""
     if head.startswith(_SIGNATURES) or (head[:4] == b"RIFF" and head[8:12] == b"WEBP"):
         return True
-    return head.startswith(_TIFF)
+    return head.startswith(TIFF)
 
 
 def read(data: bytes, name: str, *, alpha: str | None = None, page: int | None = None) -> np.ndarray | None:

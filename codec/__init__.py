@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import mmap
 import os
 from typing import BinaryIO, NoReturn, Union
 
@@ -30,7 +31,7 @@ from .errors import (
 from .mesh import Mesh
 
 #: What decode, check, info and decode_mesh take: any object with the buffer protocol.
-Buffer = Union[bytes, bytearray, memoryview, np.ndarray, "mmap.mmap"]
+Buffer = Union[bytes, bytearray, memoryview, np.ndarray, mmap.mmap]
 
 
 def __getattr__(name: str):
@@ -78,7 +79,7 @@ def encode(
 
     Size: `points` (target vertex count, within 10 %; default 2.8 % of the pixels), or
     a bound that refinement guarantees on the decoded image, per channel: `quality`
-    (1..100, like JPEG's: an RMS bound, 100 lossless), `max_rms`, `max_error` (sample
+    (1..100 on JPEG's scale: an RMS bound at about JPEG's error, 100 lossless), `max_rms`, `max_error` (sample
     units; float data: data units). The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an
     unknown one is refused with the list of valid ones).

@@ -17,6 +17,7 @@ from __future__ import annotations
 import inspect
 import numbers
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -205,6 +206,7 @@ def code_band(
     top: tuple[np.ndarray, np.ndarray] | None,
     last: bool,
     step: int | None,
+    progress: Callable[[float], None] | None = None,
 ) -> CodedBand:
     """The coded mesh of `rows` (image rows y0 .. y0 + len(rows) - 1, in the plan's
     storage dtype; `holes`: pixels without data, or None).
@@ -212,13 +214,16 @@ def code_band(
     top: the previous band's bottom_row() (None for the first band), which this band's
     first row takes exactly; last: whether the band ends the image (otherwise its last
     row is sampled closely for the next band); step: the base value step chosen so far
-    (None: this band chooses it)."""
+    (None: this band chooses it); progress: called with the share of the band's work
+    done, 0..1, as it goes (the mesh, then each round of refinement to a bound)."""
     has_holes = holes is not None and bool(holes.any())
     count = len(rows) - (y0 > 0)
     valid_share = 1.0 - holes.mean() if has_holes else 1.0
     share = max(4, round(plan.points * valid_share * count / plan.height))
     band = hole_stage.fill(rows, holes) if has_holes else rows
     meshed: Meshed = builder(plan.settings.mesher)(band, share, **plan.settings.mesher_options())
+    if progress is not None and plan.bound.active:
+        progress(0.2)
     mesh, delaunay = meshed.mesh, meshed.delaunay
     # the mesher's own measure of its error, while the mesh is the one it describes
     mse = meshed.mse if not has_holes else None
@@ -258,6 +263,8 @@ def code_band(
         last_band=last,
         valid=~holes if has_holes else None,
         delaunay=delaunay,
+        # the mesh is the first fifth of a bounded band's work; refinement the rest
+        progress=None if progress is None else (lambda done: progress(0.2 + 0.8 * done)),
     )
     if refined is not mesh:
         return CodedBand(y0, meshcode.in_stored_order(refined, triangulate_again=False), step, delaunay)

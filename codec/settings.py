@@ -56,7 +56,7 @@ class Settings:
     points: int | None = _option(
         None, "target vertex count, within 10 % (default: 2.8 % of the pixels); not with an error bound, which sets the count itself", cli=True
     )
-    quality: int | None = _option(None, "1..100, like JPEG's: an RMS bound (100 is lossless)", cli=True)
+    quality: int | None = _option(None, "1..100 on JPEG's scale: an RMS bound at about JPEG's error at that quality (100 is lossless)", cli=True)
     max_rms: float | None = _option(None, "largest RMS error of the decoded image, per channel, in sample (float data: data) units", cli=True)
     max_error: float | None = _option(None, "largest error of any decoded sample, in sample (float data: data) units", cli=True)
     band_height: int | None = _option(None, "rows per band (default: about a megapixel per band)", cli=True)

@@ -39,8 +39,10 @@ class StreamEncoder:
     (the quantisation step). `max_rms`/`max_error` are then in data units and include
     the quantisation error; decoding returns float32.
 
-    progress(rows_done, height) is called after each band is written; it watches the
-    work and never changes it, so the bytes are the same with or without it.
+    progress(rows_done, height) is called after each band is written and, under an error
+    bound, after each round of a band's refinement (rows_done then counts the band's
+    share done as rows); it watches the work and never changes it, so the bytes are the
+    same with or without it.
     """
 
     def __init__(
@@ -147,6 +149,7 @@ class StreamEncoder:
             top=self._top,
             last=self._received == self.height,
             step=self._step,
+            progress=None if self._progress is None else self._within_band,
         )
         self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout)
         self.bands += 1
@@ -159,6 +162,10 @@ class StreamEncoder:
         self._filled = 1
         if self._progress is not None:
             self._progress(self._y0 + 1, self.height)
+
+    def _within_band(self, done: float) -> None:
+        """Progress inside the band being coded: its share `done` of the band's rows."""
+        self._progress(self._y0 + 1 + int(done * (self._filled - 1)), self.height)
 
     def close(self) -> None:
         """Finish the file. Raises ATMError if fewer rows came than were declared."""

@@ -86,3 +86,22 @@ def test_bad_bounds_are_option_errors():
     for kw in (dict(max_rms=-1), dict(max_error="x"), dict(quality=0), dict(quality=101), dict(quality=50, max_rms=3)):
         with pytest.raises(OptionError):
             codec.encode(image, **kw)
+
+
+def test_quality_follows_jpegs_error_on_the_corpus():
+    """quality q bounds the RMS at about what JPEG's quality q gives (the corpus median)."""
+    import cv2
+
+    from codec.error_bound import quality_rms
+    from tests.corpus import load_corpus
+
+    images = list(load_corpus().values())
+    for q in (10, 50, 90):
+        errors = []
+        for image in images:
+            ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, q])
+            back = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED).astype(float)
+            errors.append(np.sqrt(np.mean((back - image) ** 2)))
+        assert quality_rms(q, np.dtype(np.uint8)) == pytest.approx(np.median(errors), rel=0.05), q
+    assert quality_rms(100, np.dtype(np.uint8)) == 0.0
+    assert quality_rms(50, np.dtype(np.uint16)) == pytest.approx(257 * quality_rms(50, np.dtype(np.uint8)))

@@ -85,3 +85,20 @@ def test_single_page_files_are_read_as_before(tmp_path, capsys):
     pgm.write_bytes(b"P5\n2 1\n255\n\x01\x02")
     assert main(["encode", str(pgm), str(tmp_path / "p.atm"), "--page", "0"]) == 2
     assert "--page" in capsys.readouterr().err
+
+
+def test_a_picture_on_standard_input_is_read_upright(tmp_path):
+    import subprocess
+    import sys
+
+    pixels = np.zeros((12, 20), np.uint8)
+    pixels[:, :10] = 200
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    path = tmp_path / "camera.jpg"
+    Image.fromarray(pixels).save(path, exif=exif, quality=100)
+    out = tmp_path / "piped.atm"
+    with open(path, "rb") as f:
+        r = subprocess.run([sys.executable, "-m", "codec", "encode", "-", str(out), "-q", "100"], stdin=f, capture_output=True)
+    assert r.returncode == 0, r.stderr
+    assert codec.read(out).shape == (20, 12)

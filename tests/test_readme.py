@@ -2,7 +2,8 @@
 prints what the README says it prints: the README cannot drift from the tool.
 
 Fenced `sh` and `console` blocks are run (in `console` blocks, `$ ` lines are commands
-and the lines under them their expected output); `text` blocks are synopses. Only the
+and the lines under them their expected output), then the `python` blocks, with the
+arrays they name made by the test; `text` blocks are synopses. Only the
 fresh-machine block is marked (`<!-- readme-test: ... -->`): its install and pytest
 steps are what .ci/run does from nothing, so here only its `.venv/bin/atm` steps run."""
 
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import codec
 from codec.files import read_image
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -151,3 +153,31 @@ def test_the_tour_leaves_the_tracked_picture_alone_and_it_is_current(workdir, ru
     assert np.array_equal(read_image(drawn), read_image(ROOT / "docs" / "mesh.png")), (
         "docs/mesh.png is stale: run the tour's atm encode and atm mesh commands and copy mesh.png to docs/"
     )
+
+
+def test_every_readme_python_block_runs(workdir, runs, monkeypatch):
+    """The Python blocks run too, in order, after the commands (the Pillow block opens the
+    tour's scene.atm), with the arrays they name made here."""
+    from tests.synthetic import range_scene
+
+    work, _ = workdir
+    monkeypatch.chdir(work)
+    image = range_scene(120, 90, seed=5)
+    dem = range_scene(120, 90, seed=6).astype(np.float32)
+    dem[:10, :10] = -9999
+    names = {
+        "image": image,
+        "depth_m": range_scene(120, 90, seed=7).astype(np.float32) / 50,
+        "dem": dem,
+        "array": np.empty_like(image),
+        "width": 120,
+        "height": 90,
+        "source": np.array_split(image, 4),
+        "sink": np.empty_like(image),
+    }
+    python = [b for b in blocks(README.read_text()) if b.lang == "python"]
+    assert len(python) >= 3
+    for block in python:
+        exec(compile("\n".join(block.lines), f"README.md block at line {block.line}", "exec"), names)
+    assert np.array_equal(names["sink"], codec.read("big.atm"))
+    assert np.array_equal(names["array"], codec.decode(names["data"]))

@@ -208,3 +208,17 @@ def test_rgb_and_single_row_streams():
     assert codec.decode(out.getvalue()).shape == (21, 13, 3)
     line = np.arange(17, dtype=np.uint8)[None]
     assert codec.decode(stream_encode(line, 3, 1)).shape == (1, 17)
+
+
+def test_progress_moves_inside_one_long_band():
+    """A bounded encode of one band reports its refinement rounds, not only its end."""
+    image = range_scene(120, 90, seed=11)
+    calls = []
+    out = io.BytesIO()
+    with codec.StreamEncoder(out, 120, 90, max_rms=0.8, progress=lambda done, total: calls.append((done, total))) as enc:
+        enc.write(image)
+    assert calls[-1] == (90, 90)
+    inside = [done for done, _ in calls[:-1]]
+    assert inside and all(0 < d < 90 for d in inside)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)
+    assert out.getvalue() == codec.encode(image, max_rms=0.8)
