@@ -20,6 +20,9 @@ b. "mesh": the mesh as predictor. An .atm file at a coarse vertex count (real by
    (.atm with nodata) or is made of the image with its holes filled (push-pull) and
    the hole mask is coded apart (ESTIMATE, JBIG-like contexts). The vertex count is
    swept per image and bound and the best total kept, mesh bytes included.
+   "mesh value": the brief's form of it, in the value domain: data - mesh quantised
+   around zero with the step (as near-lossless JPEG-LS and SZ do), the quantised
+   residual coded as is or after MED, contexts: neighbour residuals x mesh.
    The last column: MED's residual (variant c) in its contexts x the mesh's, the mesh
    not charged, against without: what the mesh's contexts are worth at most.
    "MED+walls" / "WP+walls": variant c's predictors made wall-aware. The mesh's walls
@@ -27,7 +30,9 @@ b. "mesh": the mesh as predictor. An .atm file at a coarse vertex count (real by
    predictor reads only neighbours in the pixel's own region (W where none is). Only
    the walls are paid for: their polylines coded alone (ESTIMATE),
    the mesh's other vertices and values are not stored.
-c. a plain causal predictor on the cover levels: "MED" (LOCO-I, as JPEG-LS) and "WP"
+c. "interp": a hierarchical interpolation predictor in the value domain (SZ3's idea,
+   linear, see interpolation_bytes), the hole mask added.
+   A plain causal predictor on the cover levels: "MED" (LOCO-I, as JPEG-LS) and "WP"
    (a blend of four predictors weighted by their recent errors, after JPEG XL's
    weighted predictor); contexts: neighbour residuals x local gradient; plus the hole
    mask and the table of levels.
@@ -384,6 +389,7 @@ class MeshSide:
     size: int
     vertices: int
     prediction: np.ndarray
+    values: np.ndarray  # the decoded mesh in data units
     wall_distance: np.ndarray
     slope: np.ndarray
     regions: np.ndarray  # connected parts between walls (wall pixels join the nearest); holes -1
@@ -429,7 +435,7 @@ def mesh_side(lv: Levels, density: float, filled: bool) -> MeshSide | None:
     pred[holes] = 0
     gy, gx = np.gradient(pred)
     lines = [m.vertices[line] for line in m.constraints]
-    return MeshSide(len(data), len(m.vertices), pred, distance, np.abs(gx) + np.abs(gy), regions,
+    return MeshSide(len(data), len(m.vertices), pred, decoded, distance, np.abs(gx) + np.abs(gy), regions,
                     polyline_bits(lines, w, h))
 
 
@@ -470,6 +476,74 @@ def coded_bytes(r: np.ndarray, lv: Levels, extra: np.ndarray | None = None, grad
     return residual_bits(r[valid], ctx[valid], sign[valid]) / 8
 
 
+def value_residual(lv: Levels, side: MeshSide) -> np.ndarray:
+    """The brief's route in the value domain: the residual data - mesh quantised with
+    step 2 floor(E) + 1 (2E for float data) around zero, so the reconstruction mesh +
+    q x step is within E by construction and, on smooth data, stays smooth (no terraces:
+    nothing straddles a level boundary of the data's own quantiser)."""
+    case = lv.case
+    step = bench.quantiser_step(case, lv.e) if lv.e > 0 else 1.0
+    d = np.where(case.valid, case.image.astype(np.float64) - side.values, 0.0)
+    return quantise_around(d, lv.e, step, case.integer)
+
+
+def quantise_around(d: np.ndarray, e: float, step: float, integer: bool) -> np.ndarray:
+    """Residuals d quantised around zero with `step`: d - q x step is within E."""
+    if integer:
+        return (np.sign(d) * ((np.abs(d) + math.floor(e)) // step)).astype(np.int64)
+    return np.rint(d / step).astype(np.int64)
+
+
+def interpolation_bytes(case: bench.Case, e: float) -> float:
+    """Estimated bytes of a hierarchical interpolation predictor in the value domain
+    (after SZ3's): a coarse grid of anchors (DPCM), then at each halving of the stride
+    the row midpoints and the column midpoints predicted as the mean of their two
+    reconstructed neighbours (integer-rounded for integer data), the residual quantised
+    around zero, so the bound holds by construction. Contexts: the level of the pyramid.
+    Holes get no residual (the mask is coded apart)."""
+    x = case.image.astype(np.float64)
+    h, w = x.shape
+    step = bench.quantiser_step(case, e) if e > 0 else 1.0
+    valid = case.valid
+    rec = np.zeros_like(x)
+    symbols: list[np.ndarray] = []
+    contexts: list[np.ndarray] = []
+
+    def code(pred: np.ndarray, ys: np.ndarray, xs: np.ndarray, level: int) -> None:
+        if case.integer:
+            pred = np.floor(pred)
+        q = np.where(valid[ys, xs], quantise_around(x[ys, xs] - pred, e, step, case.integer), 0)
+        rec[ys, xs] = pred + q * step
+        symbols.append(q[valid[ys, xs]])
+        contexts.append(np.full(len(symbols[-1]), min(level, 30)))
+
+    stride = 1
+    while stride * 2 < max(h, w):
+        stride *= 2
+    previous = 0.0
+    for y in range(0, h, stride):
+        for x0 in range(0, w, stride):
+            code(np.array([previous]), np.array([y]), np.array([x0]), 0)
+            previous = rec[y, x0]
+    level = 1
+    while stride > 1:
+        half = stride // 2
+        ys, xs = np.arange(0, h, stride), np.arange(half, w, stride)
+        if len(xs):
+            right = np.where(xs + half < w, xs + half, xs - half)
+            code((rec[np.ix_(ys, xs - half)] + rec[np.ix_(ys, right)]) / 2, ys[:, None], xs[None, :], level)
+        ys, xs = np.arange(half, h, stride), np.arange(0, w, half)
+        if len(ys):
+            down = np.where(ys + half < h, ys + half, ys - half)
+            code((rec[np.ix_(ys - half, xs)] + rec[np.ix_(down, xs)]) / 2, ys[:, None], xs[None, :], level + 1)
+        stride, level = half, level + 2
+    if np.abs(rec - x)[valid].max() > (math.floor(e) if case.integer else e) + 1e-9:
+        raise AssertionError("the interpolation predictor broke its bound")
+    q = np.concatenate(symbols)
+    ctx = np.concatenate(contexts)
+    return residual_bits(q, ctx, np.zeros_like(ctx)) / 8
+
+
 def mesh_plus_causal(lv: Levels, side: MeshSide) -> np.ndarray:
     """Residual levels when the mesh predicts each pixel and MED predicts what the mesh
     missed from the causal neighbours' misses (kept at 1/8 level: the mesh's prediction
@@ -492,6 +566,8 @@ def study(case: bench.Case, e: float, densities: tuple[float, ...]) -> dict[str,
     wp = coded_bytes(r_wp, lv)
     med_bytes = coded_bytes(r_med, lv)
     out["MED"] = (med_bytes + mask + lv.table, f"{coded_bytes(r_med, lv, real=True) / med_bytes:.4f}")
+    if e > 0 or case.integer:  # on float data at E = 0 only the value table is exact
+        out["interp"] = (interpolation_bytes(case, e) + mask, "")
     out["WP"] = (wp + mask + lv.table, f"residual {wp:,.0f} + mask {mask:,.0f} + table {lv.table:,} B")
     for density in densities:
         for filled in (False, True) if case.holes.any() else (False,):
@@ -501,9 +577,14 @@ def study(case: bench.Case, e: float, densities: tuple[float, ...]) -> dict[str,
             extra = lv.table + (mask if filled else 0)
             walls = side.wall_bits / 8
             what = "holes in mesh" if not filled else "filled, mask apart"
+            q = value_residual(lv, side)
+            q_med = np.where(valid, q - med(q), 0)
             tries = {
                 "mesh": (side.size, coded_bytes(mesh_plus_causal(lv, side), lv, side.contexts, gradient=False),
                          f"mesh {side.size:,}"),
+                "mesh value": (side.size, min(coded_bytes(q, lv, side.contexts, gradient=False),
+                                              coded_bytes(q_med, lv, side.contexts, gradient=False)),
+                               f"mesh {side.size:,}"),
             }
             for name, predict in (("MED+walls", wall_aware_med), ("WP+walls", wall_aware_wp)):
                 # the walls alone are paid for: the fallback is W, not the mesh's values
@@ -521,7 +602,7 @@ def study(case: bench.Case, e: float, densities: tuple[float, ...]) -> dict[str,
     return out
 
 
-VARIANTS = ("q+zstd", "q+jxl", "cover+jxl", "MED", "WP", "mesh", "MED+walls", "WP+walls")
+VARIANTS = ("q+zstd", "q+jxl", "cover+jxl", "MED", "WP", "interp", "mesh", "mesh value", "MED+walls", "WP+walls")
 
 
 def best_peers(case: bench.Case, e: float) -> tuple[str, int]:
@@ -555,7 +636,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"no range image {', '.join(unknown)}; choose from {', '.join(loaders)}")
     head = (["image", "E", "best peer (bytes)"] + [f"{v} ÷ peer" for v in VARIANTS]
-            + ["WP split", "mesh split", "MED+walls split", "MED residual range-coded ÷ estimate",
+            + ["WP split", "mesh split", "mesh value split", "MED+walls split", "MED residual range-coded ÷ estimate",
                "MED residual with mesh contexts (mesh free) ÷ without"])
     print(bench.markdown(head, []), flush=True)
     for name in names:
@@ -570,7 +651,7 @@ def main(argv: list[str] | None = None) -> int:
             got = study(case, e, tuple(args.densities))
             row = [f"{name} {w}x{h}", "lossless" if e == 0 else f"{pct:g} % = {e:.4g}", f"{peer} {size:,}"]
             row += [f"{got[v][0] / size:.2f}" if v in got else "-" for v in VARIANTS]
-            print(bench.markdown_row(row + [got[v][1] if v in got else "-" for v in ("WP", "mesh", "MED+walls", "MED", "meshctx")]),
+            print(bench.markdown_row(row + [got[v][1] if v in got else "-" for v in ("WP", "mesh", "mesh value", "MED+walls", "MED", "meshctx")]),
                   flush=True)
     return 0
 

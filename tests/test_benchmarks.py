@@ -173,3 +173,24 @@ def test_mesh_formats_benchmark_quick_run() -> None:
     figures = dict(zip(head[3:], (float(f.replace(",", "")) for f in row[3:])))
     assert figures["vertices"] > 0 and figures["atm bytes"] > 0
     assert figures["draco / atm"] > 0 and figures["qm.gz / atm"] > 0
+
+
+def test_study_value_domain_predictors_keep_the_bound() -> None:
+    """The interpolation predictor reconstructs within E on integer and float data
+    with holes (it checks itself and raises), and the mesh-residual quantiser's
+    reconstruction mesh + q x step is within E."""
+    study = _bench()
+    bench = _bench("range")
+    rng = np.random.default_rng(5)
+    yy, xx = np.mgrid[0:37, 0:53]
+    smooth = 1000 + 7 * xx + 3 * yy + rng.integers(-20, 20, xx.shape)
+    smooth[5:9, 10:30] = 0
+    for image, nodata in ((smooth.astype(np.uint16), 0), (smooth.astype(np.float32) / 7, None)):
+        case = bench.Case("t", image, nodata)
+        for e in (0.0, 1.5, 12.0) if case.integer else (0.3, 4.0):
+            assert study.interpolation_bytes(case, e) > 0
+            step = bench.quantiser_step(case, e)
+            guess = image.astype(np.float64) + rng.normal(0, 30, image.shape).round()
+            d = image - guess
+            q = study.quantise_around(d, e, step, case.integer)
+            assert np.abs(guess + q * step - image).max() <= (np.floor(e) if case.integer else e) + 1e-4
