@@ -199,7 +199,9 @@ def run(args: argparse.Namespace, command: str) -> int:
             sources = {pool.submit(_work, command, str(s), str(d), options): str(s) for s, d in pairs}
             pending = set(sources)
             while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                # short waits: Python runs a SIGINT/SIGTERM handler between them even when
+                # the signal went to a thread a library started (cli/signals.py)
+                done, pending = wait(pending, timeout=0.1, return_when=FIRST_COMPLETED)
                 for future in done:
                     try:
                         record(future.result())

@@ -14,7 +14,7 @@ from typing import BinaryIO
 import numpy as np
 
 import codec
-from . import pictures, rowio
+from . import pictures, rowio, signals
 from codec import geotiff, integers
 from codec.errors import ATMError, UnsupportedError
 from codec.settings import cli_option_names, size_conflict
@@ -22,7 +22,7 @@ from codec.settings import cli_option_names, size_conflict
 
 def open_input(name: str) -> BinaryIO:
     if name == "-":
-        return contextlib.nullcontext(sys.stdin.buffer)
+        return contextlib.nullcontext(signals.standard_input())
     try:
         return open(name, "rb")
     except OSError as exc:
@@ -131,9 +131,9 @@ def _picture_rows(name: str, reading: dict) -> rowio.RowSource | None:
     if name == "-":
         # standard input cannot be read twice: only a picture that is surely Pillow's
         # is taken here (TIFF stays with the row reader unless --page)
-        head = _peek(sys.stdin.buffer)
+        head = _peek(signals.standard_input())
         if pictures.claims(head) and (not head.startswith(pictures.TIFF) or "page" in reading):
-            data = sys.stdin.buffer.read()
+            data = signals.standard_input().read()
             image = pictures.read(data, "standard input", **reading)
             if image is None:  # 16-bit colour PNG, a single-page TIFF: OpenCV's
                 from codec.files import decode_image

@@ -3,7 +3,6 @@ row by row; other formats (PNG, TIFF, ...) go through OpenCV whole, in memory.""
 
 from __future__ import annotations
 
-import ast
 import sys
 from dataclasses import dataclass
 from typing import BinaryIO, Callable, Iterable, Iterator
@@ -13,6 +12,7 @@ import numpy as np
 from codec import geotiff, integers, quantise
 from codec.errors import ATMError, UnsupportedError
 from codec.files import decode_image, npy_header
+from . import signals
 
 #: Rows handed to the encoder at a time when reading a stream.
 BLOCK_ROWS = 64
@@ -152,7 +152,7 @@ def _npy_source(f: BinaryIO, name: str, path: str | None) -> RowSource:
 def open_rows(name: str) -> RowSource:
     """Open an image file (or - for standard input) as rows."""
     if name == "-":
-        f, path = sys.stdin.buffer, None
+        f, path = signals.standard_input(), None
     else:
         try:
             f, path = open(name, "rb"), name
