@@ -105,8 +105,13 @@ def stalled_batch(tmp_path: Path) -> tuple[subprocess.Popen, list[int], Path]:
     proc = subprocess.Popen(
         [sys.executable, "-m", "codec", "encode", *map(str, fifos + images), str(out), "-j", "2", "--quiet"],
         stderr=subprocess.PIPE, cwd=ROOT, start_new_session=True,
+        # as typed at a terminal: a test run started in the background (`cmd &` in a
+        # script) ignores SIGINT, and that would be inherited, so Ctrl-C could not arrive
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
-    return proc, feed_stalled(fifos, proc), out
+    writers = feed_stalled(fifos, proc)
+    settled(proc.pid)
+    return proc, writers, out
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses FIFOs and /proc")
@@ -177,6 +182,19 @@ def fds_into(pid: int, folder: Path) -> list[str]:
     return [link for link in links if link.startswith(str(folder))]
 
 
+def settled(pid: int, seconds: float = 20) -> None:
+    """Wait until the process has gone to sleep (waiting for input) for a moment: a
+    signal sent while it is still busy starting up can hit a window that is not handled
+    (noted in the closing note of the session that added this; not what these tests are
+    about)."""
+    deadline, calm = time.monotonic() + seconds, 0
+    while calm < 4 and time.monotonic() < deadline:
+        with open(f"/proc/{pid}/stat") as f:
+            state = f.read().rsplit(")", 1)[1].split()[0]
+        calm = calm + 1 if state == "S" else 0
+        time.sleep(0.05)
+
+
 def stalled_encode(tmp_path: Path, *prelude: str) -> subprocess.Popen:
     """`atm encode - OUT` that has opened its output and waits for image rows that never
     come (a PGM header on a pipe left open)."""
@@ -191,6 +209,7 @@ def stalled_encode(tmp_path: Path, *prelude: str) -> subprocess.Popen:
     while not fds_into(proc.pid, tmp_path / "out"):
         assert proc.poll() is None and time.monotonic() < deadline, stderr_of(proc)
         time.sleep(0.05)
+    settled(proc.pid)
     return proc
 
 
