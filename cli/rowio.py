@@ -3,7 +3,6 @@ row by row; other formats (PNG, TIFF, ...) go through OpenCV whole, in memory.""
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from typing import BinaryIO, Callable, Iterable, Iterator
 

@@ -21,7 +21,7 @@ from .format_spec import schema
 
 from . import coding, frames, integers, limits, meshcode
 from . import metadata as meta_json
-from .errors import CorruptError, FormatError, LimitError, OptionError, TruncatedError, UnsupportedError
+from .errors import CorruptError, FormatError, LimitError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser

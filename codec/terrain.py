@@ -12,7 +12,6 @@ a viewer draws the cliffs as the encoder kept them.
 from __future__ import annotations
 
 import io
-import math
 import struct
 from dataclasses import dataclass
 
