@@ -59,12 +59,20 @@ def cmd_mesh(args: argparse.Namespace) -> int:
 
 
 def load_any(name: str) -> np.ndarray:
-    """An image from any file OpenCV reads, a .npy, or an .atm (decoded)."""
+    """An image from any file OpenCV reads, a .npy, or an .atm (decoded). Camera and web
+    pictures are read as `atm encode` reads them (upright by their EXIF orientation,
+    alpha dropped), so that a picture compares with the .atm made from it."""
     from codec.files import decode_image
+
+    from . import pictures
 
     data = _read_bytes(name)
     if data.startswith(SIGNATURE):
         return codec.decode(data)
+    if pictures.claims(data[:16]):
+        image = pictures.read(data, name, alpha="drop")
+        if image is not None:
+            return image
     return decode_image(data, name)
 
 

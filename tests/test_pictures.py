@@ -3,6 +3,8 @@ and multi-page files are read as a user expects, or refused naming the option to
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -18,17 +20,34 @@ def _encode(tmp_path, source, *flags) -> np.ndarray:
     return codec.read(out)
 
 
-def test_exif_orientation_is_applied(tmp_path):
-    # 20 wide, 12 tall as stored; orientation 6 (rotate 90 clockwise) shows it 12 x 20
+def _rotated_jpeg(tmp_path):
+    """A camera JPEG stored 20 wide and 12 tall with EXIF orientation 6 (rotate 90
+    clockwise), so it is shown 12 x 20; the stored left half is bright: shown, the top half."""
     pixels = np.zeros((12, 20), np.uint8)
-    pixels[:, :10] = 200  # the stored left half is bright: shown, it is the top half
+    pixels[:, :10] = 200
     exif = Image.Exif()
     exif[0x0112] = 6
     path = tmp_path / "camera.jpg"
     Image.fromarray(pixels).save(path, exif=exif, quality=100)
+    return path
+
+
+def test_exif_orientation_is_applied(tmp_path):
+    # 20 wide, 12 tall as stored; orientation 6 (rotate 90 clockwise) shows it 12 x 20
+    path = _rotated_jpeg(tmp_path)
     image = _encode(tmp_path, path)
     assert image.shape == (20, 12)
     assert image[:8].mean() > 150 and image[-8:].mean() < 50
+
+
+def test_compare_reads_the_picture_upright(tmp_path, capsys):
+    # atm compare of a rotated camera JPEG and the lossless .atm made from it: equal
+    path = _rotated_jpeg(tmp_path)
+    _encode(tmp_path, path)
+    capsys.readouterr()
+    assert main(["compare", "--json", str(path), str(tmp_path / "out.atm")]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert (result["width"], result["height"], result["max_error"]) == (12, 20, 0.0)
 
 
 @pytest.mark.parametrize("mode, kind", [("RGBA", "RGBA"), ("LA", "gray+alpha")])
@@ -91,12 +110,7 @@ def test_a_picture_on_standard_input_is_read_upright(tmp_path):
     import subprocess
     import sys
 
-    pixels = np.zeros((12, 20), np.uint8)
-    pixels[:, :10] = 200
-    exif = Image.Exif()
-    exif[0x0112] = 6
-    path = tmp_path / "camera.jpg"
-    Image.fromarray(pixels).save(path, exif=exif, quality=100)
+    path = _rotated_jpeg(tmp_path)
     out = tmp_path / "piped.atm"
     with open(path, "rb") as f:
         r = subprocess.run([sys.executable, "-m", "codec", "encode", "-", str(out), "-q", "100"], stdin=f, capture_output=True)
