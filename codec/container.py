@@ -529,6 +529,7 @@ class Reader:
         self._iterated = True
         h = self.header
         next_y0, finished, holes = 0, False, None
+        shared = None  # the holes of the last band's last row, which the next band repeats
         while True:
             ctype, payload, offset = self._next_chunk()
             name = ctype.decode("latin-1")
@@ -547,7 +548,12 @@ class Reader:
                 if holes is not None:
                     if holes.shape != (mesh.height, mesh.width):
                         raise CorruptError(f"MASK and MESH chunks before byte {offset} cover different rows")
-                    mesh.holes, holes = holes, None
+                    if shared is not None and not np.array_equal(holes[0], shared):
+                        raise CorruptError(
+                            f"MASK chunk before byte {offset}: row {y0}, which two bands share, "
+                            "has different holes in each (ATM.md §4.6)"
+                        )
+                    mesh.holes, holes, shared = holes, None, holes[-1]
                 next_y0 = y0 + mesh.height - 1
                 finished = y0 + mesh.height == h.height
                 yield y0, mesh

@@ -89,6 +89,25 @@ def decompressor() -> zstandard.ZstdDecompressor:
     return zstandard.ZstdDecompressor()
 
 
+def frame_length(frame: bytes, what: str) -> int:
+    """The stored length of the zstd frame at the start of `frame`, from its header and
+    block headers (RFC 8878 §3.1.1): python-zstandard decompresses the first frame and
+    ignores what follows it, while ATM.md §4 makes a payload exactly one frame."""
+    try:
+        at = zstandard.frame_header_size(frame)
+    except zstandard.ZstdError as exc:
+        raise CorruptError(f"{what} is not a zstd frame: {exc}") from None
+    checksum = 4 if frame[4] & 0x04 else 0  # Content_Checksum_flag of the descriptor
+    while True:
+        if at + 3 > len(frame):
+            raise CorruptError(f"{what}'s zstd frame ends inside a block header")
+        block = int.from_bytes(frame[at : at + 3], "little")
+        kind, size = (block >> 1) & 3, block >> 3
+        at += 3 + (1 if kind == 1 else size)  # an RLE block stores its one byte
+        if block & 1:
+            return at + checksum
+
+
 def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompressor | None = None) -> bytes:
     """The data of one zstd frame that declares a size of at most `limit` bytes; dctx:
     the caller's own decompressor to reuse."""
@@ -104,4 +123,7 @@ def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompre
         raise CorruptError(f"{what} does not decompress: {exc}") from None
     if len(data) != size:
         raise CorruptError(f"{what} decompresses to {len(data)} bytes, not the {size} declared")
+    end = frame_length(frame, what)
+    if end != len(frame):
+        raise CorruptError(f"{what} has {len(frame) - end:,} bytes after its zstd frame (ATM.md §4: one frame)")
     return data
