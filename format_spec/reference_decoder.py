@@ -499,6 +499,7 @@ class Header:
         self.width, self.height, self.sample_type, self.channels = width, height, sample_type, channels
         self.offset, self.scale = 0.0, 1.0
         self.nodata: float | None = None
+        self.channel_axis = False  # an `axis` chunk: gray decodes as height x width x 1 (§4.8)
 
     @property
     def top(self) -> int:
@@ -977,7 +978,12 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
         # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
             raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type {header.sample_type})")
-        if kind[0] & 0x20:  # ancillary (lower-case first letter): nothing here needs one
+        if kind == b"axis":  # §4.8: empty, once, before the first band, gray images only
+            if payload or header.channel_axis or header.channels != 1 or bands or mask is not None:
+                raise DecodeError("axis chunk: it is empty and comes once, before the bands, in a gray image")
+            header.channel_axis = True
+            continue
+        if kind[0] & 0x20:  # other ancillary chunks (lower-case first letter): none needed here
             continue
         if kind == b"QUNT":
             if not expect_qunt:
@@ -1027,8 +1033,8 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
 
 
 def decode(data: bytes) -> np.ndarray:
-    """Decode `.atm` bytes to the image: height x width (gray) or height x width x 3
-    (RGB); uint8, uint16, int8/int16/int32, or float32 for real-valued samples; hole pixels hold the
+    """Decode `.atm` bytes to the image: height x width (gray; height x width x 1 when
+    the file has an `axis` chunk) or height x width x 3 (RGB); uint8, uint16, int8/int16/int32, or float32 for real-valued samples; hole pixels hold the
     NDAT value. Raises DecodeError (UnsupportedError) on anything else."""
     header, bands = read(data)
     image = np.zeros((header.height, header.width, header.channels), np.int64)
@@ -1051,7 +1057,7 @@ def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarr
         out = image.astype(np.uint8 if header.sample_type == 0 else np.uint16)
     if header.nodata is not None:
         out[holes] = header.nodata
-    return out[:, :, 0] if header.channels == 1 else out
+    return out[:, :, 0] if header.channels == 1 and not header.channel_axis else out
 
 
 def main(argv: list[str]) -> int:

@@ -545,3 +545,27 @@ def test_both_decoders_apply_the_limits_of_section_8():
         ref.decode(bad)
     with pytest.raises(codec.CorruptError, match="its counts can use at most"):
         codec.decode(bad)
+
+
+def test_the_axis_chunk_gives_the_shape_and_is_checked():
+    """§4.8: an `axis` chunk makes a gray image H x W x 1 in both decoders; one with a
+    payload, a second one or one after the first band is refused by both."""
+    data = (VECTORS / "axis_gray8_holes.atm").read_bytes()
+    assert_same_image(ref.decode(data), codec.decode(data))
+    assert ref.decode(data).shape == (24, 32, 1)
+    axis = make_chunk(b"axis", b"")
+    at = data.index(axis)
+    without = data[:at] + data[at + len(axis):]
+    assert_same_image(ref.decode(without), codec.decode(without))
+    assert ref.decode(without).shape == (24, 32)
+    end = len(data) - 12  # AEND
+    bad = {
+        "payload": data[:at] + make_chunk(b"axis", b"\0") + data[at + len(axis):],
+        "twice": data[:at] + axis + data[at:],
+        "after a band": without[: end - len(axis)] + axis + without[end - len(axis):],
+    }
+    for what, file in bad.items():
+        with pytest.raises(ref.DecodeError, match="axis chunk"):
+            ref.decode(file)
+        with pytest.raises(codec.CorruptError, match="axis chunk"):
+            codec.decode(file)

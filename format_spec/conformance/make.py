@@ -164,6 +164,10 @@ def main() -> None:
     cases["int32_bands_holes"] = codec.encode(
         deep.astype(np.int32), mesher="uniform", points=150, band_height=12, nodata=-(2**31)
     )
+    # an H x W x 1 array: the `axis` chunk (after NDAT) keeps its trailing axis
+    column = synthetic.range_scene(32, 24, seed=15)[:, :, None].copy()
+    column[5:9, 20:27] = 0
+    cases["axis_gray8_holes"] = codec.encode(column, mesher="uniform", points=90, nodata=0)
     lattice = lattice_mesh(41, 31, 2, saddle)
     rng = np.random.default_rng(19)
     cases["lattice_ties"] = encoder.pack(lattice)
@@ -175,7 +179,7 @@ def main() -> None:
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
-        if image.dtype.kind in "fi":  # PNG has no float or signed samples
+        if image.dtype.kind in "fi" or image.shape[2:] == (1,):  # beyond PNG: float, signed, H x W x 1
             np.save(HERE / f"{name}.npy", image)
         else:
             write_image(HERE / f"{name}.png", image)
