@@ -126,8 +126,9 @@ def decode(data: Buffer, *, out: np.ndarray | None = None, backend: str = "cpu")
 
     data: any buffer (bytes, bytearray, memoryview, a numpy uint8 array, an mmap).
     out: an array to fill in place and return, as imagecodecs' decoders take: of the
-    decoded dtype and shape, or (H, W, 1) for a gray image (the file does not record
-    whether a gray image had that trailing axis, so without `out` it comes back (H, W)).
+    decoded dtype and shape; for a gray image (H, W) or (H, W, 1) either way. Without
+    `out`, a gray image encoded as (H, W, 1) comes back (H, W, 1) (its file has an `axis`
+    chunk, ATM.md §4.8), one encoded as (H, W) comes back (H, W).
     backend: "cpu" (exact integer scanline decoder) or "gl" (OpenGL through EGL; the
     same pixels, BackendError where no GL context can be made).
     """
@@ -261,11 +262,13 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
     """Decode a StreamDecoder's bands into `out` (checked first) or a new array."""
     shape, dtype = tuple(dec.shape), np.dtype(dec.dtype)
     if out is None:
-        target = np.empty(shape, dtype)
+        image = np.empty(shape, dtype)
+        target = image[..., 0] if dec.channels == 1 and image.ndim == 3 else image
     else:
         if not isinstance(out, np.ndarray):
             raise ATMError(f"out must be a numpy array, not {type(out).__name__}")
-        shapes = (shape, shape + (1,)) if len(shape) == 2 else (shape,)
+        gray = shape[:2]
+        shapes = (gray, gray + (1,)) if dec.channels == 1 else (shape,)
         if out.shape not in shapes or out.dtype != dtype:
             want = " or ".join(str(s) for s in shapes)
             raise ATMError(
@@ -275,10 +278,10 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
         if not out.flags.writeable:
             raise ATMError("out is read-only; pass a writeable array")
         # a view, whatever the strides: the gray image fills the one channel in place
-        target = out[..., 0] if out.ndim != len(shape) else out
+        target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
     for y0, rows in dec:
-        target[y0 : y0 + len(rows)] = rows
-    return out if out is not None else target
+        target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
+    return out if out is not None else image
 
 
 __all__ = [

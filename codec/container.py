@@ -7,6 +7,7 @@ arrive and never seeks; `Reader` yields bands as their chunks arrive.
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import io
 import struct
@@ -42,11 +43,13 @@ class Header:
     nodata: float | None = None
     #: JSON key-values (units, georeferencing, ...) from the meta chunk
     metadata: dict | None = None
+    #: a gray image decodes as (H, W, 1), not (H, W): the file's `axis` chunk (ATM.md §4.8)
+    channel_axis: bool = False
 
     @property
     def shape(self) -> tuple[int, ...]:
         if self.channels == 1:
-            return (self.height, self.width)
+            return (self.height, self.width, 1) if self.channel_axis else (self.height, self.width)
         return (self.height, self.width, self.channels)
 
     @property
@@ -154,6 +157,8 @@ class Writer:
             stream.write(_chunk(schema.QUANT, schema.Quantisation.build(dict(offset=q.offset, scale=q.scale))))
         if header.nodata is not None:
             stream.write(_chunk(schema.NODATA, schema.NoData.build(dict(value=header.nodata))))
+        if header.channel_axis and header.channels == 1:
+            stream.write(_chunk(schema.AXIS, b""))
         if header.metadata is not None:
             stream.write(_chunk(schema.META, frames.compress(encode_metadata(header.metadata))))
 
@@ -304,6 +309,12 @@ class Reader:
                 break
             if ctype == schema.NODATA:
                 self.header = self._parse_nodata(self.header, payload)
+            elif ctype == schema.AXIS:
+                if payload or self.header.channel_axis or self.header.channels != 1:
+                    raise CorruptError(
+                        f"axis chunk at byte {offset}: it is empty, comes once and only in a gray image (ATM.md §4.8)"
+                    )
+                self.header = dataclasses.replace(self.header, channel_axis=True)
             elif ctype == schema.META and metadata:
                 self._read_metadata(payload, offset)
         self._iterated = False
@@ -417,7 +428,7 @@ class Reader:
         meta = meta_json.parse(frames.decompress(payload, size, where), where)
         h = self.header
         merged = dict(h.metadata or {}, **meta)
-        self.header = Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, h.nodata, merged)
+        self.header = dataclasses.replace(h, metadata=merged)
 
     @staticmethod
     def _parse_nodata(h: Header, payload: bytes) -> Header:
@@ -430,7 +441,7 @@ class Reader:
                 raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")
         elif np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max):
             raise CorruptError(f"NDAT value {value!r} is beyond float32's range")
-        return Header(h.width, h.height, h.dtype, h.channels, h.version, h.quant, float(value), h.metadata)
+        return dataclasses.replace(h, nodata=float(value))
 
     def _parse_mask(self, payload: bytes, offset: int, y0: int) -> np.ndarray:
         h = self.header
@@ -529,6 +540,7 @@ class Reader:
         self._iterated = True
         h = self.header
         next_y0, finished, holes = 0, False, None
+        shared = None  # the holes of the last band's last row, which the next band repeats
         while True:
             ctype, payload, offset = self._next_chunk()
             name = ctype.decode("latin-1")
@@ -547,7 +559,12 @@ class Reader:
                 if holes is not None:
                     if holes.shape != (mesh.height, mesh.width):
                         raise CorruptError(f"MASK and MESH chunks before byte {offset} cover different rows")
-                    mesh.holes, holes = holes, None
+                    if shared is not None and not np.array_equal(holes[0], shared):
+                        raise CorruptError(
+                            f"MASK chunk before byte {offset}: row {y0}, which two bands share, "
+                            "has different holes in each (ATM.md §4.6)"
+                        )
+                    mesh.holes, holes, shared = holes, None, holes[-1]
                 next_y0 = y0 + mesh.height - 1
                 finished = y0 + mesh.height == h.height
                 yield y0, mesh
@@ -559,7 +576,7 @@ class Reader:
                 return
             elif ctype == schema.META:
                 self._read_metadata(payload, offset)
-            elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA):
+            elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS):
                 raise CorruptError(f"misplaced {name} chunk at byte {offset}")
             elif ctype[0] & 0x20 == 0:
                 raise UnsupportedError(f"unknown critical chunk {name}; a newer codec wrote this file")
@@ -598,7 +615,7 @@ def summarise(reader: Reader) -> Summary:
             return Summary(bands, vertices, triangles, polylines)
         elif ctype == schema.META:
             reader._read_metadata(payload, offset)
-        elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA):
+        elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS):
             raise CorruptError(f"misplaced {ctype.decode('latin-1')} chunk at byte {offset}")
         elif ctype[0] & 0x20 == 0 and ctype != schema.MASK:
             raise UnsupportedError(f"unknown critical chunk {ctype.decode('latin-1')}; a newer codec wrote this file")

@@ -32,6 +32,7 @@ def encode(image, settings: Settings, mask=None) -> bytes:
     from .stream import StreamEncoder
 
     img = as_image(image, allow_nan=True)
+    axis = img.ndim == 2 and np.ndim(image) == 3  # H x W x 1, kept in the file (ATM.md §4.8)
     height, width = img.shape[:2]
     holes = None
     if mask is not None:
@@ -54,7 +55,8 @@ def encode(image, settings: Settings, mask=None) -> bytes:
         settings = settings.replace(value_range=integers.value_range([valid], settings.nodata))
     out = io.BytesIO()
     enc = StreamEncoder(
-        out, width, height, dtype=img.dtype, channels=1 if img.ndim == 2 else img.shape[2], settings=settings
+        out, width, height, dtype=img.dtype, channels=1 if img.ndim == 2 else img.shape[2], settings=settings,
+        channel_axis=axis,
     )
     enc.write(img, holes=holes)
     enc.close()

@@ -29,14 +29,14 @@ def as_image(image, *, allow_nan: bool = False) -> np.ndarray:
             image = image.astype(np.float32)
         if not allow_nan and not np.isfinite(image).all():
             raise UnsupportedError("the image holds NaN or infinite values; encode it to keep them as holes")
-        if image.ndim == 3:
+        if image.ndim == 3 and image.shape[2] != 1:
             raise UnsupportedError("float images must have one channel (e.g. elevations, depths)")
     elif image.dtype not in SAMPLE_TYPES:
         from . import integers
 
         if not integers.is_signed(image.dtype):
             raise integers.unsupported(image.dtype)
-        if image.ndim == 3:
+        if image.ndim == 3 and image.shape[2] != 1:
             raise UnsupportedError("signed integer images must have one channel (e.g. elevations)")
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]

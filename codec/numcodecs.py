@@ -72,10 +72,8 @@ class ATM(Codec):
         """The .atm bytes of one chunk (an ndarray: zarr hands chunks over as arrays)."""
         import codec
 
-        chunk = np.asarray(buf)
-        if chunk.ndim == 3 and chunk.shape[2] == 1:
-            chunk = chunk[:, :, 0]
-        if chunk.ndim != 2 and not (chunk.ndim == 3 and chunk.shape[2] == 3):
+        chunk = np.asarray(buf)  # an H x W x 1 chunk keeps its axis (ATM.md §4.8)
+        if chunk.ndim != 2 and not (chunk.ndim == 3 and chunk.shape[2] in (1, 3)):
             raise UnsupportedError(
                 f"the atm codec stores 2-D chunks (or H x W x 3 RGB), not shape {chunk.shape}: "
                 "give the array chunks like (1, rows, cols) squeezed to 2-D, e.g. chunk per band"

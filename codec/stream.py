@@ -43,6 +43,9 @@ class StreamEncoder:
     bound, after each round of a band's refinement (rows_done then counts the band's
     share done as rows); it watches the work and never changes it, so the bytes are the
     same with or without it.
+
+    channel_axis=True (gray only) records that the image is H x W x 1: it decodes in that
+    shape, and `write` takes rows n x W x 1 as well as n x W.
     """
 
     def __init__(
@@ -55,6 +58,7 @@ class StreamEncoder:
         channels: int = 1,
         progress: Callable[[int, int], None] | None = None,
         settings: Settings | None = None,
+        channel_axis: bool = False,
         **options,
     ):
         if settings is None:
@@ -76,6 +80,7 @@ class StreamEncoder:
             quant=p.quant,
             nodata=None if p.nodata is None else float(p.nodata),
             metadata=settings.metadata,
+            channel_axis=channel_axis and p.channels == 1,
         )
         if settings.metadata is not None:
             container.encode_metadata(settings.metadata)  # checked before anything is written
@@ -101,6 +106,8 @@ class StreamEncoder:
         if self._closed:
             raise ATMError("write() on a closed StreamEncoder")
         rows = np.asarray(rows)
+        if self._writer.header.channel_axis and rows.ndim == 3 and rows.shape[2:] == (1,):
+            rows = rows[:, :, 0]
         row_ndim = 1 if self.channels == 1 else 2
         if rows.ndim == row_ndim:
             rows = rows[None]
@@ -228,6 +235,8 @@ class StreamDecoder:
                 rows = quant.dequantise(rows)
             if mesh.holes is not None:
                 rows[mesh.holes] = nodata
+            if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.8)
+                rows = rows[:, :, None]
             last = y0 + mesh.height == self.height
             # the band's last row is the next band's first: emit it once, from there
             yield y0, rows if last else rows[:-1]

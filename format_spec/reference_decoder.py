@@ -34,6 +34,17 @@ VERSION = 6
 MAX_SIDE = 1 << 20
 MAX_PIXELS = 1 << 28
 MAX_CHUNK = (1 << 31) - 1
+MAX_IMAGE_BYTES = 1 << 30
+
+
+def frame_limit(payload: bytes) -> int:
+    """§8: the most a MESH or MASK frame may declare for its stored length S."""
+    return (1 << 20) + 1024 * len(payload)
+
+
+def rebuilt_limit(payload: bytes) -> int:
+    """§8: the most vertices of a connectivity-1 band stored in S bytes."""
+    return (1 << 16) + 64 * len(payload)
 
 
 class DecodeError(Exception):
@@ -488,6 +499,7 @@ class Header:
         self.width, self.height, self.sample_type, self.channels = width, height, sample_type, channels
         self.offset, self.scale = 0.0, 1.0
         self.nodata: float | None = None
+        self.channel_axis = False  # an `axis` chunk: gray decodes as height x width x 1 (§4.8)
 
     @property
     def top(self) -> int:
@@ -510,6 +522,9 @@ def parse_header(payload: bytes) -> Header:
         raise UnsupportedError(f"{channels} channels: only 1 (gray) and 3 (RGB) are defined")
     if sample_type >= 2 and channels != 1:
         raise DecodeError(f"sample_type {sample_type} has 1 channel, not {channels}")
+    sample_bytes = {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 4}[sample_type]
+    if width * height * channels * sample_bytes > MAX_IMAGE_BYTES:
+        raise DecodeError(f"the decoded {width}x{height} image would take more than 2^30 bytes (§8)")
     return Header(width, height, sample_type, channels)
 
 
@@ -611,11 +626,18 @@ def turn(a: int, b: int, quarters: int) -> tuple[int, int]:
 
 
 def mesh_payload_limit(header: Header) -> int:
-    """§8: the largest MESH payload the header's image can need (with every sample
-    varint at 5 bytes: ATM.md leaves the formula's s undefined)."""
+    """§8: the largest MESH payload the header's image can need, s being the bytes of
+    a stored sample (1 for sample_type 0, else 2)."""
     pixels = header.width * header.height
     vertices, triangles = pixels + 16, 2 * pixels + 16
-    return min(65 + (35 + 5 * header.channels) * vertices + 15 * triangles, 1 << 31)
+    s = 1 if header.sample_type == 0 else 2
+    return min(65 + (35 + s * header.channels) * vertices + 15 * triangles, 1 << 31)
+
+
+def mesh_count_limit(n_vertices: int, n_triangles: int, n_polylines: int, n_indices: int, channels: int) -> int:
+    """§8: the most bytes a MESH payload with these counts can hold."""
+    return (32 + 28 + 5 * (2 * n_polylines + 2 * n_indices + n_vertices + 1) + (24 * n_vertices + 7) // 8
+            + 5 * n_vertices * channels + 15 * n_triangles)
 
 
 def read_polylines(r: Reader, count: int, indices: int, width: int, rows: int) -> list[list[int]]:
@@ -685,7 +707,7 @@ def read_free_vertices(r: Reader, count: int, order: int, width: int, rows: int)
     return free
 
 
-def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
+def parse_mesh(data: bytes, header: Header, y0_expected: int, rebuilt: int) -> Band:
     """The fields of a MESH payload, the vertices and polylines they define, and the
     listed triangles if any (§4.2.1, §4.2.2)."""
     width = header.width
@@ -701,15 +723,19 @@ def parse_mesh(data: bytes, header: Header, y0_expected: int) -> Band:
             raise DecodeError(f"MESH: {rows} rows in an image one row high")
     elif rows < 2 or y0 + rows > header.height:
         raise DecodeError(f"MESH: band of rows {y0}..{y0 + rows - 1} in an image of {header.height} rows")
-    pixels = width * rows
-    if not 1 <= n_vertices <= min(pixels, header.width * header.height + 16):
+    pixels = width * rows  # §8: the counts' limits are per band
+    if not 1 <= n_vertices <= pixels:
         raise DecodeError(f"MESH: {n_vertices} vertices in a band of {pixels} pixels")
-    if n_triangles > 2 * header.width * header.height + 16:
+    if n_triangles > 2 * pixels + 16:
         raise DecodeError(f"MESH: {n_triangles} triangles is over the limit")
-    if n_indices > 2 * (header.width * header.height + 16):
-        raise DecodeError(f"MESH: {n_indices} polyline indices is over the limit")
+    if n_indices > 2 * (pixels + 16) or n_polylines > n_indices:
+        raise DecodeError(f"MESH: {n_polylines} polylines of {n_indices} indices is over the limit")
+    if len(data) > mesh_count_limit(n_vertices, n_triangles, n_polylines, n_indices, header.channels):
+        raise DecodeError(f"MESH: {len(data)} bytes is more than its counts can use")
     if connectivity not in (0, 1):
         raise UnsupportedError(f"MESH: connectivity {connectivity} is reserved")
+    if connectivity == 1 and n_vertices > rebuilt:
+        raise DecodeError(f"MESH: {n_vertices} vertices to triangulate from so few stored bytes (§8)")
     if position_order not in (0, 1):
         raise UnsupportedError(f"MESH: position_order {position_order} is reserved")
     if base_step < 1:
@@ -769,6 +795,10 @@ def band_triangles(band: Band, width: int, connectivity: int, listed: list[int],
         return []
     if connectivity == 0:
         triangles = listed_triangles(listed, band, width, band.rows)
+        ys = band.ys
+        extent = sum(max(ys[a], ys[b], ys[c]) - min(ys[a], ys[b], ys[c]) + 1 for a, b, c in triangles)
+        if extent > 4 * width * band.rows + (1 << 20):
+            raise DecodeError(f"MESH: the triangles span {extent} rows in all, over §8's limit")
     else:
         triangles = implicit_triangles(band)
     check_triangles(band.xs, band.ys, triangles, width, band.rows, count, crc)
@@ -948,7 +978,12 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
         # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
             raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type {header.sample_type})")
-        if kind[0] & 0x20:  # ancillary (lower-case first letter): nothing here needs one
+        if kind == b"axis":  # §4.8: empty, once, before the first band, gray images only
+            if payload or header.channel_axis or header.channels != 1 or bands or mask is not None:
+                raise DecodeError("axis chunk: it is empty and comes once, before the bands, in a gray image")
+            header.channel_axis = True
+            continue
+        if kind[0] & 0x20:  # other ancillary chunks (lower-case first letter): none needed here
             continue
         if kind == b"QUNT":
             if not expect_qunt:
@@ -965,7 +1000,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
                 raise DecodeError("MASK chunk without NDAT")
             if mask is not None:
                 raise DecodeError("two MASK chunks before one MESH")
-            limit = 16 + 5 * (header.width * header.height + 1)
+            limit = min(16 + 5 * (header.width * header.height + 1), frame_limit(payload))
             mask = parse_mask(decompress(payload, limit, "MASK"), header)
         elif kind == b"MESH":
             if complete:
@@ -973,7 +1008,8 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
             if have_ndat and mask is None:
                 raise DecodeError("a MESH chunk without its MASK")
             y0 = bands[-1].y0 + bands[-1].rows - 1 if bands else 0
-            band = parse_mesh(decompress(payload, mesh_payload_limit(header), "MESH"), header, y0)
+            limit = min(mesh_payload_limit(header), frame_limit(payload))
+            band = parse_mesh(decompress(payload, limit, "MESH"), header, y0, rebuilt_limit(payload))
             if mask is not None:
                 if mask[:2] != (band.y0, band.rows):
                     raise DecodeError(f"MASK is for rows {mask[0]}+{mask[1]}, its MESH for {band.y0}+{band.rows}")
@@ -997,8 +1033,8 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
 
 
 def decode(data: bytes) -> np.ndarray:
-    """Decode `.atm` bytes to the image: height x width (gray) or height x width x 3
-    (RGB); uint8, uint16, int8/int16/int32, or float32 for real-valued samples; hole pixels hold the
+    """Decode `.atm` bytes to the image: height x width (gray; height x width x 1 when
+    the file has an `axis` chunk) or height x width x 3 (RGB); uint8, uint16, int8/int16/int32, or float32 for real-valued samples; hole pixels hold the
     NDAT value. Raises DecodeError (UnsupportedError) on anything else."""
     header, bands = read(data)
     image = np.zeros((header.height, header.width, header.channels), np.int64)
@@ -1021,7 +1057,7 @@ def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarr
         out = image.astype(np.uint8 if header.sample_type == 0 else np.uint16)
     if header.nodata is not None:
         out[holes] = header.nodata
-    return out[:, :, 0] if header.channels == 1 else out
+    return out[:, :, 0] if header.channels == 1 and not header.channel_axis else out
 
 
 def main(argv: list[str]) -> int:

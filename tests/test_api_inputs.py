@@ -67,11 +67,91 @@ def test_decode_refuses_a_read_only_out(data):
         codec.decode(data, out=out)
 
 
-def test_gray_with_a_channel_axis_round_trips_in_its_shape_through_out():
+def _axis_chunk() -> bytes:
+    import zlib
+
+    return b"\0\0\0\0axis" + zlib.crc32(b"axis").to_bytes(4, "little")
+
+
+@pytest.mark.parametrize(
+    "image, options",
+    [
+        (_gray()[:, :, None], dict(points=120)),
+        (np.where(_gray() > 200, 0, _gray()).astype(np.uint16)[:, :, None] * 50, dict(points=120, nodata=0)),
+        ((_gray().astype(np.float64) / 7)[:, :, None], dict(points=120)),
+        ((_gray().astype(np.int16) - 300)[:, :, None], dict(max_error=0)),
+    ],
+    ids=["uint8", "uint16 holes", "float", "int16"],
+)
+def test_gray_with_a_channel_axis_comes_back_in_its_shape(image, options, tmp_path):
+    """ATM.md §4.8: an H x W x 1 image decodes as H x W x 1 from decode, read and the
+    StreamDecoder, without out=; its file is the H x W image's plus one empty `axis`
+    chunk, so files of H x W images keep their bytes."""
+    data = codec.encode(image, **options)
+    flat = codec.encode(image[:, :, 0], **options)
+    assert _axis_chunk() not in flat and data.replace(_axis_chunk(), b"") == flat
+    expected = codec.decode(flat)
+    assert expected.shape == (40, 56)
+    out = codec.decode(data)
+    assert out.shape == (40, 56, 1) and out.dtype == expected.dtype
+    np.testing.assert_array_equal(out[..., 0], expected)
+    path = tmp_path / "x.atm"
+    path.write_bytes(data)
+    assert codec.read(path).shape == (40, 56, 1)
+    with open(path, "rb") as f:
+        assert codec.read(f).shape == (40, 56, 1)
+    dec = codec.StreamDecoder(io.BytesIO(data))
+    assert dec.shape == (40, 56, 1)
+    rows = np.concatenate([r for _, r in dec])
+    assert rows.shape == (40, 56, 1)
+    np.testing.assert_array_equal(rows[..., 0], expected)
+    # out= may still have either shape, for either file
+    for d in (data, flat):
+        for shape in ((40, 56), (40, 56, 1)):
+            filled = codec.decode(d, out=np.empty(shape, expected.dtype))
+            np.testing.assert_array_equal(filled.reshape(40, 56), expected)
+
+
+def test_stream_encoder_records_the_channel_axis():
     image = _gray()[:, :, None]
-    data = codec.encode(image, points=120)
-    assert codec.decode(data).shape == (40, 56)  # the file does not record the axis
-    assert codec.decode(data, out=np.empty((40, 56, 1), np.uint8)).shape == (40, 56, 1)
+    buf = io.BytesIO()
+    with codec.StreamEncoder(buf, 56, 40, points=120, channel_axis=True) as enc:
+        enc.write(image[:20])
+        enc.write(image[20:, :, 0])  # rows without the axis are taken too
+    assert buf.getvalue() == codec.encode(image, points=120)
+    assert codec.decode(buf.getvalue()).shape == (40, 56, 1)
+
+
+@pytest.mark.parametrize(
+    "where, payload, match",
+    [("before bands", b"\0", "axis chunk"), ("twice", b"", "axis chunk"), ("after a band", b"", "misplaced axis")],
+)
+def test_a_bad_axis_chunk_is_refused(where, payload, match):
+    import zlib
+
+    data = codec.encode(_gray()[:, :, None], points=120)
+    at = data.index(_axis_chunk())
+    chunk = len(payload).to_bytes(4, "little") + b"axis" + payload + zlib.crc32(b"axis" + payload).to_bytes(4, "little")
+    rest = data[at + 12 :]
+    if where == "before bands":
+        bad = data[:at] + chunk + rest
+    elif where == "twice":
+        bad = data[:at] + chunk + data[at:]
+    else:
+        end = len(data) - 12  # the AEND chunk
+        bad = data[:at] + rest[: end - at - 12] + chunk + data[end:]
+    with pytest.raises(codec.CorruptError, match=match):
+        codec.decode(bad)
+
+
+def test_an_axis_chunk_in_an_rgb_file_is_refused():
+    import zlib
+
+    rgb = np.stack([_gray()] * 3, axis=2)
+    data = codec.encode(rgb, points=120)
+    bad = data[:32] + b"\0\0\0\0axis" + zlib.crc32(b"axis").to_bytes(4, "little") + data[32:]
+    with pytest.raises(codec.CorruptError, match="gray image"):
+        codec.decode(bad)
 
 
 @pytest.mark.parametrize("bad, match", [("x.atm", "codec.read"), (None, "NoneType"), ([1, 2], "list")])

@@ -115,3 +115,15 @@ def test_save_ignores_the_options_generic_pipelines_pass(tmp_path):
     assert codec.info(path.read_bytes())["width"] == 32
     with pytest.raises(codec.OptionError, match="quailty"):
         im.save(tmp_path / "typo.atm", optimize=True, quailty=50)
+
+
+def test_open_a_gray_file_with_a_channel_axis(tmp_path):
+    """Pillow has no H x W x 1 mode: a file with an `axis` chunk (ATM.md §4.8) opens as
+    the gray image it is."""
+    image = range_scene(40, 30, seed=1)
+    path = tmp_path / "x.atm"
+    codec.write(path, image[:, :, None], points=300)
+    assert codec.read(path).shape == (30, 40, 1)
+    with Image.open(path) as im:
+        assert im.mode == "L" and im.size == (40, 30)
+        np.testing.assert_array_equal(np.asarray(im), codec.read(path)[:, :, 0])

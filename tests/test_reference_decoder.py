@@ -437,9 +437,15 @@ def test_refuses_damaged_files_with_its_own_error():
             ref.decode(data)
         with pytest.raises(codec.ATMError):  # the codec agrees that each is bad
             codec.decode(data)
-    # §4: the payload is one frame, so a byte after it is damage
-    with pytest.raises(ref.DecodeError, match="after the Zstandard frame"):
-        ref.decode(with_mesh(raw, frame=zstandard.ZstdCompressor().compress(raw) + b"\0"))
+    # §4: the payload is one frame, so a byte after it is damage, for both decoders
+    for frame in (zstandard.ZstdCompressor().compress(raw),
+                  zstandard.ZstdCompressor(write_checksum=True).compress(raw)):
+        assert_same_image(codec.decode(with_mesh(raw, frame=frame)), ref.decode(good))
+        for extra in (b"\0", frame):
+            with pytest.raises(ref.DecodeError, match="after the Zstandard frame"):
+                ref.decode(with_mesh(raw, frame=frame + extra))
+            with pytest.raises(codec.CorruptError, match="after its zstd frame"):
+                codec.decode(with_mesh(raw, frame=frame + extra))
     # an unknown ancillary chunk is skipped
     assert_same_image(ref.decode(good[:offset] + make_chunk(b"zzzz", b"?") + good[offset:]), ref.decode(good))
 
@@ -466,8 +472,7 @@ def run_lengths(holes: np.ndarray) -> list[int]:
 
 def test_the_row_two_bands_share_has_one_mask():
     """§4.6: the shared row MUST have the same mask in both bands; a file whose second
-    MASK says otherwise is refused (as a decoder SHOULD; the codec takes the later
-    band's mask, as one that does not refuse must)."""
+    MASK says otherwise is refused by both decoders."""
     from codec.coding import varints
 
     rng = np.random.default_rng(0)
@@ -485,6 +490,8 @@ def test_the_row_two_bands_share_has_one_mask():
     bad = data[:offset] + make_chunk(b"MASK", zstandard.ZstdCompressor().compress(raw)) + data[offset + 12 + len(payload):]
     with pytest.raises(ref.DecodeError, match="shared by two bands"):
         ref.decode(bad)
+    with pytest.raises(codec.CorruptError, match="which two bands share"):
+        codec.decode(bad)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -518,3 +525,47 @@ def test_infinite_holes_come_back_as_they_were(hole):
     out = ref.decode(data)
     assert_same_image(out, codec.decode(data))
     assert (out[5:9, 5:12] == hole).all()
+
+
+def test_both_decoders_apply_the_limits_of_section_8():
+    """§8's limits are normative numbers: the decoded image's bytes, and a MESH
+    payload longer than its own counts can use, are refused by both decoders."""
+    good = (VECTORS / "gray8_steps.atm").read_bytes()
+    big = good[:10] + make_chunk(b"AHDR", struct.pack("<IIBB", 16384, 16384, 1, 3)) + good[10 + 22:]
+    with pytest.raises(ref.DecodeError, match="2\\^30 bytes"):
+        ref.decode(big)
+    with pytest.raises(codec.LimitError):
+        codec.decode(big)
+    offset, _, payload = next(p for p in chunks(good) if p[1] == b"MESH")
+    raw = zstandard.ZstdDecompressor().decompress(payload)
+    assert raw[-4:] == b"\0\0\0\0"  # an empty triangles section ends the payload
+    padded = raw[:-4] + struct.pack("<I", 4000) + bytes(4000)  # 4,000 bytes no count allows
+    bad = good[:offset] + make_chunk(b"MESH", zstandard.ZstdCompressor().compress(padded)) + good[offset + 12 + len(payload):]
+    with pytest.raises(ref.DecodeError, match="more than its counts can use"):
+        ref.decode(bad)
+    with pytest.raises(codec.CorruptError, match="its counts can use at most"):
+        codec.decode(bad)
+
+
+def test_the_axis_chunk_gives_the_shape_and_is_checked():
+    """§4.8: an `axis` chunk makes a gray image H x W x 1 in both decoders; one with a
+    payload, a second one or one after the first band is refused by both."""
+    data = (VECTORS / "axis_gray8_holes.atm").read_bytes()
+    assert_same_image(ref.decode(data), codec.decode(data))
+    assert ref.decode(data).shape == (24, 32, 1)
+    axis = make_chunk(b"axis", b"")
+    at = data.index(axis)
+    without = data[:at] + data[at + len(axis):]
+    assert_same_image(ref.decode(without), codec.decode(without))
+    assert ref.decode(without).shape == (24, 32)
+    end = len(data) - 12  # AEND
+    bad = {
+        "payload": data[:at] + make_chunk(b"axis", b"\0") + data[at + len(axis):],
+        "twice": data[:at] + axis + data[at:],
+        "after a band": without[: end - len(axis)] + axis + without[end - len(axis):],
+    }
+    for what, file in bad.items():
+        with pytest.raises(ref.DecodeError, match="axis chunk"):
+            ref.decode(file)
+        with pytest.raises(codec.CorruptError, match="axis chunk"):
+            codec.decode(file)

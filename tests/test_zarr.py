@@ -99,3 +99,15 @@ def test_zarr_format_3_array_with_the_atm_serializer(tmp_path):
     out = np.load(tmp_path / "back.npy")
     np.testing.assert_array_equal(np.isnan(out), np.isnan(z))
     assert np.nanmax(np.abs(out - z)) <= 0.25
+
+
+def test_a_chunk_with_a_channel_axis_comes_back_in_its_shape():
+    """An (r, c, 1) chunk decodes as (r, c, 1) without out= (ATM.md §4.8's axis chunk),
+    and into a numcodecs out= buffer of either shape."""
+    chunk = terrain(30, 40, np.int16)[:, :, None]
+    c = ATM(lossless=True)
+    data = c.encode(chunk)
+    back = c.decode(data)
+    assert back.shape == (30, 40, 1) and back.dtype == np.int16
+    np.testing.assert_array_equal(back, chunk)
+    np.testing.assert_array_equal(c.decode(data, out=np.empty((30, 40), np.int16)), chunk[:, :, 0])

@@ -150,6 +150,24 @@ def main() -> None:
     cases["holes_float"] = codec.encode(
         depth, mesher="uniform", points=120, band_height=12, metadata={"units": "m"}
     )
+    # signed integers (sample types 3-5): negative values, holes marked by a sample
+    # value of the type (NDAT), stored exactly as u16 plus QUNT's whole-number offset
+    signed = synthetic.range_scene(40, 30, seed=12).astype(np.int64)
+    int8 = (signed - 128).astype(np.int8)
+    int8[3:9, 5:14] = -128
+    cases["int8_holes"] = codec.encode(int8, mesher="uniform", points=120, nodata=-128)
+    dem = synthetic.range_scene(48, 32, seed=13).astype(np.int64) * 40 - 3000
+    dem[20:26, 30:41] = -32768  # voids, as in SRTM tiles
+    cases["int16_dem_holes"] = codec.encode(dem.astype(np.int16), points=160, nodata=-32768)
+    deep = synthetic.range_scene(40, 30, seed=14).astype(np.int64) * 100 - 2_000_000
+    deep[12:16, :7] = -(2**31)
+    cases["int32_bands_holes"] = codec.encode(
+        deep.astype(np.int32), mesher="uniform", points=150, band_height=12, nodata=-(2**31)
+    )
+    # an H x W x 1 array: the `axis` chunk (after NDAT) keeps its trailing axis
+    column = synthetic.range_scene(32, 24, seed=15)[:, :, None].copy()
+    column[5:9, 20:27] = 0
+    cases["axis_gray8_holes"] = codec.encode(column, mesher="uniform", points=90, nodata=0)
     lattice = lattice_mesh(41, 31, 2, saddle)
     rng = np.random.default_rng(19)
     cases["lattice_ties"] = encoder.pack(lattice)
@@ -161,7 +179,7 @@ def main() -> None:
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
-        if image.dtype.kind == "f":
+        if image.dtype.kind in "fi" or image.shape[2:] == (1,):  # beyond PNG: float, signed, H x W x 1
             np.save(HERE / f"{name}.npy", image)
         else:
             write_image(HERE / f"{name}.png", image)
