@@ -222,3 +222,55 @@ def fit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, method: 
         height, width = image.shape[:2]
         return least_squares(image, vertices, rasterize(vertices, triangles, width, height))
     raise OptionError(f"unknown values method {method!r}; choose one of {', '.join(METHODS)}")
+
+
+def layout_for(image: np.ndarray):
+    """The codec.mesher.elements.Statistics that least squares measures `image` with;
+    made once per image and passed to refit() round after round (it holds the image's
+    prefix sums, the costly part to build)."""
+    from ..image import structure
+    from .elements import Statistics
+
+    return Statistics(image, "structure") if image.ndim == 2 else Statistics(structure(image), image)
+
+
+def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previous: np.ndarray,
+          free: np.ndarray, layout=None) -> np.ndarray:
+    """Least-squares values of the `free` vertices (a mask) with every other vertex held
+    at its `previous` value, in the image's dtype: after a local change of the mesh
+    (refinement inserting a few vertices) only the vertices near it move, which costs
+    the triangles around them instead of the whole image. The free vertices' values
+    minimise the squared error over the pixels of the triangles that touch them (plus
+    the bottom row and right column elements), the held ones entering as known terms;
+    conjugate gradients start from `previous`."""
+    from .elements import concat, line_raster, triangle_raster
+
+    height, width = image.shape[:2]
+    n = len(vertices)
+    prev = previous.reshape(n, -1).astype(np.float64)
+    free = np.asarray(free, bool)
+    if not free.any():
+        return previous.copy()
+    layout = layout_for(image) if layout is None else layout
+    near = triangles[free[triangles].any(axis=1)]
+    raster = concat([triangle_raster(vertices, near, width, height), line_raster(vertices, width, height)])
+    moments, sums = layout.fit_part(layout(raster))
+    gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
+    # unknowns: the free vertices, numbered 0..F-1; a held corner moves its part of the
+    # element's equations to the right-hand side and points at a sink F, whose row is
+    # left empty (its ridge pins it to 0)
+    held = ~free[raster.corners]  # E x 3
+    known = np.where(held[:, :, None], prev[raster.corners], 0.0)  # E x 3 x C
+    rhs = rhs - np.einsum("eij,ejc->eci", gram, known)
+    gram = gram * (~held)[:, :, None] * (~held)[:, None, :]
+    number = np.full(n, int(free.sum()), np.int64)
+    number[free] = np.arange(int(free.sum()))
+    corners = number[raster.corners]
+    start = np.vstack([prev[free], np.zeros((1, prev.shape[1]))])
+    samples = sample(image, vertices).reshape(n, -1).astype(np.float64)
+    anchor = np.vstack([samples[free], np.zeros((1, prev.shape[1]))])
+    solved = solve(corners, gram, rhs, start, anchor=anchor)
+    out = prev.copy()
+    out[free] = solved[:-1]
+    out = np.where(free[:, None], _to_dtype(out, image.dtype), previous.reshape(n, -1))
+    return out[:, 0] if image.ndim == 2 else out
