@@ -2,8 +2,10 @@
 express as several passes: LEB128 varints, the sample tree's parents and its running
 sums, and the fan areas of the vertex steps. Each releases the GIL and checks every
 index it reads; the callers (codec.coding, codec.meshcode) turn status codes into
-CorruptError with their own messages."""
+CorruptError with their own messages. band_values does a band's whole sample stage in
+one call, so that a file of many tiny bands pays no per-array numpy overhead there."""
 
+from libc.math cimport rint, sqrt
 from libc.stdint cimport int64_t, uint8_t, uint64_t
 
 import numpy as np
@@ -54,7 +56,7 @@ def sample_parents(const int64_t[:, ::1] triangles, const int64_t[::1] seq_order
     """The parent place of each place of the sample sequence (see
     meshcode.sample_parents); None if an index is out of range or seq_order is no
     permutation."""
-    cdef int64_t n = seq_order.shape[0], m = triangles.shape[0], j, k, a, b, c, lo, mid, hi
+    cdef int64_t n = seq_order.shape[0], m = triangles.shape[0], j, k
     parent = np.empty(n, dtype=np.int64)
     pos_arr = np.full(n, -1, dtype=np.int64)
     cdef int64_t[::1] p = parent
@@ -70,26 +72,34 @@ def sample_parents(const int64_t[:, ::1] triangles, const int64_t[::1] seq_order
             p[j] = -1
         if not bad:
             for k in range(m):
-                a = triangles[k, 0]; b = triangles[k, 1]; c = triangles[k, 2]
-                if not (0 <= a < n and 0 <= b < n and 0 <= c < n):
-                    bad = True
-                    break
-                a = pos[a]; b = pos[b]; c = pos[c]
-                lo = a if a < b else b
-                lo = lo if lo < c else c
-                hi = a if a > b else b
-                hi = hi if hi > c else c
-                mid = a + b + c - lo - hi
-                # the last corner's candidate is the middle one, the middle one's the
-                # first, strictly earlier (a listed triangle may repeat a corner)
-                if mid < hi and mid > p[hi]:
-                    p[hi] = mid
-                if lo < mid and lo > p[mid]:
-                    p[mid] = lo
-            for j in range(n):
-                if p[j] < 0:
-                    p[j] = j - 1
+                for j in range(3):
+                    if not 0 <= triangles[k, j] < n:
+                        bad = True
+        if not bad:
+            _parents(triangles, pos, p)
     return None if bad else parent
+
+
+cdef void _parents(const int64_t[:, ::1] triangles, const int64_t[::1] pos, int64_t[::1] p) noexcept nogil:
+    """sample_parents' pass: pos is each vertex's place in the sequence, p (all -1 on
+    entry) gets each place's parent place; the corners already checked."""
+    cdef int64_t n = p.shape[0], j, k, a, b, c, lo, mid, hi
+    for k in range(triangles.shape[0]):
+        a = pos[triangles[k, 0]]; b = pos[triangles[k, 1]]; c = pos[triangles[k, 2]]
+        lo = a if a < b else b
+        lo = lo if lo < c else c
+        hi = a if a > b else b
+        hi = hi if hi > c else c
+        mid = a + b + c - lo - hi
+        # the last corner's candidate is the middle one, the middle one's the first,
+        # strictly earlier (a listed triangle may repeat a corner)
+        if mid < hi and mid > p[hi]:
+            p[hi] = mid
+        if lo < mid and lo > p[mid]:
+            p[mid] = lo
+    for j in range(n):
+        if p[j] < 0:
+            p[j] = j - 1
 
 
 def tree_sums(const int64_t[:, ::1] increments, const int64_t[::1] parent):
@@ -115,22 +125,273 @@ def tree_sums(const int64_t[:, ::1] increments, const int64_t[::1] parent):
     return None if bad else out
 
 
-def fan_areas(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n):
-    """The summed doubled areas of each vertex's triangles (n vertices); None if a
-    corner is out of range."""
-    cdef int64_t m = triangles.shape[0], k, i, v
-    fan = np.zeros(n, dtype=np.int64)
-    cdef int64_t[::1] f = fan
+#: vertex_steps' bounds on a vertex's step factor (meshcode.STEP_RANGE) and on a step
+cdef double STEP_LO = 0.25, STEP_HI = 4.0
+
+
+cdef void _doubled_areas(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
+                         int64_t[::1] areas) noexcept nogil:
+    """(x1-x0)(y2-y0) - (x2-x0)(y1-y0) of each triangle; its corners already checked."""
+    cdef int64_t k, a, b, c, xa, ya
+    for k in range(triangles.shape[0]):
+        a = triangles[k, 0]; b = triangles[k, 1]; c = triangles[k, 2]
+        xa = vertices[a, 0]; ya = vertices[a, 1]
+        areas[k] = (vertices[b, 0] - xa) * (vertices[c, 1] - ya) - (vertices[c, 0] - xa) * (vertices[b, 1] - ya)
+
+
+cdef void _vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t step,
+                        int64_t[::1] fan, int64_t[::1] steps) noexcept nogil:
+    """meshcode.vertex_steps without the pinned top row: `step` times the square root
+    of the mean fan area over each vertex's own, the factor within 1/4..4, rounded half
+    to even and kept within 1..65535; `step` where a vertex has no fan. The arithmetic
+    is numpy's (binary64, one rounding each), so encoder and decoder agree exactly.
+    Corners already checked; fan is zeroed scratch of n entries."""
+    cdef int64_t n = steps.shape[0], k, i, total = 0, some = 0
+    cdef double mean, factor, s
+    for i in range(n):
+        steps[i] = step
+    if step <= 1 or triangles.shape[0] == 0:
+        return
+    for k in range(triangles.shape[0]):
+        for i in range(3):
+            fan[triangles[k, i]] += areas[k]
+    for i in range(n):
+        if fan[i] > 0:
+            total += fan[i]
+            some += 1
+    if some == 0:
+        return
+    mean = <double>total / <double>some
+    for i in range(n):
+        if fan[i] > 0:
+            factor = sqrt(mean / <double>fan[i])
+            factor = STEP_LO if factor < STEP_LO else (STEP_HI if factor > STEP_HI else factor)
+            s = rint(<double>step * factor)
+            s = 1.0 if s < 1.0 else (65535.0 if s > 65535.0 else s)
+            steps[i] = <int64_t>s
+
+
+def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step):
+    """Every vertex's quantisation step before the pinned top row (_vertex_steps); None
+    if a corner is out of range or the areas do not match the triangles."""
+    cdef int64_t m = triangles.shape[0], k, i
     cdef bint bad = areas.shape[0] != m
+    steps = np.empty(n, dtype=np.int64)
+    fan = np.zeros(n, dtype=np.int64)
+    cdef int64_t[::1] s = steps
+    cdef int64_t[::1] f = fan
     with nogil:
+        for k in range(m):
+            for i in range(3):
+                if not 0 <= triangles[k, i] < n:
+                    bad = True
         if not bad:
-            for k in range(m):
-                for i in range(3):
-                    v = triangles[k, i]
-                    if v < 0 or v >= n:
-                        bad = True
-                        break
-                    f[v] += areas[k]
-                if bad:
+            _vertex_steps(triangles, areas, step, f, s)
+    return None if bad else steps
+
+
+cpdef enum Values:
+    VALUES_OK = 0
+    VALUES_CORNER = 1     # a triangle refers to a vertex beyond those stored
+    VALUES_RESIDUAL = 2   # a stored residual exceeds the sample type's range
+    VALUES_ORDER = 3      # the sample order is no permutation of the vertices
+    VALUES_SAMPLE = 4     # a decoded sample leaves the sample type's range
+
+
+def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
+                const int64_t[::1] zigzags, const int64_t[::1] seq_order, int64_t step,
+                bint top_pinned, int64_t top):
+    """(status, values, areas): a band's samples from its stored residuals (ATM.md
+    §4.2.4), what meshcode.decode_band did in numpy passes: each zigzag residual (of
+    n * channels, in sequence order) checked against 2 * top, unzigzagged, times its
+    vertex's step (vertex_steps, the rows at y = 0 step 1 when top_pinned), added to
+    its parent's sample (sample_parents) and checked within 0..top; values (n x
+    channels, int64) in vertex order, areas the triangles' doubled areas. Every index
+    is checked before it is used; values and areas are None on an error."""
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q
+    cdef int64_t channels = zigzags.shape[0] // n if n else 1
+    cdef uint64_t u
+    cdef int64_t r
+    if zigzags.shape[0] != n * channels or seq_order.shape[0] != n or channels < 1:
+        raise ValueError("band_values: one residual per vertex and channel, and one place per vertex")
+    areas = np.empty(m, dtype=np.int64)
+    values = np.empty((n, channels), dtype=np.int64)
+    scratch = np.full(n, -1, dtype=np.int64)
+    steps_arr = np.empty(n, dtype=np.int64)
+    parent_arr = np.empty(n, dtype=np.int64)
+    seq_arr = np.empty((n, channels), dtype=np.int64)
+    cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr
+    cdef int64_t[:, ::1] out = values, seq = seq_arr
+    cdef int status = VALUES_OK
+    with nogil:
+        for k in range(m):
+            for i in range(3):
+                if not 0 <= triangles[k, i] < n:
+                    status = VALUES_CORNER
+        for j in range(n * channels):
+            if zigzags[j] < 0 or zigzags[j] > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
+                status = status or VALUES_RESIDUAL
+        for j in range(n):
+            k = seq_order[j]
+            if k < 0 or k >= n or pos[k] >= 0:
+                status = status or VALUES_ORDER
+                break
+            pos[k] = j
+        if status == VALUES_OK:
+            _doubled_areas(vertices, triangles, ar)
+            for i in range(n):
+                pos[i] = 0  # now the fan areas' scratch
+            _vertex_steps(triangles, ar, step, pos, steps)
+            if top_pinned:
+                for i in range(n):
+                    if vertices[i, 1] == 0:
+                        steps[i] = 1
+            # places again: the parents are found in sequence places
+            for j in range(n):
+                pos[seq_order[j]] = j
+                p[j] = -1
+            _parents(triangles, pos, p)
+            for j in range(n):
+                q = p[j]
+                for ch in range(channels):
+                    u = <uint64_t>zigzags[j * channels + ch]
+                    r = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+                    r *= steps[seq_order[j]]
+                    if q >= 0:
+                        r += seq[q, ch]
+                    if r < 0 or r > top:
+                        status = VALUES_SAMPLE
+                    seq[j, ch] = r
+                    out[seq_order[j], ch] = r
+                if status != VALUES_OK:
                     break
-    return None if bad else fan
+    if status != VALUES_OK:
+        return status, None, None
+    return status, values, areas
+
+
+def hilbert_keys(const int64_t[::1] x, const int64_t[::1] y, const int64_t[::1] digit,
+                 const int64_t[::1] nxt, int g, int64_t groups, int64_t start):
+    """coding.hilbert_keys' state machine, a point at a time: for each group of g
+    levels from the top, look up (state, g bits of x, g bits of y) in the group tables
+    (digit, nxt: 4 << 2g entries; nxt holds the next state shifted by 2g). Every lookup
+    is masked into the tables, whatever x and y hold."""
+    cdef int64_t n = x.shape[0], j, k, i, d, state
+    cdef int64_t mask = (1 << g) - 1, size = 4 << (2 * g)
+    if y.shape[0] != n or digit.shape[0] != size or nxt.shape[0] != size or not 0 <= start < size:
+        raise ValueError("hilbert_keys: x and y of one length, tables of 4 << 2g entries")
+    out = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] o = out
+    with nogil:
+        for j in range(n):
+            d = 0
+            state = start
+            k = (groups - 1) * g
+            while k >= 0:
+                i = (((x[j] >> k) & mask) << g) | ((y[j] >> k) & mask) | state
+                i &= size - 1
+                d = (d << (2 * g)) | digit[i]
+                state = nxt[i]
+                k -= g
+            o[j] = d
+    return out
+
+
+cdef extern from "stdlib.h" nogil:
+    void qsort(void *base, size_t nmemb, size_t size, int (*compar)(const void *, const void *) noexcept nogil)
+
+
+cdef int _row_order(const void *p, const void *q) noexcept nogil:
+    cdef const int64_t *a = <const int64_t *>p
+    cdef const int64_t *b = <const int64_t *>q
+    cdef int i
+    for i in range(3):
+        if a[i] != b[i]:
+            return -1 if a[i] < b[i] else 1
+    return 0
+
+
+def canonical_triangles(const int64_t[:, ::1] triangles):
+    """coding.canonical_triangles in one pass: each row rotated (orientation kept) to
+    its lexicographically smallest rotation, then the rows sorted (qsort,
+    lexicographic)."""
+    cdef int64_t m = triangles.shape[0], k, a, b, c, r
+    if triangles.shape[1] != 3:
+        raise ValueError("canonical_triangles: an M x 3 array")
+    out = np.empty((m, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] o = out
+    with nogil:
+        for k in range(m):
+            # the smallest of the three rotations (the one from the smallest index,
+            # for the distinct corners of a real triangle)
+            o[k, 0] = triangles[k, 0]; o[k, 1] = triangles[k, 1]; o[k, 2] = triangles[k, 2]
+            for r in range(2):
+                a = triangles[k, (r + 1) % 3]; b = triangles[k, (r + 2) % 3]; c = triangles[k, r]
+                if a < o[k, 0] or (a == o[k, 0] and (b < o[k, 1] or (b == o[k, 1] and c < o[k, 2]))):
+                    o[k, 0] = a; o[k, 1] = b; o[k, 2] = c
+        if m > 1:
+            qsort(&o[0, 0], <size_t>m, 3 * sizeof(int64_t), _row_order)
+    return out
+
+
+def position_keys(const int64_t[::1] high, const uint8_t[::1] packed, int bits, int64_t span):
+    """(ok, keys): the keys of the free vertices from their stored gaps (ATM.md
+    §4.2.2): gap j is high[j] shifted left by `bits` plus the j-th `bits`-bit field of
+    `packed` (big-endian bit order), each key the previous plus the gap plus one, from
+    -1. ok is False (keys None) if a gap or a key reaches `span`, checked before the
+    sum can overflow. packed must hold len(high) * bits bits (the caller checks)."""
+    cdef int64_t n = high.shape[0], j, gap, key = -1, low, at
+    cdef int b
+    cdef bint ok = True
+    if bits < 0 or bits > 32 or packed.shape[0] * 8 < n * bits or span < 0:
+        raise ValueError("position_keys: 0..32 low bits, all of them in `packed`")
+    out = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] o = out
+    with nogil:
+        for j in range(n):
+            if high[j] < 0 or high[j] >= span:
+                ok = False
+                break
+            low = 0
+            at = j * bits
+            for b in range(bits):
+                low = (low << 1) | ((packed[(at + b) >> 3] >> (7 - ((at + b) & 7))) & 1)
+            gap = (high[j] << bits) | low
+            if gap >= span:
+                ok = False
+                break
+            key += gap + 1
+            if key >= span:
+                ok = False
+                break
+            o[j] = key
+    return (True, out) if ok else (False, None)
+
+
+def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::1] back,
+                   int g, int64_t groups, int64_t start):
+    """coding.hilbert_points' state machine, a key at a time: (x, y) of each key from
+    the inverse group tables (xy, back: 4 << 2g entries; back holds the next state
+    shifted by 2g). Every lookup is masked into the tables."""
+    cdef int64_t n = d.shape[0], j, k, i, x, y, state
+    cdef int64_t mask = (1 << (2 * g)) - 1, low = (1 << g) - 1, size = 4 << (2 * g)
+    if xy.shape[0] != size or back.shape[0] != size or not 0 <= start < size:
+        raise ValueError("hilbert_points: tables of 4 << 2g entries")
+    xs = np.empty(n, dtype=np.int64)
+    ys = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] ox = xs, oy = ys
+    with nogil:
+        for j in range(n):
+            x = 0
+            y = 0
+            state = start
+            k = (groups - 1) * 2 * g
+            while k >= 0:
+                i = (((d[j] >> k) & mask) | state) & (size - 1)
+                x = (x << g) | (xy[i] >> g)
+                y = (y << g) | (xy[i] & low)
+                state = back[i]
+                k -= 2 * g
+            ox[j] = x
+            oy[j] = y
+    return xs, ys

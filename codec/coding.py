@@ -143,78 +143,30 @@ def hilbert_keys(x: np.ndarray, y: np.ndarray, levels: int) -> np.ndarray:
     classic xy -> d mapping, ATM.md §4.2.2); x and y must be below 2**levels."""
     x = np.asarray(x, dtype=np.int64)
     y = np.asarray(y, dtype=np.int64)
-    g = _HILBERT_GROUP
     digit, nxt = _hilbert_group_tables()
     groups, start = _hilbert_start(levels)
-    d = np.zeros(x.shape, dtype=np.int64)
-    state = np.full(x.shape, start, dtype=np.int64)
-    mask = (1 << g) - 1
-    for k in range((groups - 1) * g, -1, -g):  # a loop over groups of g levels
-        i = (x >> k) & mask
-        i <<= g
-        i |= (y >> k) & mask
-        i |= state
-        d <<= 2 * g
-        d |= digit[i]
-        state = nxt[i]
-    return d
+    # a compiled loop over the points: numpy passes per group cost more on small bands
+    d = _fields.hilbert_keys(np.ascontiguousarray(x).ravel(), np.ascontiguousarray(y).ravel(), digit, nxt,
+                             _HILBERT_GROUP, groups, start)
+    return d.reshape(x.shape)
 
 
 def hilbert_points(d: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of each key d < 4**levels along the Hilbert curve over the 2**levels
     square: the inverse of hilbert_keys."""
     d = np.asarray(d, dtype=np.int64)
-    g = _HILBERT_GROUP
     xy, back = _hilbert_inverse_tables()
     groups, start = _hilbert_start(levels)
-    x = np.zeros(d.shape, dtype=np.int64)
-    y = np.zeros(d.shape, dtype=np.int64)
-    state = np.full(d.shape, start, dtype=np.int64)
-    mask = (1 << (2 * g)) - 1
-    low = (1 << g) - 1
-    for k in range((groups - 1) * 2 * g, -1, -2 * g):  # a loop over groups of g levels
-        i = (d >> k) & mask
-        i |= state
-        bits = xy[i]
-        x <<= g
-        x |= bits >> g
-        y <<= g
-        y |= bits & low
-        state = back[i]
-    return x, y
+    # a compiled loop over the keys, as hilbert_keys
+    x, y = _fields.hilbert_points(np.ascontiguousarray(d).ravel(), xy, back, _HILBERT_GROUP, groups, start)
+    return x.reshape(d.shape), y.reshape(d.shape)
 
 
 def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
     """Each triangle rotated (orientation kept) to start at its smallest index, the rows
     sorted: one list for a triangulation, whatever order it was made in."""
-    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    if len(t) == 0:
-        return t
-    bits = int(t.max()).bit_length()
-    if t.min() >= 0 and 3 * bits <= 63:
-        # The three indices as one int64 sort key per rotation, a bits-bit field each:
-        # the three indices are distinct, so the rotation starting at the smallest has
-        # the smallest key, and keys order like the rows they spell
-        a, b, c = (np.ascontiguousarray(col) for col in t.T)
-        keys = (a << 2 * bits) | (b << bits) | c
-        keys = np.minimum(keys, (b << 2 * bits) | (c << bits) | a, out=keys)
-        keys = np.minimum(keys, (c << 2 * bits) | (a << bits) | b, out=keys)
-        keys.sort()
-        if len(keys) < 2 or (keys[1:] != keys[:-1]).all():
-            out = np.empty_like(t)
-            mask = (1 << bits) - 1
-            np.right_shift(keys, 2 * bits, out=out[:, 0])
-            np.bitwise_and(keys >> bits, mask, out=out[:, 1])
-            np.bitwise_and(keys, mask, out=out[:, 2])
-            return out
-    a, b, c = t[:, 0], t[:, 1], t[:, 2]
-    first_b = (b < a) & (b < c)
-    first_c = (c < a) & (c < b)
-    r0 = np.where(first_b, b, np.where(first_c, c, a))
-    r1 = np.where(first_b, c, np.where(first_c, a, b))
-    r2 = np.where(first_b, a, np.where(first_c, b, c))
-    t = np.stack([r0, r1, r2], 1)
-    return t[np.lexsort((r2, r1, r0))]
+    # a compiled pass: numpy's passes cost more than the work on a small band
+    return _fields.canonical_triangles(np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3))
 
 
 def triangle_crc(canonical: np.ndarray) -> int:

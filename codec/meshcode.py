@@ -13,6 +13,7 @@ step (finer where the triangles are larger).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,7 +89,9 @@ def position_fields(gaps: np.ndarray, bits: int | None = None) -> dict:
     )
 
 
-def _position_gaps(m, free: int, where: str) -> np.ndarray:
+def _free_keys(m, free: int, span: int, width: int, rows: int, where: str) -> np.ndarray:
+    """The keys of the free vertices (pixel keys, or Hilbert keys when stored along the
+    curve) from the positions and position_bits fields, each below `span`."""
     nums = unvarints(m.positions, free + 1, f"{where} positions")
     bits = int(nums[0])
     if bits > MAX_POSITION_BITS:
@@ -99,26 +102,11 @@ def _position_gaps(m, free: int, where: str) -> np.ndarray:
     pad = 8 * len(packed) - free * bits  # all in the last byte
     if pad and packed[-1] & ((1 << pad) - 1):
         raise CorruptError(f"{where}: position bits padded with ones")
-    high = nums[1:]
-    if bits == 0:
-        return high
-    # each gap's b bits lie in the `span` bytes from the one holding its first bit:
-    # read them as one big-endian number and shift the bits into place
-    first = np.arange(free, dtype=np.int64) * bits
-    at = first >> 3
-    span = (7 + bits + 7) // 8
-    packed = np.concatenate([packed, np.zeros(span, np.uint8)])
-    low = packed[at].astype(np.int64)
-    for j in range(1, span):  # a loop over bytes (at most 4)
-        low <<= 8
-        low |= packed[at + j]
-    first &= 7
-    first += bits - 8 * span
-    low >>= -first
-    low &= (1 << bits) - 1
-    high <<= bits
-    high += low
-    return high
+    # each gap's high part, its low bits and the running sum in one compiled pass
+    ok, keys = _fields.position_keys(nums[1:], packed, bits, span)
+    if not ok:
+        raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+    return keys
 
 
 #: x and y of a step turned by r quarter turns (x, y) -> (-y, x), by r
@@ -195,18 +183,13 @@ def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pin
     band below another has step 1, its samples being the band above's. areas: the
     triangles' doubled_areas, when the caller has them."""
     n = len(vertices)
-    steps = np.full(n, step, dtype=np.int64)
-    if step > 1 and len(triangles):
-        fan = _fields.fan_areas(np.ascontiguousarray(triangles, dtype=np.int64),
-                                np.ascontiguousarray(doubled_areas(vertices, triangles) if areas is None else areas,
-                                                     dtype=np.int64), n)
-        if fan is None:
-            raise CorruptError(f"a triangle refers to a vertex beyond the {n} stored")
-        some = fan > 0
-        if some.any():
-            mean = float(fan[some].sum()) / float(some.sum())
-            factor = np.clip(np.sqrt(mean / fan[some].astype(np.float64)), 1 / STEP_RANGE, STEP_RANGE)
-            steps[some] = np.clip(np.rint(step * factor), 1, 65535).astype(np.int64)
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if areas is None:
+        areas = doubled_areas(vertices, triangles)
+    # a compiled kernel, the one band_values uses: encoder and decoder share the arithmetic
+    steps = _fields.vertex_steps(triangles, np.ascontiguousarray(areas, dtype=np.int64), n, step)
+    if steps is None:
+        raise CorruptError(f"a triangle refers to a vertex beyond the {n} stored")
     if top_pinned:
         steps[vertices[:, 1] == 0] = 1
     return steps
@@ -435,23 +418,23 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None
     )
 
 
-def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray]:
-    """The Mesh of a parsed MeshPayload and its triangles' doubled areas (for
-    mesh.validate); CorruptError if any field is inconsistent. Structural checks of
-    the result are left to mesh.validate."""
-    n, rows = int(m.vertex_count), int(m.rows)
-    if n > limits.max_vertices(width, rows):
-        raise LimitError(f"{where}: {n:,} vertices is too many for {width}x{rows} pixels")
-    if m.triangle_count > limits.max_triangles(width, rows):
-        raise LimitError(f"{where}: {m.triangle_count:,} triangles is too many for {width}x{rows} pixels")
-    if m.polyline_index_count > 2 * limits.max_vertices(width, rows):
-        raise LimitError(f"{where}: {m.polyline_index_count:,} polyline indices is too many")
-    if m.connectivity not in (schema.LISTED, schema.DELAUNAY):
-        raise CorruptError(f"{where}: unknown connectivity code {m.connectivity}")
-    pixels = width * rows
+_EMPTY = np.zeros(0, np.int64)
+_EMPTY.flags.writeable = False
+_EMPTY2 = np.zeros((0, 2), np.int64)
+_EMPTY2.flags.writeable = False
+#: _polylines of a band without polylines (read-only: shared by every such band)
+_NO_LINES = (_EMPTY, _EMPTY2, _EMPTY2, _EMPTY, _EMPTY, _EMPTY)
 
-    # polylines first: their points are vertices the positions do not repeat
+
+def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
+    """(lengths, steps, points, chain keys, the distinct keys sorted, each one's first
+    place in the chains) of a parsed MeshPayload's polylines, checked to lie in the
+    band."""
     count, total = int(m.polyline_count), int(m.polyline_index_count)
+    if not (count or total or m.polyline_lengths or m.polyline_starts or m.polyline_steps):
+        # no polylines (most small bands): none of the arrays below has an element
+        return _NO_LINES
+    pixels = width * rows
     lengths = unvarints(m.polyline_lengths, count, f"{where} polyline lengths")
     if lengths.sum() != total or (count and lengths.min() < 2):
         raise CorruptError(f"{where}: polyline lengths do not add up")
@@ -476,6 +459,34 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
     chain_keys = points[:, 1] * width + points[:, 0]
     line_keys, first_seen = np.unique(chain_keys, return_index=True)
+    return lengths, steps, points, chain_keys, line_keys, first_seen
+
+
+@functools.cache
+def _largest(dtype: np.dtype) -> int:
+    """The largest sample of an unsigned storage type (np.iinfo costs more than a
+    small band's samples)."""
+    return int(np.iinfo(dtype).max)
+
+
+def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray]:
+    """The Mesh of a parsed MeshPayload and its triangles' doubled areas (for
+    mesh.validate); CorruptError if any field is inconsistent. Structural checks of
+    the result are left to mesh.validate."""
+    n, rows = int(m.vertex_count), int(m.rows)
+    if n > limits.max_vertices(width, rows):
+        raise LimitError(f"{where}: {n:,} vertices is too many for {width}x{rows} pixels")
+    if m.triangle_count > limits.max_triangles(width, rows):
+        raise LimitError(f"{where}: {m.triangle_count:,} triangles is too many for {width}x{rows} pixels")
+    if m.polyline_index_count > 2 * limits.max_vertices(width, rows):
+        raise LimitError(f"{where}: {m.polyline_index_count:,} polyline indices is too many")
+    if m.connectivity not in (schema.LISTED, schema.DELAUNAY):
+        raise CorruptError(f"{where}: unknown connectivity code {m.connectivity}")
+    pixels = width * rows
+
+    # polylines first: their points are vertices the positions do not repeat
+    lengths, steps, points, chain_keys, line_keys, first_seen = _polylines(m, width, rows, where)
+    count, total = len(lengths), len(chain_keys)
 
     free = n - len(line_keys)
     if free < 0:
@@ -485,16 +496,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     by_rows = m.position_order == schema.POSITIONS_RASTER
     levels = hilbert_levels(width, rows)
     span = pixels if by_rows else 1 << 2 * levels  # the keys' range
-    gaps = _position_gaps(m, free, where)
-    # checked before the running sum can overflow: the float sum is loose, the last
-    # key exact
-    if free and (gaps.max() >= span or float(gaps.sum(dtype=np.float64)) + free > 2.0 * span):
-        raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
-    gaps += 1
-    free_keys = np.cumsum(gaps, out=gaps)
-    free_keys -= 1
-    if free and free_keys[-1] >= span:
-        raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+    free_keys = _free_keys(m, free, span, width, rows, where)
     if not by_rows:
         x, y = hilbert_points(free_keys, levels)
         if free and (x.max() >= width or y.max() >= rows):
@@ -505,17 +507,21 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     # Both key lists are increasing: merged, each free vertex's index is its own rank
     # plus the number of polyline pixels before it (searchsorted), and a shared pixel
     # is one of those found equal
-    free_index = np.searchsorted(line_keys, free_keys)
-    if len(line_keys) and free:
-        found = line_keys[np.minimum(free_index, len(line_keys) - 1)]
-        if (found == free_keys).any():
-            raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
-    free_index += np.arange(free)
-    keys = np.empty(n, np.int64)
-    is_free = np.zeros(n, bool)
-    is_free[free_index] = True
-    keys[free_index] = free_keys
-    keys[~is_free] = line_keys
+    if total:
+        free_index = np.searchsorted(line_keys, free_keys)
+        if free:
+            found = line_keys[np.minimum(free_index, len(line_keys) - 1)]
+            if (found == free_keys).any():
+                raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
+        free_index += np.arange(free)
+        keys = np.empty(n, np.int64)
+        is_free = np.zeros(n, bool)
+        is_free[free_index] = True
+        keys[free_index] = free_keys
+        keys[~is_free] = line_keys
+    else:  # every vertex stored by position, in raster order
+        free_index = np.arange(free)
+        keys = free_keys
     vertices = np.empty((n, 2), np.int64)
     np.divmod(keys, width, out=(vertices[:, 1], vertices[:, 0]))
     flat = np.searchsorted(keys, chain_keys)
@@ -552,14 +558,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     # samples last: their steps depend on the triangles' fan areas
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
-    if len(triangles) and triangles.max() >= n:  # listed indices are unsigned
-        raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
-    areas = doubled_areas(vertices, triangles)
-    top = int(np.iinfo(dtype).max)
-    residuals = unvarints(m.samples, n * channels, f"{where} samples")
-    if n and residuals.max() > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
-        raise CorruptError(f"{where}: a sample residual exceeds the {dtype} range")
-    residuals = unzigzag(residuals).reshape(n, channels)
+    top = _largest(dtype)
+    zigzags = unvarints(m.samples, n * channels, f"{where} samples")
     # the encoder's _sample_order, from the parts known here: the positions along the
     # curve are already in its order
     if by_rows:
@@ -567,15 +567,21 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index
-    seq_order = np.concatenate([flat[np.sort(first_seen)], curve])
-    if m.sample_step > 1:  # step 1 is every vertex's step
-        steps = vertex_steps(vertices, triangles, int(m.sample_step), m.y0 > 0, areas)
-        residuals *= steps[seq_order][:, None]
-    seq = tree_sums(residuals, sample_parents(triangles, seq_order))
-    if n and (seq.min() < 0 or seq.max() > top):
+    seq_order = np.concatenate([flat[np.sort(first_seen)], curve]) if total else curve
+    # steps, parents and running sums in one compiled pass (vertex_steps, sample_parents
+    # and tree_sums' arithmetic), every index checked there
+    status, values, areas = _fields.band_values(
+        vertices, np.ascontiguousarray(triangles, dtype=np.int64), zigzags, seq_order, int(m.sample_step), m.y0 > 0, top
+    )
+    if status == _fields.Values.VALUES_CORNER:
+        raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
+    if status == _fields.Values.VALUES_RESIDUAL:
+        raise CorruptError(f"{where}: a sample residual exceeds the {dtype} range")
+    if status == _fields.Values.VALUES_ORDER:
+        raise CorruptError(f"{where}: the sample order is no permutation of the vertices")
+    if status == _fields.Values.VALUES_SAMPLE:
         raise CorruptError(f"{where}: a sample leaves the {dtype} range")
-    values = np.empty((n, channels), dtype=dtype)
-    values[seq_order] = seq
+    values = values.astype(dtype)
     values = values[:, 0] if channels == 1 else values
 
     return Mesh(vertices, values, triangles, width, rows, lines), areas

@@ -90,3 +90,127 @@ def test_a_package_without_its_kernels_says_how_to_build_them(monkeypatch) -> No
     with pytest.raises(ImportError, match=r"not built: install the package with `pip install -e \.`"):
         importlib.import_module("codec.native")
 
+
+
+# The kernels below replace numpy passes whose per-call cost dominated decoding files
+# of many tiny bands; each is checked against the definition it replaces.
+
+def _reference():
+    from codec.format_spec import reference_decoder
+
+    return reference_decoder
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 16), st.integers(0, 2**32 - 1))
+def test_hilbert_kernels_follow_the_spec(levels: int, seed: int) -> None:
+    ref = _reference()
+    rng = np.random.default_rng(seed)
+    x, y = rng.integers(0, 1 << levels, (2, 50))
+    d = coding.hilbert_keys(x, y, levels)
+    assert d.tolist() == [ref.hilbert_distance(1 << levels, int(a), int(b)) for a, b in zip(x, y)]
+    back = coding.hilbert_points(d, levels)
+    assert back[0].tolist() == x.tolist() and back[1].tolist() == y.tolist()
+    # shapes are kept, and nothing at all is no error
+    assert coding.hilbert_keys(x.reshape(5, 10), y.reshape(5, 10), levels).shape == (5, 10)
+    assert coding.hilbert_keys(x[:0], y[:0], levels).shape == (0,)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_canonical_triangles_rotate_then_sort(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 10 ** int(rng.integers(1, 8))))
+    t = np.array([rng.choice(n, 3, replace=False) for _ in range(int(rng.integers(0, 60)))], np.int64).reshape(-1, 3)
+    if len(t) > 2:
+        t[-1] = t[0][[1, 2, 0]]  # a row repeated in another rotation
+    rotations = [min(tuple(r[i:]) + tuple(r[:i]) for i in range(3)) for r in t.tolist()]
+    assert coding.canonical_triangles(t).tolist() == sorted(map(list, rotations))
+
+
+def _band(seed: int, width: int = 40, rows: int = 12):
+    """Random distinct vertices in raster order with the band's corners, and their
+    Delaunay triangles."""
+    from codec.triangulate import triangulate
+
+    rng = np.random.default_rng(seed)
+    keys = rng.choice(width * rows, int(rng.integers(4, 60)), replace=False)
+    keys = np.unique(np.r_[keys, 0, width - 1, (rows - 1) * width, rows * width - 1])
+    vertices = np.stack([keys % width, keys // width], 1).astype(np.int64)
+    return vertices, coding.canonical_triangles(triangulate(vertices))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 300), st.booleans())
+def test_vertex_steps_follow_the_spec(seed: int, step: int, pinned: bool) -> None:
+    ref = _reference()
+    vertices, triangles = _band(seed)
+    band = ref.Band(1 if pinned else 0, 12)
+    band.xs, band.ys = vertices[:, 0].tolist(), vertices[:, 1].tolist()
+    band.triangles = [tuple(t) for t in triangles.tolist()]
+    assert meshcode.vertex_steps(vertices, triangles, step, pinned).tolist() == ref.vertex_steps(band, step)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.booleans(), st.sampled_from([1, 3]))
+def test_band_values_is_steps_parents_and_sums(seed: int, step: int, pinned: bool, channels: int) -> None:
+    """The decoder's one-pass sample stage equals vertex_steps, sample_parents and
+    tree_sums composed, as the encoder defines them."""
+    from codec.native import _fields
+
+    vertices, triangles = _band(seed)
+    n = len(vertices)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)
+    parent = meshcode.sample_parents(triangles, order)
+    steps = meshcode.vertex_steps(vertices, triangles, step, pinned)[order][:, None]
+    # a large root and residuals of either sign that cannot take a sum below 0
+    residuals = rng.integers(-3, 100, (n, channels))
+    residuals[0] = 10**6
+    expected = meshcode.tree_sums(residuals * steps, parent)
+    status, out, areas = _fields.band_values(vertices, triangles, coding.zigzag(residuals).astype(np.int64).ravel(),
+                                             order, step, pinned, 2**40)
+    assert status == _fields.Values.VALUES_OK
+    assert np.array_equal(out[order], expected)
+    assert np.array_equal(areas, meshcode.doubled_areas(vertices, triangles))
+
+
+def test_band_values_refusals() -> None:
+    from codec.native import _fields
+
+    vertices, triangles = _band(7)
+    n = len(vertices)
+    order = np.arange(n)
+    zero = np.zeros(n, np.int64)
+
+    def status(tri=triangles, zig=zero, seq=order, top=255):
+        return _fields.band_values(vertices, tri, zig, seq, 1, False, top)[0]
+
+    assert status() == _fields.Values.VALUES_OK
+    bad = triangles.copy()
+    bad[0, 2] = n
+    assert status(tri=bad) == _fields.Values.VALUES_CORNER
+    assert status(zig=np.r_[zero[:-1], 511]) == _fields.Values.VALUES_RESIDUAL
+    assert status(seq=np.r_[order[:-1], 0]) == _fields.Values.VALUES_ORDER
+    assert status(zig=np.r_[1, zero[1:]]) == _fields.Values.VALUES_SAMPLE  # -1 at the root
+    with pytest.raises(ValueError):
+        status(zig=zero[:-1])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(0, 5000), max_size=60), st.integers(0, 12))
+def test_position_keys_follow_the_gaps(gaps: list[int], bits: int) -> None:
+    """Keys from the stored gaps (the positions field's high parts and position_bits'
+    low bits) as meshcode.position_fields splits them; refused as soon as a key
+    leaves the span."""
+    from codec.native import _fields
+
+    fields = meshcode.position_fields(np.array(gaps, np.int64), bits)
+    nums = coding.unvarints(fields["positions"], len(gaps) + 1, "test")
+    packed = np.frombuffer(fields["position_bits"], np.uint8)
+    keys = np.cumsum(np.array(gaps, np.int64) + 1) - 1
+    span = int(keys[-1]) + 1 if gaps else 1
+    ok, out = _fields.position_keys(nums[1:], packed, bits, span)
+    assert ok and out.tolist() == keys.tolist()
+    if gaps:
+        assert _fields.position_keys(nums[1:], packed, bits, span - 1) == (False, None)
