@@ -346,8 +346,9 @@ def code_band(
             values[on] = band[mesh.height - 1, mesh.vertices[on, 0]]
         mesh = Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints,
                     holes if has_holes else None)
-        # the mesher's error describes its own values
-        mse = None if top is not None or not last else mse
+        # the mesher's error describes its own values, over the filled holes too: the
+        # step is measured again (holes: over the valid pixels)
+        mse = None if has_holes or top is not None or not last else mse
     if step is None:
         if mse is None:
             mse = _decoded_mse(mesh, band, ~holes if has_holes else None)
