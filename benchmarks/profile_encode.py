@@ -1,4 +1,4 @@
-"""Encoder work and output: Triangle calls, encode time and a fingerprint of the bytes.
+"""Encoder work and output: triangulations, encode time and a fingerprint of the bytes.
 
     python benchmarks/profile_encode.py [--hash] [--profile N] [--repeat 3]
 

@@ -234,29 +234,39 @@ def cut(mesh: Mesh, holes: np.ndarray, outline: list[np.ndarray] | None = None) 
     in stored order, triangulated as a decoder rebuilds it (meshcode.in_stored_order)."""
     if not holes.any():
         return mesh
+    outlined = cut_open(mesh, holes, outline)
+    try:
+        return in_stored_order(outlined)
+    except ATMError:
+        # walls that cross no rim still crossed: keep the rims only
+        rim_only = [c for c in outlined.constraints if holes[outlined.vertices[c, 1], outlined.vertices[c, 0]].all()]
+        return in_stored_order(Mesh(outlined.vertices, outlined.values, outlined.triangles, outlined.width,
+                                    outlined.height, rim_only, holes))
+
+
+def cut_open(mesh: Mesh, holes: np.ndarray, outline: list[np.ndarray] | None = None) -> Mesh:
+    """cut()'s vertices and walls, not triangulated: the mesh's vertices off the holes
+    and their rims, its walls that cross no rim, and the rims (`outline`; None:
+    rims(holes)) as closed polylines."""
     h, w = holes.shape
     outline = rims(holes) if outline is None else outline
     # vertices in holes, or on a rim, would sit on or inside the new walls
     base = without_vertices(mesh, ~_dropped(mesh, holes, outline))
     walls = _walls_clear_of(base, _on_lines(outline, (h, w), thickness=3))
+    # a wall may still cross a rim where it passes one of the rim's corners
+    crossed = crossing([base.vertices[c] for c in walls] + outline)[: len(walls)]
+    walls = [c for c, bad in zip(walls, crossed) if not bad]
     rim_xy = np.concatenate(outline) if outline else np.zeros((0, 2), np.int64)
     vertices, where = np.unique(np.concatenate([base.vertices, rim_xy]), axis=0, return_inverse=True)
     where = where.ravel()
     remap = where[: len(base.vertices)]
-    rim_lines = []
+    constraints = [remap[c] for c in walls]
     start = len(base.vertices)
     for r in outline:
-        rim_lines.append(where[start : start + len(r)])
+        constraints.append(where[start : start + len(r)])
         start += len(r)
     values = np.zeros((len(vertices),) + mesh.values.shape[1:], mesh.dtype)
     values[remap] = base.values
-    # the rims cross nothing of their own (rims()); a wall may still cross one where it
-    # passes a rim's corner, and then the rims are kept without the walls
-    for constraints in ([remap[c] for c in walls] + rim_lines, rim_lines, []):
-        try:
-            # through_vertices also drops the zero-length steps of rims that double back
-            lines = through_vertices(vertices, constraints)
-            return in_stored_order(Mesh(vertices, values, np.zeros((0, 3), np.int64), w, h, lines, holes))
-        except ATMError:
-            continue
-    raise AssertionError("a mesh without constraints always triangulates")
+    # through_vertices also drops the zero-length steps of rims that double back
+    lines = through_vertices(vertices, constraints)
+    return Mesh(vertices, values, np.zeros((0, 3), np.int64), w, h, lines, holes)

@@ -6,9 +6,10 @@
 `code_band` is a pure function: what one band passes to the next (the shared row's
 vertices, the base value step) goes in and comes out as values, so `codec.encode` and
 `codec.StreamEncoder` (a row buffer around it) run the same code. Its stages: fill
-holes, mesh (codec.mesher), cut the holes out (codec.holes), pin the first row to
-the band above and sample the last row for the band below (codec.banding), fit values
-in holed bands, quantise the values as stored (codec.meshcode.quantise), refine to an
+holes, mesh (codec.mesher), and before the mesher's last triangulation (its Finish)
+cut the holes out (codec.holes), pin the first row to the band above and sample the
+last row for the band below (codec.banding), so that a band is triangulated once a
+round; then quantise the values as stored (codec.meshcode.quantise) and refine to an
 error bound (codec.error_bound).
 """
 
@@ -23,13 +24,12 @@ from typing import Callable
 import numpy as np
 
 from . import banding, error_bound, holes as hole_stage, integers, meshcode, quantise
-from .errors import OptionError, UnsupportedError
+from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
-from .mesh import Mesh, segments
-from .mesher import Meshed, builder
+from .mesh import Mesh
+from .mesher import Finish, Meshed, builder
 from .mesher import values as vertex_values
 from .settings import Settings
-from .triangulate import triangulate
 
 #: Vertex density used when no size is asked for (the 2.8 % at which the paper,
 #: "Approximation of Digital Images with Discontinuity-Preserving Adaptive Triangular
@@ -54,19 +54,19 @@ MAX_REMESH = 16
 KEPT_GROWTH = 1.2
 
 
-def _mesh_around_holes(band: np.ndarray, holes: np.ndarray, rims: list[np.ndarray], share: int, plan: Plan) -> Meshed:
-    """The mesher's mesh of a filled band of which about `share` vertices lie off the
-    holes and their rims (the ones hole_stage.cut keeps): the mesher meshes the filled
-    holes too (tum depth at 500 points: three vertices in four), so it is asked for
-    more, by a secant on log(budget) -> log(kept) from the budgets tried."""
-    build = builder(plan.settings.mesher)
-    options = plan.settings.mesher_options()
+def _mesh_around_holes(build: Callable[[int], Meshed], kept: Callable[[Meshed], int], share: int) -> Meshed:
+    """A mesh of a filled band (build(budget): the mesher's) of which about `share`
+    vertices lie off the holes and their rims (kept(mesh): how many): the mesher
+    meshes the filled holes too (tum depth at 500 points: three vertices in four), so
+    it is asked for more, by a secant on log(budget) -> log(kept) from the budgets
+    tried."""
     asked = share
-    meshed = build(band, asked, **options)
-    kept = hole_stage.kept(meshed.mesh, holes, rims)
-    tried = [(asked, kept)]
+    meshed = build(asked)
+    got = kept(meshed)
+    best = got
+    tried = [(asked, got)]
     for _ in range(REMESHES):
-        if abs(kept - share) <= REMESH_OFF * share or kept == 0 and asked >= MAX_REMESH * share:
+        if abs(got - share) <= REMESH_OFF * share or got <= 0 and asked >= MAX_REMESH * share:
             break
         if len(tried) == 1:
             growth = KEPT_GROWTH
@@ -74,17 +74,56 @@ def _mesh_around_holes(band: np.ndarray, holes: np.ndarray, rims: list[np.ndarra
             (a0, k0), (a1, k1) = tried[-2:]
             growth = math.log(max(k1, 1) / max(k0, 1)) / math.log(a1 / a0) if a1 != a0 else KEPT_GROWTH
             growth = min(max(growth, 0.5), 2.0)
-        nxt = round(asked * (share / max(kept, 1)) ** (1 / growth))
-        nxt = int(min(max(nxt, 4), MAX_REMESH * share))
+        nxt = int(min(max(round(asked * (share / max(got, 1)) ** (1 / growth)), 4), MAX_REMESH * share))
         if nxt == asked:
             break
-        candidate = build(band, nxt, **options)
-        got = hole_stage.kept(candidate.mesh, holes, rims)
+        candidate = build(nxt)
+        got = kept(candidate)
         tried.append((nxt, got))
-        if abs(got - share) < abs(kept - share):
-            meshed, kept = candidate, got
+        if abs(got - share) < abs(best - share):
+            meshed, best = candidate, got
         asked = nxt
     return meshed
+
+
+def _finisher(plan: Plan, band: np.ndarray, holes: np.ndarray | None, rims: list[np.ndarray] | None,
+              top: tuple[np.ndarray, np.ndarray] | None, last: bool) -> Finish:
+    """The mesher's Finish for a band: cut its holes out, pin its first row to `top`
+    and sample its last row unless it is the image's `last`."""
+    def finish(mesh: Mesh, mse: float | None) -> Mesh:
+        if holes is not None:
+            mesh = hole_stage.cut_open(mesh, holes, rims)
+            # the rims' vertices too hold their pixels' values while the rows are made
+            mesh = Mesh(mesh.vertices, vertex_values.sample(band, mesh.vertices), mesh.triangles,
+                        mesh.width, mesh.height, mesh.constraints, holes)
+        if top is not None:
+            mesh = banding.pin_top_row(mesh, *top)
+        if not last:
+            # the next band starts from this band's last row: make that row good
+            mesh = banding.sample_last_row(mesh, band, _row_tolerance(plan, mesh, band, mse))
+        return mesh
+
+    return finish
+
+
+def _reshaped(plan: Plan, band: np.ndarray, holes: np.ndarray | None, rims, share: int,
+              top, last: bool, build, options) -> Meshed:
+    """The band's mesh made in turns (the mesher's, then holes cut, then the shared rows,
+    each triangulated): for the rare band where a wall crosses a rim in a way only
+    the triangulation finds."""
+    meshed = build(band, share, None, **options)
+    mesh = meshed.mesh
+    if holes is not None:
+        mesh = hole_stage.cut(mesh, holes.copy(), rims)
+    reshaped = mesh
+    if top is not None:
+        reshaped = banding.pin_top_row(reshaped, *top)
+    if not last:
+        reshaped = banding.sample_last_row(reshaped, band, _row_tolerance(plan, reshaped, band, meshed.mse))
+    mesh = meshcode.in_stored_order(reshaped) if reshaped is not mesh else mesh
+    values = vertex_values.fit(band, mesh.vertices, mesh.triangles, plan.values)
+    return Meshed(Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints, holes),
+                  None, True)
 
 
 def default_points(width: int, height: int) -> int:
@@ -221,24 +260,30 @@ def _decoded_mse(mesh: Mesh, band: np.ndarray, valid: np.ndarray | None) -> floa
     return float((diff.reshape(-1, mesh.channels) ** 2).mean(axis=0).min()) if diff.size else 0.0
 
 
-def _row_tolerance(plan: Plan, mesh: Mesh, band: np.ndarray, pinned: bool) -> float:
+#: A shared row follows the image to ROW_FACTOR times the band's RMS error (as the
+#: mesher last measured it): closer costs more bytes than it saves error.
+ROW_FACTOR = 2.0
+
+
+def _row_tolerance(plan: Plan, mesh: Mesh, band: np.ndarray, mse: float | None) -> float:
     """How closely a shared row must follow the image: the error bound if there is
-    one, else twice the band's RMS error as decoded (the row should not be the band's
-    worst). pinned: the mesh's first row was just pinned and it has no triangles yet;
-    the pinning's error counts (a row sampled more closely than that costs more bytes
-    than it saves error: 6 % more bytes on camera in 16 bands), so it is triangulated
-    to be measured."""
+    one, else ROW_FACTOR times the band's RMS error as the mesher last measured it
+    (`mse`; None: as the row's vertices so far follow the row, which lies on the
+    band's hull and decodes as the line through them)."""
     if plan.bound.max_error is not None:
         return float(plan.bound.max_error)
     if plan.bound.max_rms is not None:
         return float(plan.bound.max_rms)
-    from . import decoder_cpu
-
-    if pinned:
-        mesh = Mesh(mesh.vertices, mesh.values, triangulate(mesh.vertices, segments(mesh.constraints)),
-                    mesh.width, mesh.height, mesh.constraints, mesh.holes)
-    diff = decoder_cpu.render(mesh).astype(np.float64) - band
-    return max(1.0, 2.0 * float(np.sqrt(np.mean(diff**2))))
+    if mse is None:
+        xs, values = banding.bottom_row(mesh)
+        row = band[mesh.height - 1].reshape(mesh.width, -1).astype(np.float64)
+        values = values.reshape(len(xs), -1).astype(np.float64)
+        if len(xs):
+            line = np.stack([np.interp(np.arange(mesh.width), xs, v) for v in values.T], axis=1)
+        else:
+            line = row.mean(axis=0)
+        mse = float(np.mean((line - row) ** 2))
+    return max(1.0, ROW_FACTOR * float(np.sqrt(mse)))
 
 
 def code_band(
@@ -269,33 +314,41 @@ def code_band(
         rims = hole_stage.rims(holes, int(hole_stage.RIM_SHARE * share))
         share = max(4, share - len(np.unique(np.concatenate(rims), axis=0)) if rims else share)
     band = hole_stage.fill(rows, holes) if has_holes else rows
-    if has_holes:
-        meshed = _mesh_around_holes(band, holes, rims, share, plan)
-    else:
-        meshed = builder(plan.settings.mesher)(band, share, **plan.settings.mesher_options())
+    build = builder(plan.settings.mesher)
+    options = plan.settings.mesher_options()
+    finish = None
+    if has_holes or top is not None or not last:
+        # the holes, the shared first row and the sampled last row go in before the
+        # mesher's last triangulation, so that the band is triangulated once a round
+        finish = _finisher(plan, band, holes if has_holes else None, rims, top, last)
+    try:
+        if has_holes:
+            rim_count = len(np.unique(np.concatenate(rims), axis=0)) if rims else 0
+            meshed = _mesh_around_holes(lambda n: build(band, n, finish, **options),
+                                        lambda m: len(m.mesh.vertices) - rim_count, share)
+        else:
+            meshed = build(band, share, finish, **options)
+    except ATMError:
+        # a wall and a rim still cross: mesh first, then cut and pin (triangulating again)
+        meshed = _reshaped(plan, band, holes, rims, share, top, last, build, options)
     if progress is not None and plan.bound.active:
         progress(0.2)
-    mesh, delaunay = meshed.mesh, meshed.delaunay
-    # the mesher's own measure of its error, while the mesh is the one it describes
-    mse = meshed.mse if not has_holes else None
-    if has_holes:
-        mesh = hole_stage.cut(mesh, holes.copy(), rims)
-        delaunay = True
-    reshaped = mesh
-    if top is not None:
-        reshaped = banding.pin_top_row(reshaped, *top)
-    if not last:
-        # the next band starts from this band's last row: make that row good
-        reshaped = banding.sample_last_row(reshaped, band, _row_tolerance(plan, reshaped, band, top is not None))
-    if reshaped is not mesh:
-        # one triangulation for both rows' changes, in the order a decoder rebuilds
-        mesh, delaunay, mse = meshcode.in_stored_order(reshaped), True, None
-    if has_holes:
-        fitted = vertex_values.fit(band, mesh.vertices, mesh.triangles, plan.values)
+    mesh, delaunay, mse = meshed.mesh, meshed.delaunay, meshed.mse
+    if finish is not None:
+        # the mesher fitted every value; the shared rows' are fixed: the first row's as
+        # the band above stored them, the last row's its pixels (sample_last_row)
+        values = mesh.values.copy()
         if top is not None:
-            pinned = mesh.vertices[:, 1] == 0
-            fitted[pinned] = mesh.values[pinned]
-        mesh = Mesh(mesh.vertices, fitted, mesh.triangles, mesh.width, mesh.height, mesh.constraints, mesh.holes)
+            on = np.flatnonzero(mesh.vertices[:, 1] == 0)
+            values[on] = top[1][np.searchsorted(top[0], mesh.vertices[on, 0])]
+        if not last:
+            on = np.flatnonzero(mesh.vertices[:, 1] == mesh.height - 1)
+            values[on] = band[mesh.height - 1, mesh.vertices[on, 0]]
+        mesh = Mesh(mesh.vertices, values, mesh.triangles, mesh.width, mesh.height, mesh.constraints,
+                    holes if has_holes else None)
+        # the mesher's error describes its own values, over the filled holes too: the
+        # step is measured again (holes: over the valid pixels)
+        mse = None if has_holes or top is not None or not last else mse
     if step is None:
         if mse is None:
             mse = _decoded_mse(mesh, band, ~holes if has_holes else None)

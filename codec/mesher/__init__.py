@@ -35,6 +35,13 @@ class Meshed:
     delaunay: bool = False
 
 
+#: A change a mesher's caller makes to the mesh just before its last triangulation:
+#: finish(mesh, mse) -> mesh, given the mesh's vertices (their values their pixels')
+#: and walls without triangles, and the mean squared error the mesher last measured
+#: (None if it measured none); the mesher then triangulates what it returns, fits its
+#: values and returns that (a band's shared rows and holes: codec.pipeline).
+Finish = Callable[[Mesh, "float | None"], Mesh]
+
 #: Mesher name -> its module (each has `build(image, points, **options) -> Meshed`).
 _MODULES = (("adaptive", "codec.mesher.adaptive"), ("uniform", "codec.mesher.uniform"))
 

@@ -28,7 +28,8 @@ from . import values as vertex_values
 from ..errors import OptionError
 from ..image import structure
 from ..mesh import Mesh
-from . import Meshed
+from ..mesh import segments as segment_pairs
+from . import Finish, Meshed
 from .elements import Statistics, element_sse, line_raster, triangle_raster
 from .refine import FOCUSED_ROUNDS, ROUNDS, merge, refine_to_budget, run_breaks
 from .unfold import Walls, unfold
@@ -142,9 +143,24 @@ def _chains(segments: np.ndarray) -> list[np.ndarray]:
     return np.split(flat, ends[:-1] + np.arange(1, len(ends)))
 
 
+def _through(finish: Finish, image: np.ndarray):
+    """refine_to_budget's finish (vertices, segments) from a mesher's Finish (meshes):
+    the vertices hold their pixels' values while the caller changes the mesh."""
+    height, width = image.shape[:2]
+
+    def hook(vertices: np.ndarray, segments: np.ndarray, mse: float | None):
+        mesh = Mesh(vertices, vertex_values.sample(image, vertices), np.zeros((0, 3), np.int64),
+                    width, height, _chains(segments))
+        done = finish(mesh, mse)
+        return done.vertices, segment_pairs(done.constraints)
+
+    return hook
+
+
 def build(
     image: np.ndarray,
     points: int,
+    finish: Finish | None = None,
     *,
     segment_length: int = 4,
     segment_error: float = 1.0,
@@ -168,6 +184,7 @@ def build(
     refinement places, in how many rounds.
     values: "lsq" (least squares, default) or "sample" (the pixel values, as the paper).
     Explicit tiles and per_tile are honoured even when they give more than `points`.
+    finish: changes the mesh just before its last triangulation (codec.mesher.Finish).
     """
     if values not in vertex_values.METHODS:
         raise OptionError(f"unknown values method {values!r}; choose one of {', '.join(vertex_values.METHODS)}")
@@ -215,7 +232,8 @@ def build(
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
     layout = Statistics(image if image.ndim == 2 else gray, fit)
     vertices, segments, triangles, elements, stats, delaunay = refine_to_budget(
-        gray, vertices, segments, points, layout, rounds, focused_rounds
+        gray, vertices, segments, points, layout, rounds, focused_rounds,
+        None if finish is None else _through(finish, image),
     )
     if values == "lsq":
         vals = vertex_values.from_statistics(

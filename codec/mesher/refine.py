@@ -140,6 +140,7 @@ def refine_to_budget(
     layout: Statistics,
     rounds: int = ROUNDS,
     focused_rounds: int = FOCUSED_ROUNDS,
+    finish=None,
 ):
     """Add vertices until there are `target`: in each round, the elements with the
     largest squared error (against the mesh through the sampled pixel values) each get
@@ -153,12 +154,20 @@ def refine_to_budget(
     triangles' spans are not kept), every element's statistics (`layout`, which must
     have `gray` as its structure plane) and whether the triangulation is the one a
     decoder rebuilds from the vertices and segments in that order (Meshed.delaunay).
+
+    finish: called once as finish(vertices, segments, mse) before the last
+    triangulation, `mse` the mean squared error of the last one measured (None if
+    none was), it returns the vertices and segments to triangulate instead (a band's
+    shared rows and holes go in there, so that the band is triangulated once a round).
     """
     height, width = gray.shape
     cache = _Cache(layout)
     ordered = False
+    measured = None
     for r in itertools.count():
         if r == rounds or target <= len(vertices):
+            if finish is not None:
+                vertices, segments = finish(vertices, segments, measured)
             # the last triangulation: made as the MESH chunk's check will make it
             vertices, segments, _ = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
@@ -170,6 +179,7 @@ def refine_to_budget(
             break
         lines = line_raster(vertices, width, height)
         sse = np.r_[tri_sse, element_sse(lines, layout(lines), z)]
+        measured = float(sse.sum()) / (width * height)
         if r == 0:
             quarter = min(len(sse), math.ceil(missing / 4))
             if np.partition(sse, len(sse) - quarter)[len(sse) - quarter :].sum() >= CONCENTRATED * sse.sum():
@@ -190,6 +200,9 @@ def refine_to_budget(
         order = np.argsort(t, kind="stable")
         x, y, err = np.r_[x[order], lx], np.r_[y[order], ly], np.r_[err[order], lerr]
         big = err > 0.5
+        if not big.any() and finish is not None:
+            rounds = r + 1  # nothing worth a vertex, but the caller's still go in
+            continue
         if not big.any():
             # nothing worth a vertex: keep this triangulation, in raster order
             vertices, segments, renumber = _raster_order(vertices, segments, width)

@@ -9,7 +9,8 @@ import numpy as np
 
 from . import values as vertex_values
 from ..mesh import Mesh
-from . import Meshed
+from ..meshcode import in_stored_order
+from . import Finish, Meshed
 from ..triangulate import triangulate
 
 
@@ -34,8 +35,9 @@ def grid_shape(width: int, height: int, points: int) -> tuple[int, int]:
     return best[1], best[2]
 
 
-def build(image: np.ndarray, points: int, *, values: str = "sample") -> Meshed:
-    """Mesh `image` with a uniform grid of about `points` vertices."""
+def build(image: np.ndarray, points: int, finish: Finish | None = None, *, values: str = "sample") -> Meshed:
+    """Mesh `image` with a uniform grid of about `points` vertices. finish: changes the
+    mesh just before it is triangulated (codec.mesher.Finish)."""
     height, width = image.shape[:2]
     nx, ny = grid_shape(width, height, points)
     xs = np.unique(np.round(np.linspace(0, width - 1, nx)).astype(np.int64))
@@ -43,6 +45,11 @@ def build(image: np.ndarray, points: int, *, values: str = "sample") -> Meshed:
     gx, gy = np.meshgrid(xs, ys)
     # row by row: raster order, the stored order, so this is the decoder's triangulation
     vertices = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    if finish is not None:
+        grid = Mesh(vertices, vertex_values.sample(image, vertices), np.zeros((0, 3), np.int64), width, height)
+        mesh = in_stored_order(finish(grid, None))
+        vals = vertex_values.fit(image, mesh.vertices, mesh.triangles, values)
+        return Meshed(Mesh(mesh.vertices, vals, mesh.triangles, width, height, mesh.constraints), delaunay=True)
     triangles = triangulate(vertices)
     vals = vertex_values.fit(image, vertices, triangles, values)
     return Meshed(Mesh(vertices, vals, triangles, width, height), delaunay=True)
