@@ -105,8 +105,10 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
         options = src.float_options(options)
     elif integers.is_signed(src.dtype) and "value_range" not in options and src.scan is not None:
         options = dict(options, value_range=integers.value_range(src.scan(), options.get("nodata")))
+    blocks = iter(src.blocks)
     with open_output(dst_name) as f:
         out = _Counter(f)
+        first = next(blocks, None)  # (n, W, 1) rows or not: read once the output is open
         enc = codec.StreamEncoder(
             out,
             src.width,
@@ -114,9 +116,13 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
             dtype=src.dtype,
             channels=src.channels,
             progress=progress,
+            # a gray .npy of shape (H, W, 1) keeps its axis (ATM.md §4.8)
+            channel_axis=first is not None and src.channels == 1 and first.ndim == 3,
             **options,
         )
-        for block in src.blocks:
+        for block in ([] if first is None else [first]):
+            enc.write(block)
+        for block in blocks:
             enc.write(block)
         enc.close()
     return enc, out.count

@@ -262,3 +262,25 @@ def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
             os.close(fd)  # the stalled inputs end: a worker still alive would go on
     time.sleep(2)
     assert sorted(os.listdir(out)) == written == []
+
+
+def test_a_gray_image_with_a_channel_axis_through_the_command_line(tmp_path):
+    """#23, ATM.md §4.8: `atm encode` of an (H, W, 1) .npy keeps the axis; `atm decode`
+    writes it back to .npy in that shape and as a gray PNG, PGM or TIFF (formats with
+    no such axis), and `atm compare` takes the two shapes as the same gray image."""
+    image = range_scene(48, 32, seed=3)[:, :, None].copy()
+    np.save(tmp_path / "in.npy", image)
+    r = atm("encode", str(tmp_path / "in.npy"), str(tmp_path / "x.atm"), "--points", "200")
+    assert r.returncode == 0, r.stderr.decode()
+    data = (tmp_path / "x.atm").read_bytes()
+    assert data == codec.encode(image, points=200)
+    decoded = codec.decode(data)
+    assert decoded.shape == (32, 48, 1)
+    for ext in ("npy", "png", "pgm", "tif"):
+        out = tmp_path / f"out.{ext}"
+        r = atm("decode", str(tmp_path / "x.atm"), str(out))
+        assert r.returncode == 0, (ext, r.stderr.decode())
+        back = np.load(out) if ext == "npy" else codec.files.read_image(out)
+        np.testing.assert_array_equal(back, decoded if ext == "npy" else decoded[:, :, 0])
+        r = atm("compare", str(tmp_path / "x.atm"), str(out))
+        assert r.returncode == 0 and b"identical" in r.stdout, (ext, r.stdout, r.stderr)
