@@ -490,6 +490,8 @@ class Reader:
             )
         if size > min(self._payload_limit(), limits.MAX_PAYLOAD_BYTES):
             raise LimitError(f"{where} would decompress to {size:,} bytes, more than its image can need")
+        if frames.frame_length(payload, where) != len(payload):  # codec.info decompresses no more
+            raise CorruptError(f"{where} has bytes after its zstd frame (ATM.md §4: one frame)")
         raw = frames.decompress(payload, size, where, self._dctx) if size <= _WHOLE_FRAME else b""
         fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where)
         if len(fixed) < _MESH_FIXED.size:

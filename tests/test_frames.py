@@ -7,6 +7,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+import pytest
 import zstandard
 
 import codec
@@ -49,3 +50,26 @@ def test_encoding_gives_the_same_bytes_on_any_thread(corpus):
     serial = codec.encode(image, points=2000)
     with ThreadPoolExecutor(3) as pool:
         assert set(pool.map(lambda _: codec.encode(image, points=2000), range(3))) == {serial}
+
+
+def test_info_refuses_bytes_after_a_large_mesh_frame():
+    """ATM.md §4: a payload is one frame. codec.info reads only the fixed fields of a
+    MESH frame of more than 64 KiB, so it checks the frame's length from its block
+    headers instead of decompressing it."""
+    import struct
+    import zlib
+
+    from tests.conftest import chunks
+
+    image = np.random.default_rng(3).integers(0, 256, (300, 300), dtype=np.uint8)
+    data = codec.encode(image, points=45000, mesher="uniform")
+    offset, _, payload = next(p for p in chunks(data) if p[1] == b"MESH")
+    assert zstandard.frame_content_size(payload) > 1 << 16
+    bad_payload = payload + b"\0"
+    chunk = struct.pack("<I", len(bad_payload)) + b"MESH" + bad_payload + struct.pack("<I", zlib.crc32(b"MESH" + bad_payload))
+    bad = data[:offset] + chunk + data[offset + 12 + len(payload):]
+    assert codec.info(data)["vertices"] > 20000
+    with pytest.raises(codec.CorruptError, match="after its zstd frame"):
+        codec.info(bad)
+    with pytest.raises(codec.CorruptError, match="after its zstd frame"):
+        codec.decode(bad)

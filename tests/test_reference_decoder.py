@@ -569,3 +569,26 @@ def test_the_axis_chunk_gives_the_shape_and_is_checked():
             ref.decode(file)
         with pytest.raises(codec.CorruptError, match="axis chunk"):
             codec.decode(file)
+
+
+def test_both_decoders_bound_the_work_by_the_stored_bytes():
+    """§8: a frame may declare at most 2^20 + 1024 S bytes, and a connectivity-1 band
+    may ask to triangulate at most 2^16 + 64 S vertices (S: the chunk's stored length);
+    both decoders refuse more before doing the work."""
+    def file(width: int, height: int, mesh: bytes) -> bytes:
+        head = make_chunk(b"AHDR", struct.pack("<IIBB", width, height, 0, 1))
+        return ref.SIGNATURE + struct.pack("<H", 6) + head + make_chunk(b"MESH", mesh) + make_chunk(b"AEND", b"")
+
+    bomb = file(4096, 4096, zstandard.ZstdCompressor().compress(bytes(3 << 20)))
+    with pytest.raises(ref.DecodeError, match="declares"):
+        ref.decode(bomb)
+    with pytest.raises(codec.LimitError):
+        codec.decode(bomb)
+    n = 70_000  # > 2^16 + 64 S for this small chunk, within 300 x 300 pixels
+    fixed = struct.pack("<IIIIIIBBIH", 0, 300, n, 0, 0, 0, 1, 0, 0, 1)
+    raw = fixed + struct.pack("<I", 0) * 3 + struct.pack("<I", 1) + b"\0" + struct.pack("<I", 0) * 3
+    cheap = file(300, 300, zstandard.ZstdCompressor().compress(raw))
+    with pytest.raises(ref.DecodeError, match="so few stored bytes"):
+        ref.decode(cheap)
+    with pytest.raises(codec.LimitError, match="rebuild"):
+        codec.decode(cheap)
