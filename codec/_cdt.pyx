@@ -4,6 +4,7 @@ the canonical triangles straight from integer vertices and segments, with the GI
 released while they are built. codec.triangulate turns the status codes into ATMError."""
 
 from libc.stdint cimport int64_t
+from libc.string cimport memcpy
 from libcpp.vector cimport vector
 
 import numpy as np
@@ -17,8 +18,9 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         CDT_INDEX
         CDT_MEMORY
         CDT_INTERNAL
+        CDT_OVER
     Status cdt_triangulate "atmcdt::triangulate" (
-        int64_t n, const int64_t* xy, int64_t s, const int64_t* seg,
+        int64_t n, const int64_t* xy, int64_t s, const int64_t* seg, bint strict,
         vector[int64_t]* out, int64_t* flips) nogil
 
 OK = CDT_OK
@@ -28,12 +30,14 @@ EXTENT = CDT_EXTENT
 INDEX = CDT_INDEX
 MEMORY = CDT_MEMORY
 INTERNAL = CDT_INTERNAL
+OVER = CDT_OVER
 
 
-def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments):
+def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, bint strict=False):
     """(status, triangles, flips): the triangles (M x 3 int64, canonical order of ATM.md
     §4.2.3, positively oriented) of the N x 2 integer vertices with every segment (S x 2
-    vertex indices, checked here) an edge; triangles is None unless status is OK."""
+    vertex indices, checked here) an edge, cut at the vertices on it (strict: refused,
+    status OVER); triangles is None unless status is OK."""
     if vertices.shape[1] != 2 or segments.shape[1] != 2:
         raise ValueError("vertices and segments are N x 2")
     cdef int64_t n = vertices.shape[0], s = segments.shape[0], flips = 0
@@ -42,12 +46,14 @@ def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments):
     cdef const int64_t* seg = &segments[0, 0] if s else NULL
     cdef Status status
     with nogil:
-        status = cdt_triangulate(n, xy, s, seg, &out, &flips)
+        status = cdt_triangulate(n, xy, s, seg, strict, &out, &flips)
     if status != CDT_OK:
         return int(status), None, int(flips)
     result = np.empty((out.size() // 3, 3), dtype=np.int64)
-    cdef int64_t[:, ::1] r = result
-    cdef size_t i
-    for i in range(out.size()):
-        r[i // 3, i % 3] = out[i]
+    if out.size():
+        memcpy(&result_view(result)[0, 0], out.data(), out.size() * sizeof(int64_t))
     return 0, result, int(flips)
+
+
+cdef int64_t[:, ::1] result_view(object array):
+    return array

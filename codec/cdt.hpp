@@ -27,6 +27,7 @@ enum Status {
   CDT_INDEX = 4,      // a segment names no vertex
   CDT_MEMORY = 5,
   CDT_INTERNAL = 6,   // a broken invariant (a bug, never a file's fault)
+  CDT_OVER = 7,       // (strict) a segment passes over a vertex, so it is no edge
 };
 
 //: Largest coordinate extent accepted: differences below 2^28 keep incircle's products
@@ -78,6 +79,7 @@ class CDT {
   std::vector<i32> stack;
   i64 flips = 0;
   bool narrow = false;  // every coordinate difference below 2^14 (set by the caller)
+  bool strict = false;  // refuse a segment over a vertex instead of cutting it there
 
   i64 orient(i32 a, i32 b, i32 c) const {
     return (x[b] - x[a]) * (y[c] - y[a]) - (y[b] - y[a]) * (x[c] - x[a]);
@@ -422,6 +424,7 @@ class CDT {
       int r = first_step(a, b, &h, &on);
       if (r < 0) return CDT_INTERNAL;
       if (r == 1) {
+        if (strict && on != b) return CDT_OVER;
         mark(h);
         a = on;
         continue;
@@ -439,7 +442,11 @@ class CDT {
         i32 v = V[prv(f)];
         if (v == b) { end = b; break; }
         i64 ov = orient(a, b, v);
-        if (ov == 0) { end = v; break; }
+        if (ov == 0) {
+          if (strict) return CDT_OVER;
+          end = v;
+          break;
+        }
         i64 ou = orient(a, b, u);
         // triangle f is w-u, u-v, v-w: leave through the side whose ends differ
         h = ((ov > 0) == (ou > 0)) ? prv(f) : nxt(f);
@@ -482,10 +489,11 @@ class CDT {
   }
 };
 
-// Triangulate n vertices (xy, n x 2) with s segments (seg, s x 2 vertex indices):
+// Triangulate n vertices (xy, n x 2) with s segments (seg, s x 2 vertex indices; with
+// `strict`, one passing over a vertex is refused, otherwise cut there):
 // the triangles of ATM.md §4.2.5 in canonical order (§4.2.3: each rotated to start at
 // its smallest index, rows sorted) into *out (3 per triangle).
-inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg,
+inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool strict,
                           std::vector<i64>* out, i64* flips) {
   try {
     out->clear();
@@ -512,6 +520,7 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg,
         if (key[order[i - 1]] == key[order[i]]) return CDT_DUPLICATE;
     }
     CDT cdt;
+    cdt.strict = strict;
     cdt.narrow = xmax - xmin < (i64(1) << 14) && ymax - ymin < (i64(1) << 14);
     cdt.x.resize(n); cdt.y.resize(n);
     std::vector<i32> rank(n);
@@ -522,6 +531,14 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg,
     }
     Status st = cdt.build();
     if (st != CDT_OK) return st;
+    if (cdt.V.empty() && strict) {
+      // all on one line, in raster order along it: a segment over no vertex joins
+      // neighbours in that order
+      for (i64 j = 0; j < s; ++j) {
+        i64 gap = (i64)rank[seg[2 * j]] - (i64)rank[seg[2 * j + 1]];
+        if (gap > 1 || gap < -1) return CDT_OVER;
+      }
+    }
     if (!cdt.V.empty() && s > 0) {
       for (i64 j = 0; j < s; ++j) {
         i32 a = rank[seg[2 * j]], b = rank[seg[2 * j + 1]];

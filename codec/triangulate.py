@@ -24,11 +24,13 @@ _CROSSING = (
 )
 
 
-def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
+def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None, *,
+             strict: bool = False) -> np.ndarray:
     """The triangulation of ATM.md §4.2.5 of integer (x, y) vertices with every segment
     (pairs of vertex indices) an edge: M x 3 positively oriented triangles in canonical
     order (§4.2.3), none when all vertices lie on one line (a one-pixel-wide image needs
-    no triangles). A segment passing over vertices is cut at them.
+    no triangles). A segment passing over vertices is cut at them (strict: refused, as
+    ATM.md §4.2.3 constraint 6 refuses a polyline step over a vertex).
 
     The vertex set is used as given: a triangulation that would need an extra vertex
     (crossing segments) is refused, because vertices must stay on pixel centres. The
@@ -39,7 +41,7 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.nda
         s = np.zeros((0, 2), np.int64)
     else:
         s = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
-    status, triangles, _ = _cdt.triangulate(v, s)
+    status, triangles, _ = _cdt.triangulate(v, s, strict)
     if status == _cdt.OK:
         return triangles
     if status == _cdt.CROSSING:
@@ -50,6 +52,8 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.nda
         raise ATMError("the vertices span more than 2^28 - 1 in x or y, beyond the exact predicates")
     if status == _cdt.INDEX:
         raise ATMError(f"a constraint segment names a vertex beyond the {len(v)} vertices")
+    if status == _cdt.OVER:
+        raise ATMError("a polyline step passes over a vertex, so it is no triangle edge")
     if status == _cdt.MEMORY:
         raise MemoryError(f"no memory to triangulate {len(v)} vertices")
     raise ATMError(f"the triangulation kernel failed (status {status}): please report this file")
@@ -138,18 +142,6 @@ def _lattice_points(a: np.ndarray, d: np.ndarray, ends: bool) -> tuple[np.ndarra
     if not ends:
         t += 1
     return seg, a[seg] + t[:, None] * (d // g[:, None])[seg]
-
-
-def step_over_vertex(keys: np.ndarray, starts: np.ndarray, steps: np.ndarray, width: int) -> bool:
-    """Whether a pixel strictly inside one of the segments from `starts` by `steps` (K x
-    2, none zero) is a vertex; `keys` are the vertices' pixel numbers y * width + x,
-    sorted. Only steps longer than one unit step have such pixels, and there are few."""
-    g = np.gcd(np.abs(steps[:, 0]), np.abs(steps[:, 1]))
-    long = np.flatnonzero(g > 1)
-    if len(long) == 0 or len(keys) == 0:
-        return False
-    _, pts = _lattice_points(starts[long], steps[long], ends=False)
-    return bool(_find(keys, pts, width)[0].any())
 
 
 def _find(keys: np.ndarray, pts: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:

@@ -143,3 +143,21 @@ def test_bad_input_is_refused():
     assert delaunay(np.array([[3, 3], [1, 1], [2, 2]])).shape == (0, 3)
     assert delaunay(np.zeros((0, 2), np.int64)).shape == (0, 3)
 
+
+
+def test_strict_refuses_a_segment_over_a_vertex():
+    """strict (the decoder's, ATM.md §4.2.3 constraint 6): a segment over a vertex is
+    refused, across triangles, along an existing edge's line and on a one-pixel line;
+    without it the segment is cut there."""
+    gx, gy = np.meshgrid(np.arange(5), np.arange(5))
+    v = np.stack([gx.ravel(), gy.ravel()], 1)
+    for wall in ([0, 24], [0, 2], [20, 4], [12, 14]):
+        with pytest.raises(ATMError, match="passes over a vertex"):
+            delaunay(v, np.array([wall]), strict=True)
+        np.testing.assert_array_equal(delaunay(v, np.array([wall])), by_triangle(v, np.array([wall])))
+    np.testing.assert_array_equal(delaunay(v, np.array([[0, 6], [6, 12]]), strict=True),
+                                  by_triangle(v, np.array([[0, 6], [6, 12]])))
+    line = np.stack([np.arange(6), np.zeros(6, np.int64)], 1)[::-1]
+    assert delaunay(line, np.array([[0, 1], [4, 5]]), strict=True).shape == (0, 3)
+    with pytest.raises(ATMError, match="passes over a vertex"):
+        delaunay(line, np.array([[0, 2]]), strict=True)
