@@ -28,6 +28,7 @@ enum Status {
   CDT_MEMORY = 5,
   CDT_INTERNAL = 6,   // a broken invariant (a bug, never a file's fault)
   CDT_OVER = 7,       // (strict) a segment passes over a vertex, so it is no edge
+  CDT_OUTSIDE = 8,    // a point inserted outside the triangulated hull
 };
 
 //: Largest coordinate extent accepted: differences below 2^28 keep incircle's products
@@ -114,11 +115,31 @@ class CDT {
     i32 f = T[e];
     i32 a = V[e], b = V[nxt(e)], c = V[prv(e)], d = V[prv(f)];
     int s = incircle(a, b, c, d);
-    return s > 0 || (s == 0 && std::min(a, b) < std::min(c, d));
+    return s > 0 || (s == 0 && before(before(a, b) ? a : b, before(c, d) ? c : d));
+  }
+
+  // Raster order (ATM.md §4.2.5's priority): p before q.
+  bool before(i32 p, i32 q) const { return y[p] < y[q] || (y[p] == y[q] && x[p] < x[q]); }
+
+  // Change tracking for Triangulation.changes(): the first time a triangle slot changes
+  // after the last report, its old corners are kept (-1 for a slot that is new).
+  bool track = false;
+  std::vector<uint8_t> dirty_mark;
+  std::vector<i32> dirty, old;
+
+  void touch(i32 t) {
+    if (!track) return;
+    if ((size_t)t >= dirty_mark.size()) dirty_mark.resize(2 * (size_t)t + 16, 0);
+    if (dirty_mark[t]) return;
+    dirty_mark[t] = 1;
+    dirty.push_back(t);
+    bool exists = 3 * (size_t)t < V.size();
+    for (int j = 0; j < 3; ++j) old.push_back(exists ? V[3 * t + j] : -1);
   }
 
   i32 add_triangle(i32 a, i32 b, i32 c) {
     i32 t = (i32)V.size();
+    touch(t / 3);
     V.push_back(a); V.push_back(b); V.push_back(c);
     T.push_back(-1); T.push_back(-1); T.push_back(-1);
     C.push_back(0); C.push_back(0); C.push_back(0);
@@ -140,6 +161,8 @@ class CDT {
     i32 a = V[e], b = V[f], c = V[e2], d = V[f2];
     i32 te1 = T[e1], te2 = T[e2], tf1 = T[f1], tf2 = T[f2];
     uint8_t ce1 = C[e1], ce2 = C[e2], cf1 = C[f1], cf2 = C[f2];
+    touch(e / 3);
+    touch(f / 3);
     V[e] = d; V[e1] = c; V[e2] = a;
     V[f] = c; V[f1] = d; V[f2] = b;
     link(e1, te2, ce2);
@@ -175,10 +198,13 @@ class CDT {
     i32 e0 = 3 * t, e1 = e0 + 1, e2 = e0 + 2;
     i32 a = V[e0], b = V[e1], c = V[e2];
     i32 t1e = T[e1], t2e = T[e2];
+    uint8_t c1 = C[e1], c2 = C[e2];
+    touch(t);
     i32 s = add_triangle(b, c, p), r = add_triangle(c, a, p);
     V[e2] = p;  // e0: a-b, e1: b-p, e2: p-a
-    link(s, t1e, 0);
-    link(r, t2e, 0);
+    C[e1] = C[e2] = 0;
+    link(s, t1e, c1);
+    link(r, t2e, c2);
     T[e1] = s + 2; T[s + 2] = e1;
     T[s + 1] = r + 2; T[r + 2] = s + 1;
     T[r + 1] = e2; T[e2] = r + 1;
@@ -192,22 +218,30 @@ class CDT {
     i32 en = nxt(e), ep = prv(e), f = T[e];
     i32 a = V[e], b = V[en], c = V[ep];
     i32 ten = T[en];
+    uint8_t ce = C[e], cen = C[en];  // a segment split stays a segment, in two
+    touch(e / 3);
+    if (f >= 0) touch(f / 3);
     i32 q = add_triangle(p, b, c);
     V[en] = p;  // e: a-p, en: p-c, ep: c-a
-    link(q + 1, ten, 0);
+    C[en] = 0;
+    C[q] = ce;
+    link(q + 1, ten, cen);
     T[en] = q + 2; T[q + 2] = en;
     vinc[a] = e; vinc[c] = ep; vinc[b] = q + 1; vinc[p] = q;
     stack.push_back(ep); stack.push_back(q + 1);
     if (f < 0) {
-      link(e, -1, 0);  // both halves on the hull
-      link(q, -1, 0);
+      link(e, -1, ce);  // both halves on the hull
+      link(q, -1, ce);
       return;
     }
     i32 fn = nxt(f), fp = prv(f);
     i32 d = V[fp], tfn = T[fn];
+    uint8_t cfn = C[fn];
     i32 w = add_triangle(p, a, d);
     V[fn] = p;  // f: b-p, fn: p-d, fp: d-b
-    link(w + 1, tfn, 0);
+    C[fn] = 0;
+    C[w] = ce;
+    link(w + 1, tfn, cfn);
     T[fn] = w + 2; T[w + 2] = fn;
     T[e] = w; T[w] = e;   // a-p with p-a
     T[q] = f; T[f] = q;   // p-b with b-p
@@ -261,13 +295,19 @@ class CDT {
     hedge.assign(n, -1);
     V.reserve(6 * (size_t)n); T.reserve(6 * (size_t)n); C.reserve(6 * (size_t)n);
     if (n < 3) return CDT_OK;
-    // Andrew's monotone chain in raster order, corners only (collinear points dropped)
+    // Andrew's monotone chain in raster order, corners only (collinear points dropped);
+    // triangulate() passes the vertices in that order already
+    std::vector<i32> ranked(n);
+    for (i32 i = 0; i < n; ++i) ranked[i] = i;
+    bool in_order = true;
+    for (i32 i = 1; i < n && in_order; ++i) in_order = before(i - 1, i);
+    if (!in_order) std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
     std::vector<i32> hull;
     hull.reserve(n + 1);
     for (int pass = 0; pass < 2; ++pass) {
       size_t base = hull.size();
       for (i32 k = 0; k < n; ++k) {
-        i32 i = pass ? n - 1 - k : k;
+        i32 i = ranked[pass ? n - 1 - k : k];
         while (hull.size() >= base + 2 && orient(hull[hull.size() - 2], hull.back(), i) <= 0)
           hull.pop_back();
         hull.push_back(i);
@@ -309,7 +349,7 @@ class CDT {
     std::sort(idx.begin(), idx.end(), [&](i32 p, i32 q) {
       return key[p] != key[q] ? key[p] < key[q] : rest[p] < rest[q];
     });
-    i32 last = hull[0];
+    last = hull[0];
     for (i32 j : idx) {
       i32 p = rest[j], on = -1;
       i32 t = locate(vinc[last], p, &on);
@@ -487,7 +527,64 @@ class CDT {
     }
     return CDT_OK;
   }
+
+  // Incremental use (codec._cdt.Triangulation): the last vertex inserted, where the
+  // next point location walk starts.
+  i32 last = 0;
+
+  // Insert point (px, py) inside the hull as vertex x.size(), with Lawson flips (no
+  // segment is flipped): the constrained triangulation of §4.2.5 of all the points.
+  Status insert(i64 px, i64 py) {
+    if (V.empty()) return CDT_OUTSIDE;
+    i32 p = (i32)x.size();
+    x.push_back(px); y.push_back(py); vinc.push_back(-1); hedge.push_back(-1);
+    i32 on = -1, t = locate(vinc[last], p, &on);
+    bool dup = false;
+    if (t >= 0)
+      for (int j = 0; j < 3; ++j) dup |= x[V[3 * t + j]] == px && y[V[3 * t + j]] == py;
+    if (t < 0 || dup) {
+      x.pop_back(); y.pop_back(); vinc.pop_back(); hedge.pop_back();
+      return t < 0 ? CDT_OUTSIDE : CDT_DUPLICATE;
+    }
+    if (on >= 0) split_edge(on, p);
+    else split_triangle(t, p);
+    legalise();
+    last = p;
+    return CDT_OK;
+  }
 };
+
+// The triangles of `cdt` in canonical order into *out (vertex i of cdt is order[i],
+// or i itself when order is null): each rotated to start at its smallest index, then
+// a counting sort by that index and, within one (a fan of a few), insertion by the
+// other two.
+inline void canonical(const CDT& cdt, const i64* order, std::vector<i64>* out) {
+  i64 n = (i64)cdt.x.size(), m = (i64)cdt.V.size() / 3;
+  std::vector<i64> start(n + 1, 0);
+  out->assign(3 * m, 0);
+  i64* o = out->data();
+  for (i64 t = 0; t < m; ++t) {
+    i64 a = cdt.V[3 * t], b = cdt.V[3 * t + 1], c = cdt.V[3 * t + 2];
+    if (order) { a = order[a]; b = order[b]; c = order[c]; }
+    ++start[std::min(a, std::min(b, c)) + 1];
+  }
+  for (i64 i = 0; i < n; ++i) start[i + 1] += start[i];
+  for (i64 t = 0; t < m; ++t) {
+    i64 a = cdt.V[3 * t], b = cdt.V[3 * t + 1], c = cdt.V[3 * t + 2];
+    if (order) { a = order[a]; b = order[b]; c = order[c]; }
+    if (b < a && b < c) { i64 r = a; a = b; b = c; c = r; }
+    else if (c < a && c < b) { i64 r = c; c = b; b = a; a = r; }
+    i64 j = start[a]++;
+    // within the fan of a (slots before j hold a's or, unfilled, zeros), keep (b, c)
+    // increasing
+    while (j > 0 && o[3 * (j - 1)] == a &&
+           (o[3 * (j - 1) + 1] > b || (o[3 * (j - 1) + 1] == b && o[3 * (j - 1) + 2] > c))) {
+      o[3 * j] = o[3 * (j - 1)]; o[3 * j + 1] = o[3 * (j - 1) + 1]; o[3 * j + 2] = o[3 * (j - 1) + 2];
+      --j;
+    }
+    o[3 * j] = a; o[3 * j + 1] = b; o[3 * j + 2] = c;
+  }
+}
 
 // Triangulate n vertices (xy, n x 2) with s segments (seg, s x 2 vertex indices; with
 // `strict`, one passing over a vertex is refused, otherwise cut there):
@@ -549,31 +646,7 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool stri
       cdt.legalise();  // around the flips that forced the segments in
     }
     *flips = cdt.flips;
-    // canonical order, in the caller's vertex numbers: each triangle rotated to start at
-    // its smallest index, then a counting sort by that index and, within one (a fan of
-    // a few), insertion by the other two
-    i64 m = (i64)cdt.V.size() / 3;
-    std::vector<i64> start(n + 1, 0);
-    for (i64 t = 0; t < m; ++t) {
-      i64 a = order[cdt.V[3 * t]], b = order[cdt.V[3 * t + 1]], c = order[cdt.V[3 * t + 2]];
-      ++start[std::min(a, std::min(b, c)) + 1];
-    }
-    for (i64 i = 0; i < n; ++i) start[i + 1] += start[i];
-    out->resize(3 * m);
-    i64* o = out->data();
-    for (i64 t = 0; t < m; ++t) {
-      i64 a = order[cdt.V[3 * t]], b = order[cdt.V[3 * t + 1]], c = order[cdt.V[3 * t + 2]];
-      if (b < a && b < c) { i64 r = a; a = b; b = c; c = r; }
-      else if (c < a && c < b) { i64 r = c; c = b; b = a; a = r; }
-      i64 j = start[a]++;
-      // within the fan of a, keep (b, c) increasing
-      while (j > 0 && o[3 * (j - 1)] == a &&
-             (o[3 * (j - 1) + 1] > b || (o[3 * (j - 1) + 1] == b && o[3 * (j - 1) + 2] > c))) {
-        o[3 * j] = o[3 * (j - 1)]; o[3 * j + 1] = o[3 * (j - 1) + 1]; o[3 * j + 2] = o[3 * (j - 1) + 2];
-        --j;
-      }
-      o[3 * j] = a; o[3 * j + 1] = b; o[3 * j + 2] = c;
-    }
+    canonical(cdt, order.data(), out);
     return CDT_OK;
   } catch (const std::bad_alloc&) {
     return CDT_MEMORY;

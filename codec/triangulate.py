@@ -42,8 +42,13 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     else:
         s = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
     status, triangles, _ = _cdt.triangulate(v, s, strict)
-    if status == _cdt.OK:
-        return triangles
+    if status != _cdt.OK:
+        _refuse(status, len(v))
+    return triangles
+
+
+def _refuse(status: int, n: int) -> None:
+    """Raise the error a kernel status code stands for."""
     if status == _cdt.CROSSING:
         raise ATMError(_CROSSING)
     if status == _cdt.DUPLICATE:
@@ -51,12 +56,51 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     if status == _cdt.EXTENT:
         raise ATMError("the vertices span more than 2^28 - 1 in x or y, beyond the exact predicates")
     if status == _cdt.INDEX:
-        raise ATMError(f"a constraint segment names a vertex beyond the {len(v)} vertices")
+        raise ATMError(f"a constraint segment names a vertex beyond the {n} vertices")
     if status == _cdt.OVER:
         raise ATMError("a polyline step passes over a vertex, so it is no triangle edge")
+    if status == _cdt.OUTSIDE:
+        raise ATMError("a point lies outside the triangulated hull (or all points lie on one line)")
     if status == _cdt.MEMORY:
-        raise MemoryError(f"no memory to triangulate {len(v)} vertices")
-    raise ATMError(f"the triangulation kernel failed (status {status}): please report this file")
+        raise MemoryError(f"no memory to triangulate {n} vertices")
+    raise ATMError(f"the triangulation kernel failed (status {status}): please report this input")
+
+
+class Triangulation:
+    """delaunay's triangulation kept up to date while points are inserted and segments
+    constrained (for a refinement loop): the same triangles as delaunay() of all the
+    points and segments so far. Pixel coordinates 0 .. 2^28 - 1; inserted points lie
+    inside the first vertices' hull (an image's corners, say). Owns its buffers."""
+
+    def __init__(self, vertices: np.ndarray) -> None:
+        v = np.ascontiguousarray(vertices, dtype=np.int64).reshape(-1, 2)
+        self._kernel = _cdt.Triangulation()
+        status = self._kernel.start(v)
+        if status != _cdt.OK:
+            _refuse(status, len(v))
+        self._count = len(v)
+
+    def insert(self, points: np.ndarray) -> np.ndarray:
+        """Insert points (K x 2); returns their vertex indices (the next numbers)."""
+        status, indices = self._kernel.insert(np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2))
+        self._count += len(indices)
+        if status != _cdt.OK:
+            _refuse(status, self._count)
+        return indices
+
+    def constrain(self, segments: np.ndarray) -> None:
+        """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
+        status = self._kernel.constrain(np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2))
+        if status != _cdt.OK:
+            _refuse(status, self._count)
+
+    def triangles(self) -> np.ndarray:
+        """All triangles (M x 3, positively oriented, canonical order of ATM.md §4.2.3)."""
+        return self._kernel.triangles()
+
+    def changes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(removed, added) triangles since construction or the last call."""
+        return self._kernel.changes()
 
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
