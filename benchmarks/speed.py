@@ -10,7 +10,10 @@ the median over the rounds of each round's own ratio, a time the median time.
    (imagecodecs, in the bench extra; left out when it is not installed; WebP codes a
    gray image as three equal channels). Also the parts of a decode:
    render (the rasteriser alone, mesh -> image) and triangulate (the constrained
-   Delaunay triangulation the format leaves implicit, which no decoder can skip).
+   Delaunay triangulation the format leaves implicit, which no decoder can skip: the
+   compiled kernel codec.triangulate.delaunay the decoder uses, and against it
+   Triangle followed by the canonical flip pass, the way it was built before).
+   --large 2048 adds each image resized to 2048 x 2048 (cubic).
 2. Threads: two threads decoding different files (the corpus files, each several
    times) against one thread decoding them in turn: throughput ratio.
 3. Encode at equal vertex count: codec.encode(image, points=N) against pydelatin's
@@ -41,7 +44,8 @@ import codec  # noqa: E402
 from codec import container, decoder_cpu, decoder_gl  # noqa: E402
 from codec.errors import BackendError  # noqa: E402
 from codec.mesh import segments  # noqa: E402
-from codec.triangulate import triangulate  # noqa: E402
+from codec.coding import canonical_triangles  # noqa: E402
+from codec.triangulate import delaunay, triangulate  # noqa: E402
 
 DENSITY = 0.028
 
@@ -111,10 +115,11 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int) -
     files = {name: codec.encode(corpus[name], points=max(4, round(DENSITY * np.prod(corpus[name].shape[:2]))))
              for name in names}
     peers = list(peer_codecs(corpus[names[0]]))
-    parts = ["render", "decode", "triangulate"] + (["gl render", "gl decode"] if gl else [])
+    parts = ["render", "decode", "triangulate", "triangle+canonical"] + (["gl render", "gl decode"] if gl else [])
     cols = peers + parts
     head = ["image", "size", "triangles"] + [f"{c} ms" for c in cols]
-    head += [f"decode / {p}" for p in peers] + ["render / jpeg", "triangulate / jpeg"]
+    head += [f"decode / {p}" for p in peers] + ["render / jpeg", "triangulate / jpeg",
+                                                "triangulate / triangle+canonical"]
     head += ["gl decode / jpeg"] if gl else []
     rows = []
     for name in names:
@@ -128,7 +133,8 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int) -
                 fns[peer] = lambda dec=dec, b=enc(img): dec(b)
         fns["render"] = lambda: decoder_cpu.render(mesh)
         fns["decode"] = lambda: codec.decode(data, backend="cpu")
-        fns["triangulate"] = lambda: [triangulate(v, s) for v, s in bands]
+        fns["triangulate"] = lambda: [delaunay(v, s) for v, s in bands]
+        fns["triangle+canonical"] = lambda: [canonical_triangles(triangulate(v, s)) for v, s in bands]
         if gl:
             fns["gl render"] = lambda: decoder_gl.render(mesh)
             fns["gl decode"] = lambda: codec.decode(data, backend="gl")
@@ -136,7 +142,8 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int) -
         row = [name, f"{w}x{h}", f"{len(mesh.triangles):,}"]
         row += [f"{statistics.median(times[c]):.2f}" if c in times else "-" for c in cols]
         row += [f"{ratio(times, 'decode', p):.1f}" if p in times else "-" for p in peers]
-        row += [f"{ratio(times, 'render', 'jpeg'):.1f}", f"{ratio(times, 'triangulate', 'jpeg'):.1f}"]
+        row += [f"{ratio(times, 'render', 'jpeg'):.1f}", f"{ratio(times, 'triangulate', 'jpeg'):.1f}",
+                f"{ratio(times, 'triangulate', 'triangle+canonical'):.2f}"]
         row += [f"{ratio(times, 'gl decode', 'jpeg'):.1f}"] if gl else []
         rows.append(row)
     print_table(head, rows)
@@ -221,6 +228,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-errors", type=float, nargs="*", default=[0.5, 5.0, 50.0],
                         help="max_error bounds in metres (table 4)")
     parser.add_argument("--no-encode", action="store_true", help="decode and thread tables only")
+    parser.add_argument("--large", type=int, nargs="*", default=[],
+                        help="also decode each image resized to N x N (cubic), e.g. 2048")
     args = parser.parse_args(argv)
     from tests.corpus import load_corpus
 
@@ -230,6 +239,12 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"no corpus image {', '.join(unknown)}; choose from {', '.join(corpus)}")
     files = decode_table(corpus, names, args.repeat)
+    if args.large:
+        import cv2
+
+        large = {f"{name}@{n}": cv2.resize(corpus[name], (n, n), interpolation=cv2.INTER_CUBIC)
+                 for name in names for n in args.large}
+        decode_table(large, list(large), max(3, args.repeat // 4))
     thread_table(files, max(3, args.repeat // 4))
     if not args.no_encode:
         encode_tables(corpus, names, args.dem_size, args.max_errors, args.encode_repeat)

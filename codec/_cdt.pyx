@@ -4,6 +4,7 @@ the canonical triangles straight from integer vertices and segments, with the GI
 released while they are built. codec.triangulate turns the status codes into ATMError."""
 
 from libc.stdint cimport int64_t
+from libc.string cimport memcpy
 from libcpp.vector cimport vector
 
 import numpy as np
@@ -17,8 +18,23 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         CDT_INDEX
         CDT_MEMORY
         CDT_INTERNAL
+        CDT_OVER
+        CDT_OUTSIDE
+    cdef cppclass CDT:
+        vector[int64_t] x, y
+        vector[int] V
+        bint narrow, track
+        vector[int] dirty, old
+        vector[unsigned char] dirty_mark
+        Status build() nogil
+        Status insert(int64_t px, int64_t py) nogil
+        Status constrain(int a, int b) nogil
+        void legalise() nogil
+    void cdt_canonical "atmcdt::canonical" (const CDT& cdt, const int64_t* order,
+                                           vector[int64_t]* out) nogil
+    int64_t MAX_EXTENT
     Status cdt_triangulate "atmcdt::triangulate" (
-        int64_t n, const int64_t* xy, int64_t s, const int64_t* seg,
+        int64_t n, const int64_t* xy, int64_t s, const int64_t* seg, bint strict,
         vector[int64_t]* out, int64_t* flips) nogil
 
 OK = CDT_OK
@@ -28,12 +44,15 @@ EXTENT = CDT_EXTENT
 INDEX = CDT_INDEX
 MEMORY = CDT_MEMORY
 INTERNAL = CDT_INTERNAL
+OVER = CDT_OVER
+OUTSIDE = CDT_OUTSIDE
 
 
-def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments):
+def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, bint strict=False):
     """(status, triangles, flips): the triangles (M x 3 int64, canonical order of ATM.md
     §4.2.3, positively oriented) of the N x 2 integer vertices with every segment (S x 2
-    vertex indices, checked here) an edge; triangles is None unless status is OK."""
+    vertex indices, checked here) an edge, cut at the vertices on it (strict: refused,
+    status OVER); triangles is None unless status is OK."""
     if vertices.shape[1] != 2 or segments.shape[1] != 2:
         raise ValueError("vertices and segments are N x 2")
     cdef int64_t n = vertices.shape[0], s = segments.shape[0], flips = 0
@@ -42,12 +61,122 @@ def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments):
     cdef const int64_t* seg = &segments[0, 0] if s else NULL
     cdef Status status
     with nogil:
-        status = cdt_triangulate(n, xy, s, seg, &out, &flips)
+        status = cdt_triangulate(n, xy, s, seg, strict, &out, &flips)
     if status != CDT_OK:
         return int(status), None, int(flips)
     result = np.empty((out.size() // 3, 3), dtype=np.int64)
-    cdef int64_t[:, ::1] r = result
-    cdef size_t i
-    for i in range(out.size()):
-        r[i // 3, i % 3] = out[i]
+    if out.size():
+        memcpy(&result_view(result)[0, 0], out.data(), out.size() * sizeof(int64_t))
     return 0, result, int(flips)
+
+
+cdef int64_t[:, ::1] result_view(object array):
+    return array
+
+
+
+cdef object triangle_array(const vector[int64_t]& out):
+    result = np.empty((out.size() // 3, 3), dtype=np.int64)
+    if out.size():
+        memcpy(&result_view(result)[0, 0], out.data(), out.size() * sizeof(int64_t))
+    return result
+
+
+cdef class Triangulation:
+    """The triangulation of ATM.md §4.2.5 kept up to date as points are inserted and
+    segments constrained (the encoder's refinement loop): it owns its buffers; every
+    call that builds releases the GIL. Methods return a status (OK or one of the
+    module's codes; codec.triangulate.Triangulation raises instead)."""
+
+    cdef CDT cdt
+
+    def start(self, const int64_t[:, ::1] vertices):
+        """Triangulate the first N x 2 vertices (pixel coordinates 0 .. MAX_EXTENT,
+        distinct, not all on one line); their indices are their rows."""
+        cdef int64_t n = vertices.shape[0], i
+        if self.cdt.x.size():
+            raise ValueError("Triangulation.start: already started")
+        for i in range(n):
+            if not (0 <= vertices[i, 0] <= MAX_EXTENT and 0 <= vertices[i, 1] <= MAX_EXTENT):
+                return CDT_EXTENT
+            self.cdt.x.push_back(vertices[i, 0])
+            self.cdt.y.push_back(vertices[i, 1])
+        keys = np.asarray(vertices[:, 1]) * (MAX_EXTENT + 1) + np.asarray(vertices[:, 0])
+        if len(np.unique(keys)) != n:
+            return CDT_DUPLICATE
+        # later points lie inside the hull, so this extent holds for good
+        self.cdt.narrow = n > 0 and max(np.ptp(np.asarray(vertices), axis=0)) < (1 << 14)
+        with nogil:
+            status = self.cdt.build()
+        if status == CDT_OK and self.cdt.V.size() == 0:
+            return CDT_OUTSIDE  # all on one line: nothing to insert into
+        self.cdt.track = True
+        self.cdt.dirty.clear()
+        self.cdt.old.clear()
+        self.cdt.dirty_mark.assign(self.cdt.V.size() // 3, 0)
+        return status
+
+    def insert(self, const int64_t[:, ::1] points):
+        """(status, indices): insert each point (K x 2) inside the hull; the new vertex
+        indices continue the vertices' numbering. Stops at the first point refused."""
+        cdef int64_t k = points.shape[0], i, done = 0
+        cdef Status status = CDT_OK
+        for i in range(k):
+            if not (0 <= points[i, 0] <= MAX_EXTENT and 0 <= points[i, 1] <= MAX_EXTENT):
+                k = i  # insert those before it, then report it
+                status = CDT_EXTENT
+                break
+        cdef Status refused = status
+        status = CDT_OK
+        with nogil:
+            for i in range(k):
+                status = self.cdt.insert(points[i, 0], points[i, 1])
+                if status != CDT_OK:
+                    break
+                done += 1
+        if status == CDT_OK:
+            status = refused
+        first = self.cdt.x.size() - done
+        return int(status), np.arange(first, first + done, dtype=np.int64)
+
+    def constrain(self, const int64_t[:, ::1] segments):
+        """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
+        cdef int64_t s = segments.shape[0], j, n = self.cdt.x.size()
+        cdef Status status = CDT_OK
+        for j in range(s):
+            if not (0 <= segments[j, 0] < n and 0 <= segments[j, 1] < n):
+                return CDT_INDEX
+        if self.cdt.V.size() == 0:
+            return CDT_OK
+        with nogil:
+            for j in range(s):
+                if segments[j, 0] != segments[j, 1]:
+                    status = self.cdt.constrain(<int>segments[j, 0], <int>segments[j, 1])
+                    if status != CDT_OK:
+                        break
+            self.cdt.legalise()
+        return int(status)
+
+    def triangles(self):
+        """All triangles, M x 3, canonical order (ATM.md §4.2.3)."""
+        cdef vector[int64_t] out
+        with nogil:
+            cdt_canonical(self.cdt, NULL, &out)
+        return triangle_array(out)
+
+    def changes(self):
+        """(removed, added): the triangles (K x 3 each, corners in their stored
+        rotation) that left and that joined the triangulation since start or the last
+        call; a triangle may be in both if it was undone and made again."""
+        cdef size_t j, k = self.cdt.dirty.size()
+        removed, added = [], []
+        for j in range(k):
+            t = self.cdt.dirty[j]
+            if self.cdt.old[3 * j] >= 0:
+                removed.append((self.cdt.old[3 * j], self.cdt.old[3 * j + 1], self.cdt.old[3 * j + 2]))
+            added.append((self.cdt.V[3 * t], self.cdt.V[3 * t + 1], self.cdt.V[3 * t + 2]))
+            self.cdt.dirty_mark[t] = 0
+        self.cdt.dirty.clear()
+        self.cdt.old.clear()
+        return (np.array(removed, dtype=np.int64).reshape(-1, 3),
+                np.array(added, dtype=np.int64).reshape(-1, 3))

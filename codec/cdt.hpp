@@ -1,7 +1,8 @@
 // The constrained Delaunay triangulation of format version 6 (format_spec/ATM.md
-// §4.2.5), built directly: a sweep in raster order with Lawson flips after each
-// insertion, then every segment forced in by flips (Sloan's method), then Lawson flips
-// with the perturbed rule until every free edge is locally Delaunay. The result is the
+// §4.2.5), built directly: the convex hull's corners, then the other vertices inserted
+// one by one with Lawson flips (the perturbed rule throughout), then every segment
+// forced in by flips (Sloan's method), then Lawson flips until every free edge is
+// locally Delaunay. The result is the
 // unique triangulation of §4.2.5 whatever the construction, so it equals Triangle
 // followed by codec/canonical.py's flip pass. Plain C++ without the Python API, so that
 // the Cython wrapper (codec/_cdt.pyx) runs it with the GIL released.
@@ -26,6 +27,8 @@ enum Status {
   CDT_INDEX = 4,      // a segment names no vertex
   CDT_MEMORY = 5,
   CDT_INTERNAL = 6,   // a broken invariant (a bug, never a file's fault)
+  CDT_OVER = 7,       // (strict) a segment passes over a vertex, so it is no edge
+  CDT_OUTSIDE = 8,    // a point inserted outside the triangulated hull
 };
 
 //: Largest coordinate extent accepted: differences below 2^28 keep incircle's products
@@ -73,9 +76,11 @@ class CDT {
   std::vector<i32> T;     // the twin half-edge, -1 on the hull
   std::vector<uint8_t> C; // whether the edge is a segment
   std::vector<i32> vinc;  // one outgoing half-edge of each vertex (-1 before it has one)
-  std::vector<i32> hnext, hprev, hedge;  // the hull during the sweep, counterclockwise
+  std::vector<i32> hedge;  // a hull half-edge from each hull vertex (kept by link)
   std::vector<i32> stack;
   i64 flips = 0;
+  bool narrow = false;  // every coordinate difference below 2^14 (set by the caller)
+  bool strict = false;  // refuse a segment over a vertex instead of cutting it there
 
   i64 orient(i32 a, i32 b, i32 c) const {
     return (x[b] - x[a]) * (y[c] - y[a]) - (y[b] - y[a]) * (x[c] - x[a]);
@@ -86,10 +91,7 @@ class CDT {
     i64 adx = x[a] - x[d], ady = y[a] - y[d];
     i64 bdx = x[b] - x[d], bdy = y[b] - y[d];
     i64 cdx = x[c] - x[d], cdy = y[c] - y[d];
-    i64 m = std::max(std::max(std::max(adx < 0 ? -adx : adx, ady < 0 ? -ady : ady),
-                              std::max(bdx < 0 ? -bdx : bdx, bdy < 0 ? -bdy : bdy)),
-                     std::max(cdx < 0 ? -cdx : cdx, cdy < 0 ? -cdy : cdy));
-    if (m < (i64(1) << 14)) {
+    if (narrow) {
       // differences below 2^14: lifts and minors below 2^29, products below 2^58,
       // their sum below 2^60: exact in int64
       i64 det = (adx * adx + ady * ady) * (bdx * cdy - bdy * cdx) +
@@ -113,11 +115,31 @@ class CDT {
     i32 f = T[e];
     i32 a = V[e], b = V[nxt(e)], c = V[prv(e)], d = V[prv(f)];
     int s = incircle(a, b, c, d);
-    return s > 0 || (s == 0 && std::min(a, b) < std::min(c, d));
+    return s > 0 || (s == 0 && before(before(a, b) ? a : b, before(c, d) ? c : d));
+  }
+
+  // Raster order (ATM.md §4.2.5's priority): p before q.
+  bool before(i32 p, i32 q) const { return y[p] < y[q] || (y[p] == y[q] && x[p] < x[q]); }
+
+  // Change tracking for Triangulation.changes(): the first time a triangle slot changes
+  // after the last report, its old corners are kept (-1 for a slot that is new).
+  bool track = false;
+  std::vector<uint8_t> dirty_mark;
+  std::vector<i32> dirty, old;
+
+  void touch(i32 t) {
+    if (!track) return;
+    if ((size_t)t >= dirty_mark.size()) dirty_mark.resize(2 * (size_t)t + 16, 0);
+    if (dirty_mark[t]) return;
+    dirty_mark[t] = 1;
+    dirty.push_back(t);
+    bool exists = 3 * (size_t)t < V.size();
+    for (int j = 0; j < 3; ++j) old.push_back(exists ? V[3 * t + j] : -1);
   }
 
   i32 add_triangle(i32 a, i32 b, i32 c) {
     i32 t = (i32)V.size();
+    touch(t / 3);
     V.push_back(a); V.push_back(b); V.push_back(c);
     T.push_back(-1); T.push_back(-1); T.push_back(-1);
     C.push_back(0); C.push_back(0); C.push_back(0);
@@ -139,6 +161,8 @@ class CDT {
     i32 a = V[e], b = V[f], c = V[e2], d = V[f2];
     i32 te1 = T[e1], te2 = T[e2], tf1 = T[f1], tf2 = T[f2];
     uint8_t ce1 = C[e1], ce2 = C[e2], cf1 = C[f1], cf2 = C[f2];
+    touch(e / 3);
+    touch(f / 3);
     V[e] = d; V[e1] = c; V[e2] = a;
     V[f] = c; V[f1] = d; V[f2] = b;
     link(e1, te2, ce2);
@@ -168,61 +192,191 @@ class CDT {
       if (T[e] > e && !C[e]) stack.push_back(e);
   }
 
-  // The Delaunay triangulation of the vertices (already in raster order, distinct).
-  Status sweep() {
+  // Split triangle t at p (strictly inside): (a, b, c) becomes (a, b, p), (b, c, p)
+  // and (c, a, p); the old outer edges go on the stack.
+  void split_triangle(i32 t, i32 p) {
+    i32 e0 = 3 * t, e1 = e0 + 1, e2 = e0 + 2;
+    i32 a = V[e0], b = V[e1], c = V[e2];
+    i32 t1e = T[e1], t2e = T[e2];
+    uint8_t c1 = C[e1], c2 = C[e2];
+    touch(t);
+    i32 s = add_triangle(b, c, p), r = add_triangle(c, a, p);
+    V[e2] = p;  // e0: a-b, e1: b-p, e2: p-a
+    C[e1] = C[e2] = 0;
+    link(s, t1e, c1);
+    link(r, t2e, c2);
+    T[e1] = s + 2; T[s + 2] = e1;
+    T[s + 1] = r + 2; T[r + 2] = s + 1;
+    T[r + 1] = e2; T[e2] = r + 1;
+    vinc[a] = e0; vinc[b] = s; vinc[c] = r; vinc[p] = e2;
+    stack.push_back(e0); stack.push_back(s); stack.push_back(r);
+  }
+
+  // Split edge e (a to b, in triangle (a, b, c); its twin in (b, a, d) if any) at p on
+  // it: (a, p, c), (p, b, c), and (b, p, d), (p, a, d).
+  void split_edge(i32 e, i32 p) {
+    i32 en = nxt(e), ep = prv(e), f = T[e];
+    i32 a = V[e], b = V[en], c = V[ep];
+    i32 ten = T[en];
+    uint8_t ce = C[e], cen = C[en];  // a segment split stays a segment, in two
+    touch(e / 3);
+    if (f >= 0) touch(f / 3);
+    i32 q = add_triangle(p, b, c);
+    V[en] = p;  // e: a-p, en: p-c, ep: c-a
+    C[en] = 0;
+    C[q] = ce;
+    link(q + 1, ten, cen);
+    T[en] = q + 2; T[q + 2] = en;
+    vinc[a] = e; vinc[c] = ep; vinc[b] = q + 1; vinc[p] = q;
+    stack.push_back(ep); stack.push_back(q + 1);
+    if (f < 0) {
+      link(e, -1, ce);  // both halves on the hull
+      link(q, -1, ce);
+      return;
+    }
+    i32 fn = nxt(f), fp = prv(f);
+    i32 d = V[fp], tfn = T[fn];
+    uint8_t cfn = C[fn];
+    i32 w = add_triangle(p, a, d);
+    V[fn] = p;  // f: b-p, fn: p-d, fp: d-b
+    C[fn] = 0;
+    C[w] = ce;
+    link(w + 1, tfn, cfn);
+    T[fn] = w + 2; T[w + 2] = fn;
+    T[e] = w; T[w] = e;   // a-p with p-a
+    T[q] = f; T[f] = q;   // p-b with b-p
+    vinc[d] = fp; vinc[a] = w + 1;
+    stack.push_back(fp); stack.push_back(w + 1);
+  }
+
+  // The triangle holding p, by a visibility walk from half-edge `from`: *on is the
+  // half-edge p lies on, or -1 when p is strictly inside. Falls back to a scan of
+  // every triangle should the walk not arrive (it does on a Delaunay triangulation).
+  i32 locate(i32 from, i32 p, i32* on) {
+    i32 t = from / 3;
+    i64 steps = 0, limit = 64 + 4 * (i64)V.size();
+    uint32_t turn = 0;
+    for (;;) {
+      i32 moved = -1;
+      ++turn;
+      for (int k = 0; k < 3 && moved < 0; ++k) {
+        i32 e = 3 * t + (int)((turn + k) % 3);  // the first edge tried rotates
+        if (orient(V[e], V[nxt(e)], p) < 0) moved = e;
+      }
+      if (moved < 0) break;
+      if (T[moved] < 0 || ++steps > limit) {
+        t = -1;
+        break;
+      }
+      t = T[moved] / 3;
+    }
+    if (t < 0) {
+      i32 m = (i32)(V.size() / 3);
+      for (t = 0; t < m; ++t) {
+        i32 e = 3 * t;
+        if (orient(V[e], V[e + 1], p) >= 0 && orient(V[e + 1], V[e + 2], p) >= 0 &&
+            orient(V[e + 2], V[e], p) >= 0) break;
+      }
+      if (t == m) return -1;
+    }
+    *on = -1;
+    for (i32 e = 3 * t; e < 3 * t + 3; ++e)
+      if (orient(V[e], V[nxt(e)], p) == 0) *on = e;
+    return t;
+  }
+
+  // The Delaunay triangulation of the vertices (in raster order, distinct): the convex
+  // hull's corners fanned and flipped, then every other vertex inserted with Lawson
+  // flips, in rounds of growing size (a biased randomised insertion order), each round
+  // along a Hilbert curve, so that point location walks are short.
+  Status build() {
     i32 n = (i32)x.size();
     vinc.assign(n, -1);
-    hnext.assign(n, -1); hprev.assign(n, -1); hedge.assign(n, -1);
+    hedge.assign(n, -1);
     V.reserve(6 * (size_t)n); T.reserve(6 * (size_t)n); C.reserve(6 * (size_t)n);
     if (n < 3) return CDT_OK;
-    i32 k = 2;
-    while (k < n && orient(0, 1, k) == 0) ++k;
-    if (k == n) return CDT_OK;  // all on one line: no triangles
-    // the first k points lie on a line in order; point k sees all of them
-    if (orient(0, 1, k) > 0) {
-      for (i32 j = 0; j + 1 < k; ++j) {
-        i32 t = add_triangle(j, j + 1, k);
-        if (j) { T[t + 2] = t - 2; T[t - 2] = t + 2; }  // k-j with triangle j-1's j-k
-        hnext[j] = j + 1; hprev[j + 1] = j; hedge[j] = t;
+    // Andrew's monotone chain in raster order, corners only (collinear points dropped);
+    // triangulate() passes the vertices in that order already
+    std::vector<i32> ranked(n);
+    for (i32 i = 0; i < n; ++i) ranked[i] = i;
+    bool in_order = true;
+    for (i32 i = 1; i < n && in_order; ++i) in_order = before(i - 1, i);
+    if (!in_order) std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+    std::vector<i32> hull;
+    hull.reserve(n + 1);
+    for (int pass = 0; pass < 2; ++pass) {
+      size_t base = hull.size();
+      for (i32 k = 0; k < n; ++k) {
+        i32 i = ranked[pass ? n - 1 - k : k];
+        while (hull.size() >= base + 2 && orient(hull[hull.size() - 2], hull.back(), i) <= 0)
+          hull.pop_back();
+        hull.push_back(i);
       }
-      hnext[k - 1] = k; hprev[k] = k - 1; hedge[k - 1] = 3 * (k - 2) + 1;
-      hnext[k] = 0; hprev[0] = k; hedge[k] = 2;
-    } else {
-      for (i32 j = 0; j + 1 < k; ++j) {
-        i32 t = add_triangle(j + 1, j, k);
-        if (j) { T[t + 1] = t - 1; T[t - 1] = t + 1; }  // j-k with triangle j-1's k-j
-        hnext[j + 1] = j; hprev[j] = j + 1; hedge[j + 1] = t;
-      }
-      hnext[0] = k; hprev[k] = 0; hedge[0] = 1;
-      hnext[k] = k - 1; hprev[k - 1] = k; hedge[k] = 3 * (k - 2) + 2;
+      hull.pop_back();
     }
+    if (hull.size() < 3) return CDT_OK;  // all on one line: no triangles
+    // the chain runs one way round; make it counterclockwise (orient > 0)
+    if (orient(hull[0], hull[1], hull[2]) < 0) std::reverse(hull.begin(), hull.end());
+    std::vector<uint8_t> done(n, 0);
+    for (size_t j = 1; j + 1 < hull.size(); ++j) {
+      i32 t = add_triangle(hull[0], hull[j], hull[j + 1]);
+      if (j > 1) { T[t] = t - 1; T[t - 1] = t; }  // h0-hj with the last one's hj-h0
+    }
+    for (i32 h : hull) done[h] = 1;
     push_all();
     legalise();
-    for (i32 p = k + 1; p < n; ++p) {
-      // the last point is the raster-order maximum so far, a hull vertex, and p sees it
-      // (the hull lies before it in raster order, the segment to p after): the edges p
-      // sees are a run of the hull through it
-      i32 q = p - 1, s = q, t = q;
-      while (orient(t, hnext[t], p) < 0) t = hnext[t];
-      while (orient(hprev[s], s, p) < 0) s = hprev[s];
-      if (s == t) return CDT_INTERNAL;
-      i32 first = -1, last = -1;
-      for (i32 u = s; u != t;) {
-        i32 w = hnext[u], he = hedge[u];
-        i32 tri = add_triangle(u, p, w);  // u-p, p-w, w-u
-        T[tri + 2] = he; T[he] = tri + 2;
-        if (last >= 0) { T[tri] = last + 1; T[last + 1] = tri; }
-        else first = tri;
-        stack.push_back(tri + 2);
-        stack.push_back(tri);
-        last = tri;
-        u = w;
-      }
-      hnext[s] = p; hprev[p] = s; hnext[p] = t; hprev[t] = p;
-      hedge[s] = first; hedge[p] = last + 1;
+    // insertion order: round r holds about half the points of round r + 1
+    i64 span = 1;
+    for (i32 i = 0; i < n; ++i) span = std::max(span, std::max(x[i], y[i]) + 1);
+    int order = 1;
+    while ((i64(1) << order) < span) ++order;
+    std::vector<uint64_t> key;
+    key.reserve(n);
+    for (i32 i = 0; i < n; ++i) {
+      if (done[i]) continue;
+      uint64_t h = (uint64_t)i * 0x9E3779B97F4A7C15ull;  // a fixed hash: same order every run
+      h ^= h >> 31; h *= 0xBF58476D1CE4E5B9ull; h ^= h >> 29;
+      uint64_t round = 0;
+      while (round < 12 && (h & 1)) { ++round; h >>= 1; }
+      key.push_back((12 - round) << 58 | hilbert(order, x[i], y[i]));  // hilbert < 2^56
+    }
+    std::vector<i32> rest;
+    rest.reserve(n);
+    for (i32 i = 0; i < n; ++i)
+      if (!done[i]) rest.push_back(i);
+    std::vector<i32> idx(rest.size());
+    for (size_t j = 0; j < idx.size(); ++j) idx[j] = (i32)j;
+    std::sort(idx.begin(), idx.end(), [&](i32 p, i32 q) {
+      return key[p] != key[q] ? key[p] < key[q] : rest[p] < rest[q];
+    });
+    last = hull[0];
+    for (i32 j : idx) {
+      i32 p = rest[j], on = -1;
+      i32 t = locate(vinc[last], p, &on);
+      if (t < 0) return CDT_INTERNAL;
+      if (on >= 0) split_edge(on, p);
+      else split_triangle(t, p);
       legalise();
+      last = p;
     }
     return CDT_OK;
+  }
+
+  // Distance along the Hilbert curve of order `order` (coordinates below 2^order).
+  static uint64_t hilbert(int order, i64 px, i64 py) {
+    uint64_t d = 0, hx = (uint64_t)px, hy = (uint64_t)py;
+    for (uint64_t s = uint64_t(1) << (order - 1); s > 0; s >>= 1) {
+      uint64_t rx = (hx & s) ? 1 : 0, ry = (hy & s) ? 1 : 0;
+      d += s * s * ((3 * rx) ^ ry);
+      if (ry == 0) {
+        if (rx == 1) { hx = s - 1 - (hx & (s - 1)); hy = s - 1 - (hy & (s - 1)); }
+        else { hx &= s - 1; hy &= s - 1; }
+        uint64_t tmp = hx; hx = hy; hy = tmp;
+      } else {
+        hx &= s - 1; hy &= s - 1;
+      }
+    }
+    return d;
   }
 
   // A half-edge of the edge u-w (u to w, or w to u on the hull), or -1 if none.
@@ -310,6 +464,7 @@ class CDT {
       int r = first_step(a, b, &h, &on);
       if (r < 0) return CDT_INTERNAL;
       if (r == 1) {
+        if (strict && on != b) return CDT_OVER;
         mark(h);
         a = on;
         continue;
@@ -327,7 +482,11 @@ class CDT {
         i32 v = V[prv(f)];
         if (v == b) { end = b; break; }
         i64 ov = orient(a, b, v);
-        if (ov == 0) { end = v; break; }
+        if (ov == 0) {
+          if (strict) return CDT_OVER;
+          end = v;
+          break;
+        }
         i64 ou = orient(a, b, u);
         // triangle f is w-u, u-v, v-w: leave through the side whose ends differ
         h = ((ov > 0) == (ou > 0)) ? prv(f) : nxt(f);
@@ -347,6 +506,10 @@ class CDT {
         i32 p = V[e], q = V[nxt(e)], c = V[prv(e)], d = V[prv(f)];
         if (orient(p, d, c) > 0 && orient(d, q, c) > 0) {
           flip(e);
+          // the edges whose quadrilateral changed, for the last Lawson pass (a slot
+          // that a later flip refills is pushed again by that flip)
+          stack.push_back(e); stack.push_back(nxt(e)); stack.push_back(prv(e));
+          stack.push_back(nxt(f)); stack.push_back(prv(f));
           if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); }
         } else {
           queue.push_back(u);
@@ -364,12 +527,70 @@ class CDT {
     }
     return CDT_OK;
   }
+
+  // Incremental use (codec._cdt.Triangulation): the last vertex inserted, where the
+  // next point location walk starts.
+  i32 last = 0;
+
+  // Insert point (px, py) inside the hull as vertex x.size(), with Lawson flips (no
+  // segment is flipped): the constrained triangulation of §4.2.5 of all the points.
+  Status insert(i64 px, i64 py) {
+    if (V.empty()) return CDT_OUTSIDE;
+    i32 p = (i32)x.size();
+    x.push_back(px); y.push_back(py); vinc.push_back(-1); hedge.push_back(-1);
+    i32 on = -1, t = locate(vinc[last], p, &on);
+    bool dup = false;
+    if (t >= 0)
+      for (int j = 0; j < 3; ++j) dup |= x[V[3 * t + j]] == px && y[V[3 * t + j]] == py;
+    if (t < 0 || dup) {
+      x.pop_back(); y.pop_back(); vinc.pop_back(); hedge.pop_back();
+      return t < 0 ? CDT_OUTSIDE : CDT_DUPLICATE;
+    }
+    if (on >= 0) split_edge(on, p);
+    else split_triangle(t, p);
+    legalise();
+    last = p;
+    return CDT_OK;
+  }
 };
 
-// Triangulate n vertices (xy, n x 2) with s segments (seg, s x 2 vertex indices):
+// The triangles of `cdt` in canonical order into *out (vertex i of cdt is order[i],
+// or i itself when order is null): each rotated to start at its smallest index, then
+// a counting sort by that index and, within one (a fan of a few), insertion by the
+// other two.
+inline void canonical(const CDT& cdt, const i64* order, std::vector<i64>* out) {
+  i64 n = (i64)cdt.x.size(), m = (i64)cdt.V.size() / 3;
+  std::vector<i64> start(n + 1, 0);
+  out->assign(3 * m, 0);
+  i64* o = out->data();
+  for (i64 t = 0; t < m; ++t) {
+    i64 a = cdt.V[3 * t], b = cdt.V[3 * t + 1], c = cdt.V[3 * t + 2];
+    if (order) { a = order[a]; b = order[b]; c = order[c]; }
+    ++start[std::min(a, std::min(b, c)) + 1];
+  }
+  for (i64 i = 0; i < n; ++i) start[i + 1] += start[i];
+  for (i64 t = 0; t < m; ++t) {
+    i64 a = cdt.V[3 * t], b = cdt.V[3 * t + 1], c = cdt.V[3 * t + 2];
+    if (order) { a = order[a]; b = order[b]; c = order[c]; }
+    if (b < a && b < c) { i64 r = a; a = b; b = c; c = r; }
+    else if (c < a && c < b) { i64 r = c; c = b; b = a; a = r; }
+    i64 j = start[a]++;
+    // within the fan of a (slots before j hold a's or, unfilled, zeros), keep (b, c)
+    // increasing
+    while (j > 0 && o[3 * (j - 1)] == a &&
+           (o[3 * (j - 1) + 1] > b || (o[3 * (j - 1) + 1] == b && o[3 * (j - 1) + 2] > c))) {
+      o[3 * j] = o[3 * (j - 1)]; o[3 * j + 1] = o[3 * (j - 1) + 1]; o[3 * j + 2] = o[3 * (j - 1) + 2];
+      --j;
+    }
+    o[3 * j] = a; o[3 * j + 1] = b; o[3 * j + 2] = c;
+  }
+}
+
+// Triangulate n vertices (xy, n x 2) with s segments (seg, s x 2 vertex indices; with
+// `strict`, one passing over a vertex is refused, otherwise cut there):
 // the triangles of ATM.md §4.2.5 in canonical order (§4.2.3: each rotated to start at
 // its smallest index, rows sorted) into *out (3 per triangle).
-inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg,
+inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool strict,
                           std::vector<i64>* out, i64* flips) {
   try {
     out->clear();
@@ -396,6 +617,8 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg,
         if (key[order[i - 1]] == key[order[i]]) return CDT_DUPLICATE;
     }
     CDT cdt;
+    cdt.strict = strict;
+    cdt.narrow = xmax - xmin < (i64(1) << 14) && ymax - ymin < (i64(1) << 14);
     cdt.x.resize(n); cdt.y.resize(n);
     std::vector<i32> rank(n);
     for (i64 i = 0; i < n; ++i) {
@@ -403,43 +626,27 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg,
       cdt.y[i] = xy[2 * order[i] + 1] - ymin;
       rank[order[i]] = (i32)i;
     }
-    Status st = cdt.sweep();
+    Status st = cdt.build();
     if (st != CDT_OK) return st;
+    if (cdt.V.empty() && strict) {
+      // all on one line, in raster order along it: a segment over no vertex joins
+      // neighbours in that order
+      for (i64 j = 0; j < s; ++j) {
+        i64 gap = (i64)rank[seg[2 * j]] - (i64)rank[seg[2 * j + 1]];
+        if (gap > 1 || gap < -1) return CDT_OVER;
+      }
+    }
     if (!cdt.V.empty() && s > 0) {
-      i64 before = cdt.flips;
       for (i64 j = 0; j < s; ++j) {
         i32 a = rank[seg[2 * j]], b = rank[seg[2 * j + 1]];
         if (a == b) continue;
         st = cdt.constrain(a, b);
         if (st != CDT_OK) return st;
       }
-      if (cdt.flips != before) {
-        cdt.push_all();
-        cdt.legalise();
-      }
+      cdt.legalise();  // around the flips that forced the segments in
     }
     *flips = cdt.flips;
-    // canonical order, in the caller's vertex numbers
-    i64 m = (i64)cdt.V.size() / 3;
-    out->resize(3 * m);
-    std::vector<i64> tri(3 * m);
-    for (i64 t = 0; t < m; ++t) {
-      i64 a = order[cdt.V[3 * t]], b = order[cdt.V[3 * t + 1]], c = order[cdt.V[3 * t + 2]];
-      if (b < a && b < c) { i64 r = a; a = b; b = c; c = r; }
-      else if (c < a && c < b) { i64 r = c; c = b; b = a; a = r; }
-      tri[3 * t] = a; tri[3 * t + 1] = b; tri[3 * t + 2] = c;
-    }
-    std::vector<i64> idx(m);
-    for (i64 t = 0; t < m; ++t) idx[t] = t;
-    std::sort(idx.begin(), idx.end(), [&](i64 p, i64 q) {
-      const i64* u = &tri[3 * p];
-      const i64* v = &tri[3 * q];
-      if (u[0] != v[0]) return u[0] < v[0];
-      if (u[1] != v[1]) return u[1] < v[1];
-      return u[2] < v[2];
-    });
-    for (i64 t = 0; t < m; ++t)
-      for (int j = 0; j < 3; ++j) (*out)[3 * t + j] = tri[3 * idx[t] + j];
+    canonical(cdt, order.data(), out);
     return CDT_OK;
   } catch (const std::bad_alloc&) {
     return CDT_MEMORY;

@@ -35,7 +35,7 @@ from .coding import (
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, chain_steps, doubled_areas
 from .native import _fields
-from .triangulate import delaunay, step_over_vertex, triangulate
+from .triangulate import delaunay, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
@@ -529,21 +529,17 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
     walls = None
     if total:
-        # the steps as pairs of chain positions: their first points are where the
-        # stored steps start
+        # the steps as pairs of chain positions
         pairs = chain_steps(np.arange(total), lengths)
-        begin = pairs[:, 0]
         walls = flat[pairs]
 
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
             raise CorruptError(f"{where}: triangles listed for a Delaunay band")
-        # the triangulation adds no vertex, so it has every step as an edge unless a
-        # vertex lies inside a step (then mesh.validate need not search the edges)
-        if walls is not None and step_over_vertex(keys, points[begin], steps, width):
-            raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
+        # the triangulation adds no vertex, and strict refuses a step over a vertex, so
+        # every step is an edge (mesh.validate need not search the edges)
         try:
-            triangles = delaunay(vertices, walls)  # already in canonical order
+            triangles = delaunay(vertices, walls, strict=True)  # in canonical order
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:

@@ -24,11 +24,13 @@ _CROSSING = (
 )
 
 
-def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
+def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None, *,
+             strict: bool = False) -> np.ndarray:
     """The triangulation of ATM.md §4.2.5 of integer (x, y) vertices with every segment
     (pairs of vertex indices) an edge: M x 3 positively oriented triangles in canonical
     order (§4.2.3), none when all vertices lie on one line (a one-pixel-wide image needs
-    no triangles). A segment passing over vertices is cut at them.
+    no triangles). A segment passing over vertices is cut at them (strict: refused, as
+    ATM.md §4.2.3 constraint 6 refuses a polyline step over a vertex).
 
     The vertex set is used as given: a triangulation that would need an extra vertex
     (crossing segments) is refused, because vertices must stay on pixel centres. The
@@ -39,9 +41,14 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.nda
         s = np.zeros((0, 2), np.int64)
     else:
         s = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
-    status, triangles, _ = _cdt.triangulate(v, s)
-    if status == _cdt.OK:
-        return triangles
+    status, triangles, _ = _cdt.triangulate(v, s, strict)
+    if status != _cdt.OK:
+        _refuse(status, len(v))
+    return triangles
+
+
+def _refuse(status: int, n: int) -> None:
+    """Raise the error a kernel status code stands for."""
     if status == _cdt.CROSSING:
         raise ATMError(_CROSSING)
     if status == _cdt.DUPLICATE:
@@ -49,10 +56,51 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.nda
     if status == _cdt.EXTENT:
         raise ATMError("the vertices span more than 2^28 - 1 in x or y, beyond the exact predicates")
     if status == _cdt.INDEX:
-        raise ATMError(f"a constraint segment names a vertex beyond the {len(v)} vertices")
+        raise ATMError(f"a constraint segment names a vertex beyond the {n} vertices")
+    if status == _cdt.OVER:
+        raise ATMError("a polyline step passes over a vertex, so it is no triangle edge")
+    if status == _cdt.OUTSIDE:
+        raise ATMError("a point lies outside the triangulated hull (or all points lie on one line)")
     if status == _cdt.MEMORY:
-        raise MemoryError(f"no memory to triangulate {len(v)} vertices")
-    raise ATMError(f"the triangulation kernel failed (status {status}): please report this file")
+        raise MemoryError(f"no memory to triangulate {n} vertices")
+    raise ATMError(f"the triangulation kernel failed (status {status}): please report this input")
+
+
+class Triangulation:
+    """delaunay's triangulation kept up to date while points are inserted and segments
+    constrained (for a refinement loop): the same triangles as delaunay() of all the
+    points and segments so far. Pixel coordinates 0 .. 2^28 - 1; inserted points lie
+    inside the first vertices' hull (an image's corners, say). Owns its buffers."""
+
+    def __init__(self, vertices: np.ndarray) -> None:
+        v = np.ascontiguousarray(vertices, dtype=np.int64).reshape(-1, 2)
+        self._kernel = _cdt.Triangulation()
+        status = self._kernel.start(v)
+        if status != _cdt.OK:
+            _refuse(status, len(v))
+        self._count = len(v)
+
+    def insert(self, points: np.ndarray) -> np.ndarray:
+        """Insert points (K x 2); returns their vertex indices (the next numbers)."""
+        status, indices = self._kernel.insert(np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2))
+        self._count += len(indices)
+        if status != _cdt.OK:
+            _refuse(status, self._count)
+        return indices
+
+    def constrain(self, segments: np.ndarray) -> None:
+        """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
+        status = self._kernel.constrain(np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2))
+        if status != _cdt.OK:
+            _refuse(status, self._count)
+
+    def triangles(self) -> np.ndarray:
+        """All triangles (M x 3, positively oriented, canonical order of ATM.md §4.2.3)."""
+        return self._kernel.triangles()
+
+    def changes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(removed, added) triangles since construction or the last call."""
+        return self._kernel.changes()
 
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
@@ -138,18 +186,6 @@ def _lattice_points(a: np.ndarray, d: np.ndarray, ends: bool) -> tuple[np.ndarra
     if not ends:
         t += 1
     return seg, a[seg] + t[:, None] * (d // g[:, None])[seg]
-
-
-def step_over_vertex(keys: np.ndarray, starts: np.ndarray, steps: np.ndarray, width: int) -> bool:
-    """Whether a pixel strictly inside one of the segments from `starts` by `steps` (K x
-    2, none zero) is a vertex; `keys` are the vertices' pixel numbers y * width + x,
-    sorted. Only steps longer than one unit step have such pixels, and there are few."""
-    g = np.gcd(np.abs(steps[:, 0]), np.abs(steps[:, 1]))
-    long = np.flatnonzero(g > 1)
-    if len(long) == 0 or len(keys) == 0:
-        return False
-    _, pts = _lattice_points(starts[long], steps[long], ends=False)
-    return bool(_find(keys, pts, width)[0].any())
 
 
 def _find(keys: np.ndarray, pts: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:

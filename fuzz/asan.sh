@@ -28,14 +28,16 @@ git ls-files -z --cached --others --exclude-standard | tar -c --null -T - -f - |
 # install would be reused); not editable, so the kernels live in the venv and not
 # beside the sources
 rm -rf "$src/build"
-CC="$cc" CFLAGS="-fsanitize=address -fno-omit-frame-pointer -g -O1" LDFLAGS="-fsanitize=address" \
+# (CXXFLAGS too: the C++ kernel, codec/_cdt, is compiled with them)
+sanitize="-fsanitize=address -fno-omit-frame-pointer -g -O1"
+CC="$cc" CFLAGS="$sanitize" CXXFLAGS="$sanitize" LDFLAGS="-fsanitize=address" \
   "$venv/bin/pip" install -q --disable-pip-version-check --no-cache-dir --force-reinstall --no-deps "$src"
 # The kernels the tests will import must be the instrumented ones, in the venv (from
 # /, so that the import cannot find the sources instead).
 # detect_leaks=0: CPython keeps objects until exit, which LeakSanitizer reports.
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_init_order=1"
 kernels=$(cd / && LD_PRELOAD="$runtime" "$venv/bin/python" -c \
-  "import codec._rasterise as r, codec._fields as f; print(r.__file__, f.__file__)")
+  "import codec._rasterise as r, codec._fields as f, codec._cdt as c; print(r.__file__, f.__file__, c.__file__)")
 [ -n "$kernels" ] || { echo "fuzz/asan.sh: the kernels do not import" >&2; exit 1; }
 for kernel in $kernels; do
   case $kernel in "$venv"/*) ;; *) echo "fuzz/asan.sh: $kernel is not the venv's" >&2; exit 1 ;; esac
@@ -52,4 +54,5 @@ done
 cd "$src"
 LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
   tests/test_decoders.py tests/test_container.py tests/test_meshcode.py \
-  tests/test_fuzz_smoke.py tests/test_stream.py tests/test_conformance.py tests/test_fields.py "$@"
+  tests/test_fuzz_smoke.py tests/test_stream.py tests/test_conformance.py tests/test_fields.py \
+  tests/test_cdt.py tests/test_canonical.py "$@"

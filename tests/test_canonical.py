@@ -53,7 +53,7 @@ def decode_by_triangle(monkeypatch) -> None:
     """Within the test, codec.decode rebuilds Delaunay bands by Triangle and the
     canonical pass (codec.triangulate.triangulate) instead of the compiled kernel."""
     monkeypatch.setattr(meshcode, "delaunay",
-                        lambda v, w: canonical_triangles(triangulate_module.triangulate(v, w)))
+                        lambda v, w, strict=False: canonical_triangles(triangulate_module.triangulate(v, w)))
 
 
 def lattice(w: int, h: int, sx: int = 1, sy: int = 1) -> np.ndarray:

@@ -143,3 +143,107 @@ def test_bad_input_is_refused():
     assert delaunay(np.array([[3, 3], [1, 1], [2, 2]])).shape == (0, 3)
     assert delaunay(np.zeros((0, 2), np.int64)).shape == (0, 3)
 
+
+
+def test_strict_refuses_a_segment_over_a_vertex():
+    """strict (the decoder's, ATM.md §4.2.3 constraint 6): a segment over a vertex is
+    refused, across triangles, along an existing edge's line and on a one-pixel line;
+    without it the segment is cut there."""
+    gx, gy = np.meshgrid(np.arange(5), np.arange(5))
+    v = np.stack([gx.ravel(), gy.ravel()], 1)
+    for wall in ([0, 24], [0, 2], [20, 4], [12, 14]):
+        with pytest.raises(ATMError, match="passes over a vertex"):
+            delaunay(v, np.array([wall]), strict=True)
+        np.testing.assert_array_equal(delaunay(v, np.array([wall])), by_triangle(v, np.array([wall])))
+    np.testing.assert_array_equal(delaunay(v, np.array([[0, 6], [6, 12]]), strict=True),
+                                  by_triangle(v, np.array([[0, 6], [6, 12]])))
+    line = np.stack([np.arange(6), np.zeros(6, np.int64)], 1)[::-1]
+    assert delaunay(line, np.array([[0, 1], [4, 5]]), strict=True).shape == (0, 3)
+    with pytest.raises(ATMError, match="passes over a vertex"):
+        delaunay(line, np.array([[0, 2]]), strict=True)
+
+
+@settings(max_examples=120, deadline=None)
+@given(point_sets(), st.integers(1, 6), st.booleans())
+def test_the_incremental_triangulation_equals_the_batch_one(case, batches, walls_first):
+    """Triangulation: the image's corners, then the points inserted in a few batches
+    and the walls constrained (before or after the last batch): the triangles equal
+    delaunay() of all of them; and the changes reported after each step turn the
+    previous triangle set into the new one."""
+    from codec.triangulate import Triangulation
+
+    pts, walls = case
+    if len(pts) < 3:
+        return
+    pts = pts - pts.min(axis=0)
+    w, h = pts.max(axis=0)
+    if w == 0 or h == 0:
+        return
+    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+    rest = pts[~((pts[:, 0] % w == 0) & (pts[:, 1] % h == 0))]
+    vertices = np.concatenate([corners, rest])
+    tri = Triangulation(corners)
+    state = {tuple(t) for t in canonical_triangles(tri.triangles()).tolist()}
+    tri.changes()
+
+    def step() -> None:
+        removed, added = tri.changes()
+        for side, rows in ((removed, -1), (added, 1)):
+            for t in canonical_triangles(side).tolist():
+                (state.discard if rows < 0 else state.add)(tuple(t))
+        assert state == {tuple(t) for t in tri.triangles().tolist()}
+
+    # walls name indices of pts; renumber to the order of insertion
+    where = {tuple(p): i for i, p in enumerate(vertices.tolist())}
+    wall_idx = None if walls is None else np.array([[where[tuple(pts[a])], where[tuple(pts[b])]] for a, b in walls])
+    parts = np.array_split(np.arange(len(rest)), batches)
+    for k, part in enumerate(parts):
+        if k == len(parts) - 1 and walls_first and wall_idx is not None:
+            inserted = set(range(4 + part[0] if len(part) else 4))
+            if all(i in inserted for i in wall_idx.ravel().tolist()):
+                tri.constrain(wall_idx)
+                step()
+        indices = tri.insert(rest[part])
+        np.testing.assert_array_equal(indices, 4 + part)
+        step()
+    if wall_idx is not None:
+        tri.constrain(wall_idx)
+        step()
+    np.testing.assert_array_equal(tri.triangles(), delaunay(vertices, wall_idx))
+
+
+def test_the_incremental_triangulation_refuses_bad_points():
+    """Outside the hull, a vertex again, negative coordinates, an unknown index,
+    crossing walls: ATMError naming it; the points before a refused one stay."""
+    from codec.triangulate import Triangulation
+
+    tri = Triangulation(np.array([[0, 0], [8, 0], [0, 8], [8, 8]]))
+    with pytest.raises(ATMError, match="outside"):
+        tri.insert(np.array([[1, 1], [9, 3]]))
+    np.testing.assert_array_equal(tri.triangles(), delaunay(np.array([[0, 0], [8, 0], [0, 8], [8, 8], [1, 1]])))
+    with pytest.raises(ATMError, match="share a position"):
+        tri.insert(np.array([[1, 1]]))
+    with pytest.raises(ATMError, match="2\\^28"):
+        tri.insert(np.array([[-1, 3]]))
+    with pytest.raises(ATMError, match="beyond the 5 vertices"):
+        tri.constrain(np.array([[0, 5]]))
+    tri.insert(np.array([[7, 1], [4, 6]]))
+    tri.constrain(np.array([[0, 3]]))
+    with pytest.raises(ATMError, match="cross each other"):
+        tri.constrain(np.array([[1, 2]]))
+    with pytest.raises(ATMError, match="one line"):
+        Triangulation(np.array([[0, 0], [1, 1], [2, 2]]))
+
+
+def test_a_point_inserted_on_a_wall_cuts_it_into_two_walls():
+    """Incremental: a point on a constrained edge splits it into two constrained
+    halves; points on both sides of the far half then cannot flip it away."""
+    from codec.triangulate import Triangulation
+
+    corners = np.array([[0, 0], [8, 0], [0, 8], [8, 8]])
+    tri = Triangulation(corners)
+    tri.constrain(np.array([[0, 3]]))
+    tri.insert(np.array([[4, 4], [7, 5], [5, 7], [5, 3]]))
+    every = np.concatenate([corners, [[4, 4], [7, 5], [5, 7], [5, 3]]])
+    np.testing.assert_array_equal(tri.triangles(), delaunay(every, np.array([[0, 3]])))
+    assert not np.array_equal(delaunay(every), delaunay(every, np.array([[0, 3]])))
