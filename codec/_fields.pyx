@@ -395,3 +395,60 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
             ox[j] = x
             oy[j] = y
     return xs, ys
+
+
+cpdef enum MeshCheck:
+    MESH_OK = 0
+    MESH_OUTSIDE = 1      # a vertex lies outside the image
+    MESH_INDEX = 2        # a triangle refers to a vertex beyond those stored
+    MESH_DEGENERATE = 3   # a triangle's doubled area is not positive
+
+
+def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, areas, int64_t w, int64_t h):
+    """mesh.validate's per-element checks in one pass: (status, keys increasing, total
+    doubled area, rows crossed by all triangles plus their count). Vertices are
+    checked first, then corners, then areas (given, or computed here once the corners
+    are known good); the totals are 0 unless status is MESH_OK."""
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, key, last = -1, total = 0, rows = 0
+    cdef int64_t lo, hi, y
+    cdef bint increasing = True, given = areas is not None
+    cdef int status = MESH_OK
+    cdef int64_t[::1] ar
+    if not given:
+        own = np.empty(m, dtype=np.int64)
+        ar = own
+    else:
+        ar = areas
+        if ar.shape[0] != m:
+            raise ValueError("mesh_checks: one area per triangle")
+    with nogil:
+        for j in range(n):
+            if not (0 <= vertices[j, 0] < w and 0 <= vertices[j, 1] < h):
+                status = MESH_OUTSIDE
+                break
+            key = vertices[j, 1] * w + vertices[j, 0]
+            if key <= last:
+                increasing = False
+            last = key
+        if status == MESH_OK:
+            for k in range(m):
+                for i in range(3):
+                    if not 0 <= triangles[k, i] < n:
+                        status = MESH_INDEX
+        if status == MESH_OK and not given:
+            _doubled_areas(vertices, triangles, ar)
+        if status == MESH_OK:
+            for k in range(m):
+                if ar[k] <= 0:
+                    status = MESH_DEGENERATE
+                    break
+                total += ar[k]
+                lo = hi = vertices[triangles[k, 0], 1]
+                for i in range(1, 3):
+                    y = vertices[triangles[k, i], 1]
+                    lo = y if y < lo else lo
+                    hi = y if y > hi else hi
+                rows += hi - lo + 1
+    if status != MESH_OK:
+        return status, increasing, 0, 0
+    return status, increasing, total, rows

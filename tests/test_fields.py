@@ -214,3 +214,26 @@ def test_position_keys_follow_the_gaps(gaps: list[int], bits: int) -> None:
     assert ok and out.tolist() == keys.tolist()
     if gaps:
         assert _fields.position_keys(nums[1:], packed, bits, span - 1) == (False, None)
+
+
+def test_validate_checks_elements_in_one_pass_whatever_the_arrays() -> None:
+    """mesh.validate's element checks (a compiled pass) refuse each kind of bad mesh
+    with its own message, for int32 and strided arrays as for int64."""
+    from codec.mesh import Mesh, validate
+
+    v = np.array([[0, 0], [3, 0], [0, 2], [3, 2]], np.int64)
+    t = np.array([[0, 1, 3], [0, 3, 2]])
+    t = np.array([r if meshcode.doubled_areas(v, r[None])[0] > 0 else r[[0, 2, 1]] for r in t])
+    values = np.zeros(4, np.uint8)
+    for cast in (lambda a: a, lambda a: a.astype(np.int32), lambda a: np.asfortranarray(a)):
+        validate(Mesh(cast(v), values, cast(t), 4, 3))
+        cases = {
+            "outside the 4x3 image": (v + [0, 1], t),
+            "share a pixel": (v[[0, 1, 2, 0]], t),
+            "beyond the 4 stored": (v, np.where(t == 3, 4, t)),
+            "degenerate or wrongly oriented": (v, t[:, [0, 2, 1]]),
+            "exactly once": (v, t[:1]),
+        }
+        for message, (vv, tt) in cases.items():
+            with pytest.raises(CorruptError, match=message):
+                validate(Mesh(cast(vv), values, cast(tt), 4, 3))
