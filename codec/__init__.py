@@ -276,7 +276,9 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
             raise ATMError("out is read-only; pass a writeable array")
         # a view, whatever the strides: the gray image fills the one channel in place
         target = out[..., 0] if out.ndim != len(shape) else out
-    for y0, rows in dec:
+    from .stream import GROUP_PIXELS
+
+    for y0, rows in dec.rows(GROUP_PIXELS):  # small bands rendered a group at a time
         target[y0 : y0 + len(rows)] = rows
     return out if out is not None else target
 
