@@ -125,10 +125,6 @@ def tree_sums(const int64_t[:, ::1] increments, const int64_t[::1] parent):
     return None if bad else out
 
 
-#: vertex_steps' bounds on a vertex's step factor (meshcode.STEP_RANGE) and on a step
-cdef double STEP_LO = 0.25, STEP_HI = 4.0
-
-
 cdef void _doubled_areas(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                          int64_t[::1] areas) noexcept nogil:
     """(x1-x0)(y2-y0) - (x2-x0)(y1-y0) of each triangle; its corners already checked."""
@@ -140,9 +136,10 @@ cdef void _doubled_areas(const int64_t[:, ::1] vertices, const int64_t[:, ::1] t
 
 
 cdef void _vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t step,
-                        int64_t[::1] fan, int64_t[::1] steps) noexcept nogil:
+                        double bound, int64_t[::1] fan, int64_t[::1] steps) noexcept nogil:
     """meshcode.vertex_steps without the pinned top row: `step` times the square root
-    of the mean fan area over each vertex's own, the factor within 1/4..4, rounded half
+    of the mean fan area over each vertex's own, the factor within 1/bound..bound
+    (meshcode.STEP_RANGE), rounded half
     to even and kept within 1..65535; `step` where a vertex has no fan. The arithmetic
     is numpy's (binary64, one rounding each), so encoder and decoder agree exactly.
     Corners already checked; fan is zeroed scratch of n entries."""
@@ -165,13 +162,14 @@ cdef void _vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] area
     for i in range(n):
         if fan[i] > 0:
             factor = sqrt(mean / <double>fan[i])
-            factor = STEP_LO if factor < STEP_LO else (STEP_HI if factor > STEP_HI else factor)
+            factor = 1.0 / bound if factor < 1.0 / bound else (bound if factor > bound else factor)
             s = rint(<double>step * factor)
             s = 1.0 if s < 1.0 else (65535.0 if s > 65535.0 else s)
             steps[i] = <int64_t>s
 
 
-def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step):
+def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step,
+                 double bound):
     """Every vertex's quantisation step before the pinned top row (_vertex_steps); None
     if a corner is out of range or the areas do not match the triangles."""
     cdef int64_t m = triangles.shape[0], k, i
@@ -186,7 +184,7 @@ def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int6
                 if not 0 <= triangles[k, i] < n:
                     bad = True
         if not bad:
-            _vertex_steps(triangles, areas, step, f, s)
+            _vertex_steps(triangles, areas, step, bound, f, s)
     return None if bad else steps
 
 
@@ -200,7 +198,7 @@ cpdef enum Values:
 
 def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 const int64_t[::1] zigzags, const int64_t[::1] seq_order, int64_t step,
-                bint top_pinned, int64_t top):
+                double bound, bint top_pinned, int64_t top):
     """(status, values, areas): a band's samples from its stored residuals (ATM.md
     §4.2.4), what meshcode.decode_band did in numpy passes: each zigzag residual (of
     n * channels, in sequence order) checked against 2 * top, unzigzagged, times its
@@ -241,7 +239,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
             _doubled_areas(vertices, triangles, ar)
             for i in range(n):
                 pos[i] = 0  # now the fan areas' scratch
-            _vertex_steps(triangles, ar, step, pos, steps)
+            _vertex_steps(triangles, ar, step, bound, pos, steps)
             if top_pinned:
                 for i in range(n):
                     if vertices[i, 1] == 0:

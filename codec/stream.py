@@ -231,7 +231,9 @@ class StreamDecoder:
             for y0, mesh in self._reader:
                 self.metadata.update(self._reader.header.metadata or {})
                 size = mesh.width * mesh.height
-                if group and (pixels + size > group_pixels or not len(mesh.triangles)):
+                # a band without triangles (a one-pixel-wide image) is rendered alone
+                if group and (pixels + size > group_pixels or not len(mesh.triangles)
+                              or not len(group[-1][1].triangles)):
                     yield self._rows(group)
                     group, pixels = [], 0
                 group.append((y0, mesh))

@@ -169,7 +169,7 @@ def test_band_values_is_steps_parents_and_sums(seed: int, step: int, pinned: boo
     residuals[0] = 10**6
     expected = meshcode.tree_sums(residuals * steps, parent)
     status, out, areas = _fields.band_values(vertices, triangles, coding.zigzag(residuals).astype(np.int64).ravel(),
-                                             order, step, pinned, 2**40)
+                                             order, step, meshcode.STEP_RANGE, pinned, 2**40)
     assert status == _fields.Values.VALUES_OK
     assert np.array_equal(out[order], expected)
     assert np.array_equal(areas, meshcode.doubled_areas(vertices, triangles))
@@ -184,7 +184,7 @@ def test_band_values_refusals() -> None:
     zero = np.zeros(n, np.int64)
 
     def status(tri=triangles, zig=zero, seq=order, top=255):
-        return _fields.band_values(vertices, tri, zig, seq, 1, False, top)[0]
+        return _fields.band_values(vertices, tri, zig, seq, 1, meshcode.STEP_RANGE, False, top)[0]
 
     assert status() == _fields.Values.VALUES_OK
     bad = triangles.copy()
