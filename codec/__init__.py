@@ -279,7 +279,9 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
             raise ATMError("out is read-only; pass a writeable array")
         # a view, whatever the strides: the gray image fills the one channel in place
         target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
-    for y0, rows in dec:
+    from .stream import GROUP_PIXELS
+
+    for y0, rows in dec.rows(GROUP_PIXELS):  # small bands rendered a group at a time
         target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
     return out if out is not None else image
 

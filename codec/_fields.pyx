@@ -125,10 +125,6 @@ def tree_sums(const int64_t[:, ::1] increments, const int64_t[::1] parent):
     return None if bad else out
 
 
-#: vertex_steps' bounds on a vertex's step factor (meshcode.STEP_RANGE) and on a step
-cdef double STEP_LO = 0.25, STEP_HI = 4.0
-
-
 cdef void _doubled_areas(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                          int64_t[::1] areas) noexcept nogil:
     """(x1-x0)(y2-y0) - (x2-x0)(y1-y0) of each triangle; its corners already checked."""
@@ -140,9 +136,10 @@ cdef void _doubled_areas(const int64_t[:, ::1] vertices, const int64_t[:, ::1] t
 
 
 cdef void _vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t step,
-                        int64_t[::1] fan, int64_t[::1] steps) noexcept nogil:
+                        double bound, int64_t[::1] fan, int64_t[::1] steps) noexcept nogil:
     """meshcode.vertex_steps without the pinned top row: `step` times the square root
-    of the mean fan area over each vertex's own, the factor within 1/4..4, rounded half
+    of the mean fan area over each vertex's own, the factor within 1/bound..bound
+    (meshcode.STEP_RANGE), rounded half
     to even and kept within 1..65535; `step` where a vertex has no fan. The arithmetic
     is numpy's (binary64, one rounding each), so encoder and decoder agree exactly.
     Corners already checked; fan is zeroed scratch of n entries."""
@@ -165,13 +162,14 @@ cdef void _vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] area
     for i in range(n):
         if fan[i] > 0:
             factor = sqrt(mean / <double>fan[i])
-            factor = STEP_LO if factor < STEP_LO else (STEP_HI if factor > STEP_HI else factor)
+            factor = 1.0 / bound if factor < 1.0 / bound else (bound if factor > bound else factor)
             s = rint(<double>step * factor)
             s = 1.0 if s < 1.0 else (65535.0 if s > 65535.0 else s)
             steps[i] = <int64_t>s
 
 
-def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step):
+def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step,
+                 double bound):
     """Every vertex's quantisation step before the pinned top row (_vertex_steps); None
     if a corner is out of range or the areas do not match the triangles."""
     cdef int64_t m = triangles.shape[0], k, i
@@ -186,7 +184,7 @@ def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int6
                 if not 0 <= triangles[k, i] < n:
                     bad = True
         if not bad:
-            _vertex_steps(triangles, areas, step, f, s)
+            _vertex_steps(triangles, areas, step, bound, f, s)
     return None if bad else steps
 
 
@@ -200,7 +198,7 @@ cpdef enum Values:
 
 def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 const int64_t[::1] zigzags, const int64_t[::1] seq_order, int64_t step,
-                bint top_pinned, int64_t top):
+                double bound, bint top_pinned, int64_t top):
     """(status, values, areas): a band's samples from its stored residuals (ATM.md
     §4.2.4), what meshcode.decode_band did in numpy passes: each zigzag residual (of
     n * channels, in sequence order) checked against 2 * top, unzigzagged, times its
@@ -241,7 +239,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
             _doubled_areas(vertices, triangles, ar)
             for i in range(n):
                 pos[i] = 0  # now the fan areas' scratch
-            _vertex_steps(triangles, ar, step, pos, steps)
+            _vertex_steps(triangles, ar, step, bound, pos, steps)
             if top_pinned:
                 for i in range(n):
                     if vertices[i, 1] == 0:
@@ -395,3 +393,60 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
             ox[j] = x
             oy[j] = y
     return xs, ys
+
+
+cpdef enum MeshCheck:
+    MESH_OK = 0
+    MESH_OUTSIDE = 1      # a vertex lies outside the image
+    MESH_INDEX = 2        # a triangle refers to a vertex beyond those stored
+    MESH_DEGENERATE = 3   # a triangle's doubled area is not positive
+
+
+def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, areas, int64_t w, int64_t h):
+    """mesh.validate's per-element checks in one pass: (status, keys increasing, total
+    doubled area, rows crossed by all triangles plus their count). Vertices are
+    checked first, then corners, then areas (given, or computed here once the corners
+    are known good); the totals are 0 unless status is MESH_OK."""
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, key, last = -1, total = 0, rows = 0
+    cdef int64_t lo, hi, y
+    cdef bint increasing = True, given = areas is not None
+    cdef int status = MESH_OK
+    cdef int64_t[::1] ar
+    if not given:
+        own = np.empty(m, dtype=np.int64)
+        ar = own
+    else:
+        ar = areas
+        if ar.shape[0] != m:
+            raise ValueError("mesh_checks: one area per triangle")
+    with nogil:
+        for j in range(n):
+            if not (0 <= vertices[j, 0] < w and 0 <= vertices[j, 1] < h):
+                status = MESH_OUTSIDE
+                break
+            key = vertices[j, 1] * w + vertices[j, 0]
+            if key <= last:
+                increasing = False
+            last = key
+        if status == MESH_OK:
+            for k in range(m):
+                for i in range(3):
+                    if not 0 <= triangles[k, i] < n:
+                        status = MESH_INDEX
+        if status == MESH_OK and not given:
+            _doubled_areas(vertices, triangles, ar)
+        if status == MESH_OK:
+            for k in range(m):
+                if ar[k] <= 0:
+                    status = MESH_DEGENERATE
+                    break
+                total += ar[k]
+                lo = hi = vertices[triangles[k, 0], 1]
+                for i in range(1, 3):
+                    y = vertices[triangles[k, i], 1]
+                    lo = y if y < lo else lo
+                    hi = y if y > hi else hi
+                rows += hi - lo + 1
+    if status != MESH_OK:
+        return status, increasing, 0, 0
+    return status, increasing, total, rows

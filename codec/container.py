@@ -107,7 +107,7 @@ class _MeshFields:
             (n,) = struct.unpack_from("<I", raw, at)
             if at + 4 + n > len(raw):
                 raise CorruptError(f"{where} is malformed: a section of {n:,} bytes runs past its end")
-            values.append(bytes(view[at + 4 : at + 4 + n]))
+            values.append(view[at + 4 : at + 4 + n])  # a view: no copy
             at += 4 + n
         if at != len(raw):
             raise CorruptError(f"{where} has {len(raw) - at} bytes of trailing data")
@@ -286,6 +286,7 @@ class Reader:
         self.header = self.header.header
         self._pending_head = None
         self._pending_error = None
+        self._largest_payload: int | None = None  # _check_frame's bound, once known
         # the chunks before the first band (NDAT, meta, ancillary ones); the first band's
         # chunk is left unread, so that opening a file reads its header and no more
         while True:
@@ -488,7 +489,9 @@ class Reader:
                 f"{limits.MAX_PAYLOAD_EXPANSION} times (a decompression bomb?; raise "
                 "codec.limits.MAX_PAYLOAD_EXPANSION to accept it)"
             )
-        if size > min(self._payload_limit(), limits.MAX_PAYLOAD_BYTES):
+        if self._largest_payload is None:  # the header's, worked out once
+            self._largest_payload = min(self._payload_limit(), limits.MAX_PAYLOAD_BYTES)
+        if size > self._largest_payload:
             raise LimitError(f"{where} would decompress to {size:,} bytes, more than its image can need")
         if frames.frame_length(payload, where) != len(payload):  # codec.info decompresses no more
             raise CorruptError(f"{where} has bytes after its zstd frame (ATM.md §4: one frame)")

@@ -8,6 +8,7 @@ import numpy as np
 
 from . import limits
 from .errors import CorruptError, LimitError
+from .native import _fields
 
 
 @dataclass(eq=False)
@@ -94,28 +95,27 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
         raise CorruptError(f"{len(vals)} values for {len(v)} vertices")
     known = None  # the triangles' edges as sorted keys, once _check_edges has them
     x, y = v[:, 0], v[:, 1]
-    if x.min() < 0 or y.min() < 0 or x.max() >= w or y.max() >= h:
+    # the element checks in one compiled pass (their numpy passes cost more than the
+    # work on a small band): vertices inside, corners in range, areas positive
+    v64, t64 = np.ascontiguousarray(v, dtype=np.int64), np.ascontiguousarray(t, dtype=np.int64)
+    status, increasing, area, extent = _fields.mesh_checks(
+        v64, t64, None if areas is None else np.ascontiguousarray(areas, dtype=np.int64), w, h
+    )
+    if status == _fields.MeshCheck.MESH_OUTSIDE:
         raise CorruptError(f"a vertex lies outside the {w}x{h} image")
-    keys = y.astype(np.int64) * w + x
     # decoded meshes come in raster order, where distinctness is a linear-time check
-    if not (keys[1:] > keys[:-1]).all() and len(np.unique(keys)) != len(v):
+    if not increasing and len(np.unique(y.astype(np.int64) * w + x)) != len(v):
         raise CorruptError("two vertices share a pixel")
+    if status == _fields.MeshCheck.MESH_INDEX:
+        raise CorruptError(f"a triangle refers to a vertex beyond the {len(v)} stored")
+    if status == _fields.MeshCheck.MESH_DEGENERATE:
+        raise CorruptError("a triangle is degenerate or wrongly oriented")
     if len(t):
-        if t.min() < 0 or t.max() >= len(v):
-            raise CorruptError(f"a triangle refers to a vertex beyond the {len(v)} stored")
-        if areas is None:
-            areas = doubled_areas(v, t)
-        if areas.min() <= 0:
-            raise CorruptError("a triangle is degenerate or wrongly oriented")
-        if w > 1 and h > 1 and int(areas.sum()) != 2 * (w - 1) * (h - 1):
+        if w > 1 and h > 1 and area != 2 * (w - 1) * (h - 1):
             raise CorruptError("the triangles do not cover the image exactly once")
         if not tiles:
-            known = _check_edges(v, t, w, h)
-        y0, y1, y2 = (y[i] for i in t.T)  # corner by corner: contiguous arrays
-        extent = np.maximum(y0, y1)
-        np.maximum(extent, y2, out=extent)
-        extent -= np.minimum(np.minimum(y0, y1, out=y0), y2, out=y0)
-        extent = int(extent.sum(dtype=np.int64)) + len(t)
+            known = _check_edges(v64, t64, w, h)
+        # rows crossed by all triangles, plus their count
         if extent > limits.max_triangle_rows(w, h):
             raise LimitError(
                 f"the triangles cross {extent:,} rows in all, too many to render a {w}x{h} "

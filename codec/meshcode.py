@@ -187,7 +187,7 @@ def vertex_steps(vertices: np.ndarray, triangles: np.ndarray, step: int, top_pin
     if areas is None:
         areas = doubled_areas(vertices, triangles)
     # a compiled kernel, the one band_values uses: encoder and decoder share the arithmetic
-    steps = _fields.vertex_steps(triangles, np.ascontiguousarray(areas, dtype=np.int64), n, step)
+    steps = _fields.vertex_steps(triangles, np.ascontiguousarray(areas, dtype=np.int64), n, step, STEP_RANGE)
     if steps is None:
         raise CorruptError(f"a triangle refers to a vertex beyond the {n} stored")
     if top_pinned:
@@ -567,7 +567,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     # steps, parents and running sums in one compiled pass (vertex_steps, sample_parents
     # and tree_sums' arithmetic), every index checked there
     status, values, areas = _fields.band_values(
-        vertices, np.ascontiguousarray(triangles, dtype=np.int64), zigzags, seq_order, int(m.sample_step), m.y0 > 0, top
+        vertices, np.ascontiguousarray(triangles, dtype=np.int64), zigzags, seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top
     )
     if status == _fields.Values.VALUES_CORNER:
         raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")

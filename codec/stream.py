@@ -223,30 +223,89 @@ class StreamDecoder:
         return iter(self._reader)
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
+        return self.rows()
+
+    def rows(self, group_pixels: int = 0) -> Iterator[tuple[int, np.ndarray]]:
+        """Iterate as the decoder does (each band's rows as soon as its chunk has
+        arrived), or with group_pixels > 0, render consecutive bands together up to
+        that many pixels: fewer, larger renders, so that a render's fixed cost (the GL
+        backend's framebuffer and read-backs, about 2 ms) falls on many rows of a file
+        of small bands; rows then come a group at a time, memory bounded by the group.
+        A whole-file decode wants that (codec.decode uses GROUP_PIXELS)."""
+        group: list[tuple[int, Mesh]] = []
+        pixels = 0
+        try:
+            for y0, mesh in self._reader:
+                self.metadata.update(self._reader.header.metadata or {})
+                size = mesh.width * mesh.height
+                # a band without triangles (a one-pixel-wide image) is rendered alone
+                if group and (pixels + size > group_pixels or not len(mesh.triangles)
+                              or not len(group[-1][1].triangles)):
+                    yield self._rows(group)
+                    group, pixels = [], 0
+                group.append((y0, mesh))
+                pixels += size
+        except ATMError:
+            if group:  # the intact bands before the damage
+                yield self._rows(group)
+            raise
+        if group:
+            yield self._rows(group)
+
+    def _rows(self, group: list[tuple[int, Mesh]]) -> tuple[int, np.ndarray]:
+        """(y0, rows) of a group of consecutive bands: each row once, the group's last
+        row only if it is the image's."""
         from . import decoding
 
+        y0, mesh = group[0][0], stack_bands(group)
+        rows = decoding.render(mesh, backend=self._backend)
         quant, nodata = self._reader.header.quant, self._reader.header.nodata
-        for y0, mesh in self._reader:
-            self.metadata.update(self._reader.header.metadata or {})
-            rows = decoding.render(mesh, backend=self._backend)
-            if quant is not None and integers.is_signed(self.dtype):
-                rows = integers.restore(rows, quant, self.dtype)
-            elif quant is not None:
-                rows = quant.dequantise(rows)
-            if mesh.holes is not None:
-                rows[mesh.holes] = nodata
-            if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.8)
-                rows = rows[:, :, None]
-            last = y0 + mesh.height == self.height
-            # the band's last row is the next band's first: emit it once, from there
-            yield y0, rows if last else rows[:-1]
+        if quant is not None and integers.is_signed(self.dtype):
+            rows = integers.restore(rows, quant, self.dtype)
+        elif quant is not None:
+            rows = quant.dequantise(rows)
+        if mesh.holes is not None:
+            rows[mesh.holes] = nodata
+        if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.8)
+            rows = rows[:, :, None]
+        last = y0 + mesh.height == self.height
+        # the group's last row is the next band's first: emit it once, from there
+        return y0, rows if last else rows[:-1]
+
+
+#: Most pixels of the consecutive bands a whole-file decode renders in one call.
+GROUP_PIXELS = 1 << 16
+
+
+def stack_bands(group: list[tuple[int, Mesh]]) -> Mesh:
+    """One mesh of consecutive bands, to render at once: their vertices and triangles
+    side by side, not merged. Rendering it gives each band's rows as rendering the
+    band alone does: a shared row belongs to the triangles of the band below (those
+    whose top row it is, ATM.md's ownership rule), which see only their own band's
+    vertices, and the rule's arithmetic does not change when a band moves down. Holes:
+    each band's, its shared last row from the band below."""
+    if len(group) == 1:
+        return group[0][1]
+    top = group[0][0]
+    meshes = [m for _, m in group]
+    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+    vertices = np.concatenate([m.vertices + [0, y0 - top] for y0, m in group])
+    triangles = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+    holes = None
+    if any(m.holes is not None for m in meshes):
+        holes = np.concatenate(
+            [m.holes[:-1] if m.holes is not None else np.zeros((m.height - 1, m.width), bool) for m in meshes[:-1]]
+            + [meshes[-1].holes if meshes[-1].holes is not None else np.zeros((meshes[-1].height, meshes[-1].width), bool)]
+        )
+    height = group[-1][0] + meshes[-1].height - top
+    return Mesh(vertices, np.concatenate([m.values for m in meshes]), triangles, meshes[0].width, height, [], holes)
 
 
 def decode_all(fileobj: BinaryIO, backend: str = "cpu") -> tuple[np.ndarray, dict]:
     """Decode a whole file into one array; also return its metadata."""
     dec = StreamDecoder(fileobj, backend=backend)
     out = np.empty(dec.shape, dec.dtype)
-    for y0, rows in dec:
+    for y0, rows in dec.rows(GROUP_PIXELS):
         out[y0 : y0 + len(rows)] = rows
     return out, dec.metadata
 

@@ -18,12 +18,14 @@ def run_one(data: bytes) -> bool:
     except codec.ATMError:
         pass
     rows_seen = 0
+    bands = []
     try:
         dec = codec.StreamDecoder(io.BytesIO(data))
         for y0, rows in dec:
             if y0 != rows_seen or rows.shape[1:] != dec.shape[1:] or rows.dtype != dec.dtype:
                 raise AssertionError(f"band at row {y0} of shape {rows.shape} after {rows_seen} rows")
             rows_seen += len(rows)
+            bands.append(rows)
     except codec.ATMError:
         pass
     try:
@@ -37,6 +39,9 @@ def run_one(data: bytes) -> bool:
         raise AssertionError(f"decoded shape {image.shape}, header says {expected}")
     if not isinstance(image, np.ndarray):
         raise AssertionError("decode did not return an array")
+    # codec.decode renders small bands a group at a time: the pixels must be each band's
+    if not np.array_equal(np.concatenate(bands), image, equal_nan=image.dtype.kind == "f"):
+        raise AssertionError("bands rendered together differ from each band rendered alone")
     if max(image.shape[:2]) > GL_DIFFERENTIAL_SIDE and _gl_available():
         # wide and large images: triangles far beyond a GL tile (the differential target)
         if not np.array_equal(codec.decode(data, backend="gl"), image):

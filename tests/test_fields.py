@@ -169,7 +169,7 @@ def test_band_values_is_steps_parents_and_sums(seed: int, step: int, pinned: boo
     residuals[0] = 10**6
     expected = meshcode.tree_sums(residuals * steps, parent)
     status, out, areas = _fields.band_values(vertices, triangles, coding.zigzag(residuals).astype(np.int64).ravel(),
-                                             order, step, pinned, 2**40)
+                                             order, step, meshcode.STEP_RANGE, pinned, 2**40)
     assert status == _fields.Values.VALUES_OK
     assert np.array_equal(out[order], expected)
     assert np.array_equal(areas, meshcode.doubled_areas(vertices, triangles))
@@ -184,7 +184,7 @@ def test_band_values_refusals() -> None:
     zero = np.zeros(n, np.int64)
 
     def status(tri=triangles, zig=zero, seq=order, top=255):
-        return _fields.band_values(vertices, tri, zig, seq, 1, False, top)[0]
+        return _fields.band_values(vertices, tri, zig, seq, 1, meshcode.STEP_RANGE, False, top)[0]
 
     assert status() == _fields.Values.VALUES_OK
     bad = triangles.copy()
@@ -214,3 +214,26 @@ def test_position_keys_follow_the_gaps(gaps: list[int], bits: int) -> None:
     assert ok and out.tolist() == keys.tolist()
     if gaps:
         assert _fields.position_keys(nums[1:], packed, bits, span - 1) == (False, None)
+
+
+def test_validate_checks_elements_in_one_pass_whatever_the_arrays() -> None:
+    """mesh.validate's element checks (a compiled pass) refuse each kind of bad mesh
+    with its own message, for int32 and strided arrays as for int64."""
+    from codec.mesh import Mesh, validate
+
+    v = np.array([[0, 0], [3, 0], [0, 2], [3, 2]], np.int64)
+    t = np.array([[0, 1, 3], [0, 3, 2]])
+    t = np.array([r if meshcode.doubled_areas(v, r[None])[0] > 0 else r[[0, 2, 1]] for r in t])
+    values = np.zeros(4, np.uint8)
+    for cast in (lambda a: a, lambda a: a.astype(np.int32), lambda a: np.asfortranarray(a)):
+        validate(Mesh(cast(v), values, cast(t), 4, 3))
+        cases = {
+            "outside the 4x3 image": (v + [0, 1], t),
+            "share a pixel": (v[[0, 1, 2, 0]], t),
+            "beyond the 4 stored": (v, np.where(t == 3, 4, t)),
+            "degenerate or wrongly oriented": (v, t[:, [0, 2, 1]]),
+            "exactly once": (v, t[:1]),
+        }
+        for message, (vv, tt) in cases.items():
+            with pytest.raises(CorruptError, match=message):
+                validate(Mesh(cast(vv), values, cast(tt), 4, 3))
