@@ -2,19 +2,22 @@
 pyproject.toml. Extra compiler flags (e.g. a sanitizer, fuzz/asan.sh) come through
 the usual CFLAGS and LDFLAGS."""
 
+import glob
 import sys
 
 from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 #: The kernels, each a module of its own.
-KERNELS = ["codec._rasterise", "codec._fields"]
+KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt"]
 
 # MSVC spells optimisation its own way; gcc and clang take -O2.
 OPTIMISE = ["/O2"] if sys.platform == "win32" else ["-O2"]
 
 extensions = [
-    Extension(name, [name.replace(".", "/") + ".pyx"], extra_compile_args=OPTIMISE)
+    # depends: C++ headers beside a kernel (codec/cdt.hpp), rebuilt on change, in the sdist
+    Extension(name, [name.replace(".", "/") + ".pyx"], extra_compile_args=OPTIMISE,
+              depends=glob.glob("codec/*.hpp"))
     for name in KERNELS
 ]
 

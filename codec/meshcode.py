@@ -34,7 +34,7 @@ from .coding import (
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, chain_steps, doubled_areas
 from .native import _fields
-from .triangulate import step_over_vertex, triangulate
+from .triangulate import delaunay, step_over_vertex, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
@@ -537,7 +537,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         if walls is not None and step_over_vertex(keys, points[begin], steps, width):
             raise CorruptError(f"{where}: a polyline step passes over a vertex, so it is no triangle edge")
         try:
-            triangles = canonical_triangles(triangulate(vertices, walls))
+            triangles = delaunay(vertices, walls)  # already in canonical order
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:

@@ -1,4 +1,7 @@
-"""Constrained Delaunay triangulation of sample pixels with the `triangle` library."""
+"""Constrained Delaunay triangulation of sample pixels, the triangulation of ATM.md
+§4.2.5, two ways that give the same triangles: delaunay() by the compiled kernel
+codec._cdt (codec/cdt.hpp; the decoder's), triangulate() by Shewchuk's Triangle and
+the canonical flip pass of codec.canonical (the encoder's meshers)."""
 
 from __future__ import annotations
 
@@ -8,21 +11,55 @@ import triangle
 from .canonical import canonicalise
 from .errors import ATMError
 from .mesh import segments
+from .native import _cdt
 
 
 #: Largest coordinate extent (max - min, either axis) at which Triangle's plain
 #: floating-point predicates are exact (see triangulate).
 EXACT_EXTENT = 4095
 
+_CROSSING = (
+    "constraint segments cross each other, so the triangulation would need vertices "
+    "off the pixel grid"
+)
+
+
+def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
+    """The triangulation of ATM.md §4.2.5 of integer (x, y) vertices with every segment
+    (pairs of vertex indices) an edge: M x 3 positively oriented triangles in canonical
+    order (§4.2.3), none when all vertices lie on one line (a one-pixel-wide image needs
+    no triangles). A segment passing over vertices is cut at them.
+
+    The vertex set is used as given: a triangulation that would need an extra vertex
+    (crossing segments) is refused, because vertices must stay on pixel centres. The
+    GIL is released while the kernel works.
+    """
+    v = np.ascontiguousarray(vertices, dtype=np.int64).reshape(-1, 2)
+    if segments is None:
+        s = np.zeros((0, 2), np.int64)
+    else:
+        s = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
+    status, triangles, _ = _cdt.triangulate(v, s)
+    if status == _cdt.OK:
+        return triangles
+    if status == _cdt.CROSSING:
+        raise ATMError(_CROSSING)
+    if status == _cdt.DUPLICATE:
+        raise ATMError("two vertices of the triangulation share a position")
+    if status == _cdt.EXTENT:
+        raise ATMError("the vertices span more than 2^28 - 1 in x or y, beyond the exact predicates")
+    if status == _cdt.INDEX:
+        raise ATMError(f"a constraint segment names a vertex beyond the {len(v)} vertices")
+    if status == _cdt.MEMORY:
+        raise MemoryError(f"no memory to triangulate {len(v)} vertices")
+    raise ATMError(f"the triangulation kernel failed (status {status}): please report this file")
+
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
                 exact: bool = False) -> np.ndarray:
-    """Triangulate integer (x, y) vertices, keeping every segment (pairs of vertex
-    indices) as an edge. Returns M x 3 positively oriented triangles, or none when all
-    vertices lie on one row or column (a one-pixel-wide image needs no triangles).
-
-    The vertex set is used as given: a triangulation that would need an extra vertex
-    (crossing segments) is refused, because vertices must stay on pixel centres.
+    """delaunay's triangles (not in canonical order) by Shewchuk's Triangle and the
+    canonical flip pass: the construction ATM.md §4.2.5 describes. Crossing segments
+    are refused as by delaunay.
 
     Triangle's exact arithmetic is skipped where that provably changes nothing
     (exact=True keeps it, for tests: the result is identical).
@@ -56,10 +93,7 @@ def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     result = triangle.triangulate(data, switches + "BN")
     triangles = np.asarray(result.get("triangles", np.zeros((0, 3))), dtype=np.int64)
     if len(triangles) and int(triangles.max()) >= len(vertices):
-        raise ATMError(
-            "constraint segments cross each other, so the triangulation would need vertices "
-            "off the pixel grid"
-        )
+        raise ATMError(_CROSSING)
     # Triangle lists every triangle counterclockwise with x right and y up, which is a
     # positive doubled area here; mesh.validate checks it wherever a mesh is written or
     # read, so it is not computed a second time on this hot path
