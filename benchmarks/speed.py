@@ -19,7 +19,10 @@ the median over the rounds of each round's own ratio, a time the median time.
 3. Encode at equal vertex count: codec.encode(image, points=N) against pydelatin's
    Delatin(image, max_points=N) (bench extra; left out without it).
 4. Encode at equal max error: codec.encode(dem, max_error=E) of a float DEM against
-   Delatin(dem, max_error=E), for each E.
+   Delatin(dem, max_error=E), for each E (a synthetic DEM, or --dem-file's GeoTIFF as
+   float32), with the .atm bytes and both vertex counts.
+5. Encode to a quality: codec.encode(image, quality=Q) of each gray corpus image
+   against a JPEG XL encode at level 90 (imagecodecs; JPEG quality 90 without it).
 
 Measures and prints; asserts nothing.
 
@@ -186,19 +189,48 @@ def dem(size: int, seed: int = 1) -> np.ndarray:
     return out - out.min()
 
 
-def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int,
-                  errors: list[float], repeat: int) -> None:
-    """Tables 3 and 4 (pydelatin, bench extra)."""
+def quality_table(corpus: dict[str, np.ndarray], names: list[str], quality: int, repeat: int) -> None:
+    """Table 5: encode to `quality` against a JPEG XL (or JPEG) encode of the image."""
+    import cv2
+
     try:
-        from pydelatin import Delatin
+        import imagecodecs
+
+        peer, encode_peer = "jxl", lambda a: imagecodecs.jpegxl_encode(a, level=90)
     except ImportError:
-        print("\npydelatin not installed (the bench extra): encode tables left out")
-        return
+        peer, encode_peer = "jpeg", lambda a: cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
     rows = []
     for name in names:
         img = corpus[name]
         if img.ndim != 2:
             continue
+        times = interleaved({"atm": lambda: codec.encode(img, quality=quality),
+                             peer: lambda: encode_peer(img)}, repeat)
+        h, w = img.shape
+        rows.append([name, f"{w}x{h}", f"{statistics.median(times['atm']):.0f}",
+                     f"{statistics.median(times[peer]):.1f}", f"{ratio(times, 'atm', peer):.0f}"])
+    print()
+    print_table(["image", "size", f"atm quality={quality} ms", f"{peer} encode ms", f"atm / {peer}"], rows)
+
+
+def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int,
+                  errors: list[float], repeat: int, sides: list[int] = (), dem_file: str | None = None) -> None:
+    """Tables 3 and 4 (pydelatin, bench extra); table 3 also for the images resized to
+    each of `sides` (cubic), table 4 on `dem_file` (a GeoTIFF, as float32) if given."""
+    try:
+        from pydelatin import Delatin
+    except ImportError:
+        print("\npydelatin not installed (the bench extra): encode tables left out")
+        return
+    import cv2
+
+    rows = []
+    work = [corpus[name] for name in names if corpus[name].ndim == 2]
+    labels = [name for name in names if corpus[name].ndim == 2]
+    for side in sides:
+        work += [cv2.resize(img, (side, side), interpolation=cv2.INTER_CUBIC) for img in work[: len(labels)]]
+    labels = labels * (1 + len(sides))
+    for name, img in zip(labels, work):
         n = max(4, round(DENSITY * img.size))
         heights = img.astype(np.float32)
         times = interleaved({"atm": lambda: codec.encode(img, points=n),
@@ -208,15 +240,24 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
                      f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}"])
     print()
     print_table(["image", "size", "vertices", "atm encode ms", "delatin ms", "atm / delatin"], rows)
-    terrain = dem(dem_size)
+    if dem_file is None:
+        terrain = dem(dem_size)
+    else:
+        import tifffile
+
+        terrain = tifffile.imread(dem_file).astype(np.float32)
     rows = []
     for e in errors:
         times = interleaved({"atm": lambda: codec.encode(terrain, max_error=e),
                              "delatin": lambda: Delatin(terrain, max_error=e)}, repeat)
-        rows.append([f"{dem_size}x{dem_size}", f"{e:g}", f"{statistics.median(times['atm']):.0f}",
+        data = codec.encode(terrain, max_error=e)
+        h, w = terrain.shape
+        rows.append([f"{w}x{h}", f"{e:g}", f"{len(data):,}", f"{codec.info(data)['vertices']:,}",
+                     f"{len(Delatin(terrain, max_error=e).vertices):,}", f"{statistics.median(times['atm']):.0f}",
                      f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}"])
     print()
-    print_table(["float DEM", "max error (m)", "atm encode ms", "delatin ms", "atm / delatin"], rows)
+    print_table(["float DEM", "max error (m)", "atm bytes", "atm vertices", "delatin vertices",
+                 "atm encode ms", "delatin ms", "atm / delatin"], rows)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -230,6 +271,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-encode", action="store_true", help="decode and thread tables only")
     parser.add_argument("--large", type=int, nargs="*", default=[],
                         help="also decode each image resized to N x N (cubic), e.g. 2048")
+    parser.add_argument("--no-decode", action="store_true", help="encode tables only")
+    parser.add_argument("--encode-sides", type=int, nargs="*", default=[],
+                        help="also encode the images resized to these sides (table 3)")
+    parser.add_argument("--dem-file", help="a GeoTIFF DEM for table 4, read as float32 (default: synthetic)")
+    parser.add_argument("--quality", type=int, default=70, help="quality of table 5")
     args = parser.parse_args(argv)
     from tests.corpus import load_corpus
 
@@ -238,16 +284,19 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(names) - set(corpus))
     if unknown:
         parser.error(f"no corpus image {', '.join(unknown)}; choose from {', '.join(corpus)}")
-    files = decode_table(corpus, names, args.repeat)
-    if args.large:
-        import cv2
+    if not args.no_decode:
+        files = decode_table(corpus, names, args.repeat)
+        if args.large:
+            import cv2
 
-        large = {f"{name}@{n}": cv2.resize(corpus[name], (n, n), interpolation=cv2.INTER_CUBIC)
-                 for name in names for n in args.large}
-        decode_table(large, list(large), max(3, args.repeat // 4))
-    thread_table(files, max(3, args.repeat // 4))
+            large = {f"{name}@{n}": cv2.resize(corpus[name], (n, n), interpolation=cv2.INTER_CUBIC)
+                     for name in names for n in args.large}
+            decode_table(large, list(large), max(3, args.repeat // 4))
+        thread_table(files, max(3, args.repeat // 4))
     if not args.no_encode:
-        encode_tables(corpus, names, args.dem_size, args.max_errors, args.encode_repeat)
+        encode_tables(corpus, names, args.dem_size, args.max_errors, args.encode_repeat,
+                      args.encode_sides, args.dem_file)
+        quality_table(corpus, names, args.quality, args.encode_repeat)
     return 0
 
 
