@@ -146,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); not with a bound")
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
+    enc.add_argument("--lossless", action="store_true", default=None, help="every valid sample decodes exactly; not with a bound")
     enc.add_argument(
         "--band-height",
         type=int,

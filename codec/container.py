@@ -25,6 +25,7 @@ from .errors import CorruptError, FormatError, LimitError, TruncatedError, Unsup
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser
+from .residual import CHUNK as RESIDUAL
 
 
 @dataclass(frozen=True)
@@ -163,10 +164,11 @@ class Writer:
         return self._rows_done == self.header.height
 
     def write_band(self, y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None,
-                   layout: meshcode.Layout | None = None) -> None:
+                   layout: meshcode.Layout | None = None, residual: bytes | None = None) -> None:
         """Write the mesh of rows y0 .. y0 + mesh.height - 1, its samples as
         meshcode.quantise(mesh, step, y0 > 0) left them (any samples with step 1);
-        delaunay and layout as for meshcode.encode_band."""
+        delaunay and layout as for meshcode.encode_band; residual: the band's RESD
+        payload (codec.residual), if the image has a residual layer."""
         h = self.header
         if y0 != self._next_y0:
             raise ValueError(f"band starts at row {y0}, expected {self._next_y0}")
@@ -182,6 +184,8 @@ class Writer:
             self._stream.write(_chunk(schema.MASK, frames.compress(mask)))
         elif mesh.holes is not None and mesh.holes.any():
             raise ValueError("a band with holes needs a header with a nodata value")
+        if residual is not None:
+            self._stream.write(_chunk(RESIDUAL, residual))
         fields = meshcode.encode_band(y0, mesh, step, delaunay, layout)
         raw = schema.MeshPayload.build(fields, **h._fields())
         frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
@@ -529,10 +533,18 @@ class Reader:
         self._iterated = True
         h = self.header
         next_y0, finished, holes = 0, False, None
+        #: the (payload, offset) of the band just yielded's RESD chunk, None without one
+        self.band_residual, residual, layered = None, None, None
         while True:
             ctype, payload, offset = self._next_chunk()
             name = ctype.decode("latin-1")
-            if ctype == schema.MASK:
+            if ctype == RESIDUAL:
+                if residual is not None:
+                    raise CorruptError(f"two RESD chunks before a MESH at byte {offset}")
+                if h.nodata is not None and holes is None:
+                    raise CorruptError(f"RESD chunk at byte {offset} comes before its band's MASK chunk")
+                residual = (payload, offset)
+            elif ctype == schema.MASK:
                 if h.nodata is None:
                     raise CorruptError(f"MASK chunk at byte {offset} in a file without NDAT")
                 if holes is not None:
@@ -543,6 +555,9 @@ class Reader:
                     raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
                 if h.nodata is not None and holes is None:
                     raise CorruptError(f"MESH chunk at byte {offset} has no MASK chunk before it")
+                if layered is not None and layered != (residual is not None):
+                    raise CorruptError(f"MESH chunk at byte {offset}: a residual layer covers every band or none")
+                layered, self.band_residual, residual = residual is not None, residual, None
                 y0, mesh = self._parse_band(payload, offset, next_y0)
                 if holes is not None:
                     if holes.shape != (mesh.height, mesh.width):
@@ -554,6 +569,8 @@ class Reader:
             elif ctype == schema.END:
                 if payload:
                     raise CorruptError("the AEND chunk must be empty")
+                if residual is not None:
+                    raise CorruptError("the file ends with a RESD chunk that no MESH chunk follows")
                 if not finished:
                     raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
                 return
@@ -600,7 +617,7 @@ def summarise(reader: Reader) -> Summary:
             reader._read_metadata(payload, offset)
         elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA):
             raise CorruptError(f"misplaced {ctype.decode('latin-1')} chunk at byte {offset}")
-        elif ctype[0] & 0x20 == 0 and ctype != schema.MASK:
+        elif ctype[0] & 0x20 == 0 and ctype not in (schema.MASK, RESIDUAL):
             raise UnsupportedError(f"unknown critical chunk {ctype.decode('latin-1')}; a newer codec wrote this file")
 
 

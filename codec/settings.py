@@ -86,6 +86,9 @@ class Settings:
     region_share: float | None = _option(
         None, "share of the budget for curvature samples, 0..1 (default: by effort, less on piecewise-smooth images)", meshers=("adaptive",)
     )
+    lossless: bool = _option(
+        False, "every valid sample decodes exactly (a residual layer over a coarse mesh, ATM.md §4.8); not with an error bound", cli=True
+    )
 
     def __post_init__(self) -> None:
         if self.points is not None:
@@ -94,12 +97,16 @@ class Settings:
             _whole(self.band_height, "band_height")
         if self.quality is not None:
             _whole(self.quality, "quality", 1, 100)
-        clash = size_conflict(n for n in ("points", "quality", "max_rms", "max_error") if getattr(self, n) is not None)
+        clash = size_conflict(
+            n for n in ("points", "quality", "max_rms", "max_error", "lossless") if getattr(self, n) not in (None, False)
+        )
         if clash:
             raise OptionError(f"{clash[0]} and {clash[1]} both set the size: give one of them")
         for name in ("max_rms", "max_error", "precision"):
             if getattr(self, name) is not None:
                 _number(getattr(self, name), name)
+        if not isinstance(self.lossless, bool):
+            raise OptionError(f"lossless must be True or False, not {self.lossless!r}")
         if self.mesher not in MESHERS:
             raise OptionError(f"unknown mesher {self.mesher!r}; choose one of {', '.join(MESHERS)}")
         if self.value_step != "auto" and (
@@ -168,7 +175,8 @@ def size_conflict(given) -> tuple[str, str] | None:
     `points` fixes the vertex count, so it takes no error bound, and `quality` is an RMS
     bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met."""
     given = list(given)
-    for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms")):
+    for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
+                 ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error")):
         if a in given and b in given:
             return a, b
     return None

@@ -11,7 +11,8 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, integers, pipeline
+from . import container, integers, pipeline, residual
+from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
 from .settings import Settings
@@ -64,6 +65,10 @@ class StreamEncoder:
             settings = settings.replace(**{k: v for k, v in options.items() if v is not None})
         self._plan = pipeline.plan(settings, width, height, dtype, channels)
         p = self._plan
+        error = residual.layer_bound(settings, p)
+        self._residual = None if error is None else residual.ResidualEncoder(p.width, p.channels, p.storage, error)
+        if self._residual is not None:
+            self._plan = p = pipeline.plan(residual.mesh_settings(settings, p.width, p.height), width, height, dtype, channels)
         self.width, self.height, self.dtype, self.channels = p.width, p.height, p.dtype, p.channels
         self.band_height = p.band_height
         self._nodata = p.nodata
@@ -141,9 +146,15 @@ class StreamEncoder:
         if self._filled < 2 and self.height > 1:
             return  # only the shared row of a band already written
         band_holes = self._holes[: self._filled]
+        band = self._buf[: self._filled]
+        mesh_holes = band_holes if band_holes.any() else None
+        if self._residual is not None and mesh_holes is not None:
+            # the layer gives the pixels: a mesh of the holes filled need not trace
+            # their outlines (what made `points` balloon on range data with holes)
+            band, mesh_holes = hole_stage.fill(band, band_holes), None
         coded = pipeline.code_band(
-            self._buf[: self._filled],
-            band_holes if band_holes.any() else None,
+            band,
+            mesh_holes,
             self._plan,
             y0=self._y0,
             top=self._top,
@@ -151,7 +162,13 @@ class StreamEncoder:
             step=self._step,
             progress=None if self._progress is None else self._within_band,
         )
-        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout)
+        layer = None
+        if self._residual is not None:
+            n = residual.covered_rows(self._filled, self._received == self.height)
+            layer = self._residual.band(self._y0, self._buf[:n], band_holes[:n] if band_holes.any() else None)
+            if band_holes.any():
+                coded.mesh.holes = band_holes.copy()  # for the band's MASK chunk
+        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout, layer)
         self.bands += 1
         self.vertices += len(coded.mesh.vertices)
         self.triangles += len(coded.mesh.triangles)
@@ -218,19 +235,29 @@ class StreamDecoder:
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         from . import decoding
 
-        quant, nodata = self._reader.header.quant, self._reader.header.nodata
+        h = self._reader.header
+        quant, nodata = h.quant, h.nodata
+        layer = None
         for y0, mesh in self._reader:
             self.metadata.update(self._reader.header.metadata or {})
-            rows = decoding.render(mesh, backend=self._backend)
+            last = y0 + mesh.height == self.height
+            if self._reader.band_residual is not None:
+                # the residual layer gives every pixel the band emits: no need to render
+                payload, offset = self._reader.band_residual
+                if layer is None:
+                    layer = residual.ResidualDecoder(h.width, h.channels, h.storage)
+                rows = layer.band(payload, y0, residual.covered_rows(mesh.height, last), mesh.holes,
+                                  f"RESD chunk at byte {offset}")
+            else:
+                rows = decoding.render(mesh, backend=self._backend)
             if quant is not None and integers.is_signed(self.dtype):
                 rows = integers.restore(rows, quant, self.dtype)
             elif quant is not None:
                 rows = quant.dequantise(rows)
             if mesh.holes is not None:
-                rows[mesh.holes] = nodata
-            last = y0 + mesh.height == self.height
+                rows[mesh.holes[: len(rows)]] = nodata
             # the band's last row is the next band's first: emit it once, from there
-            yield y0, rows if last else rows[:-1]
+            yield y0, rows if last or len(rows) < mesh.height else rows[:-1]
 
 
 def decode_all(fileobj: BinaryIO, backend: str = "cpu") -> tuple[np.ndarray, dict]:
