@@ -68,8 +68,9 @@ def encode(
     canny: tuple[float, float] | None = None,
     edge_share: float | None = None,
     region_share: float | None = None,
-    mask: np.ndarray | None = None,
     lossless: bool = False,
+    residual: bool = False,
+    mask: np.ndarray | None = None,
     **unknown: NoReturn,
 ) -> bytes:
     """Encode an image as .atm bytes; the same image and options give the same bytes.
@@ -81,9 +82,10 @@ def encode(
     Size: `points` (target vertex count, within 10 %; default 2.8 % of the pixels), or
     a bound that refinement guarantees on the decoded image, per channel: `quality`
     (1..100 on JPEG's scale: an RMS bound at about JPEG's error, 100 lossless), `max_rms`, `max_error` (sample
-    units; float data: data units). `lossless=True`, or `max_error` alone, adds a residual
-    layer (ATM.md §4.8) that meets the bound on every valid sample by construction,
-    beside a light mesh (`points` sets its size). The other options and their defaults:
+    units; float data: data units). `lossless=True`, or `max_error` with `residual=True`,
+    adds a residual layer (ATM.md §4.8) that meets the bound on every valid sample by
+    construction with the fewest bytes, beside a light mesh (`points` sets its size;
+    it is a preview, not within the bound). The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an
     unknown one is refused with the list of valid ones).
     """
@@ -97,7 +99,7 @@ def encode(
         mesher=mesher, value_step=value_step, nodata=nodata, value_range=value_range, precision=precision,
         metadata=metadata, effort=effort, values=values, segment_length=segment_length,
         segment_error=segment_error, tiles=tiles, per_tile=per_tile, canny=canny, edge_share=edge_share,
-        region_share=region_share, lossless=lossless,
+        region_share=region_share, lossless=lossless, residual=residual,
     )
     return encoder.encode(image, settings, mask)
 

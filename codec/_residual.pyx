@@ -13,14 +13,19 @@ from libc.string cimport memcpy
 
 import numpy as np
 
-#: Contexts: activity bucket x gradient bucket, each 0..BUCKETS-1.
+#: Contexts: activity bucket (0..BUCKETS-1) x local shape (0..SHAPES-1): the signs of
+#: three neighbour differences (27) x the bucket of their magnitudes' sum.
 DEF BUCKETS = 12
 #: Unary nodes of a token (tokens 0..TOKENS-1; the last has no terminating node).
 DEF TOKENS = 40
 DEF NODES = TOKENS - 1
-DEF CONTEXTS = BUCKETS * BUCKETS
+DEF SHAPES = 27 * BUCKETS
+DEF CONTEXTS = BUCKETS * SHAPES
 DEF SIGN_CONTEXTS = 9
-DEF MODELS = CONTEXTS * NODES + SIGN_CONTEXTS
+#: Interpolation (predictor 1): contexts are the pyramid's levels, 0..LEVELS-1.
+DEF LEVELS = 32
+DEF INTERP = CONTEXTS * NODES + SIGN_CONTEXTS
+DEF MODELS = INTERP + LEVELS * NODES + LEVELS
 #: Slowest adaptation: p moves by 1/2^MAX_SHIFT of the way to the coded bit.
 DEF MAX_SHIFT = 7
 DEF TOP = 1 << 24
@@ -193,11 +198,21 @@ cdef class Plane:
         self.above_residual = np.zeros(width, np.int32)
         self.started = False
 
+    def copy(self):
+        """An independent copy (the encoder tries each predictor on one)."""
+        other = Plane(self.width)
+        other.prob[:] = self.prob
+        other.count[:] = self.count
+        other.above[:] = self.above
+        other.above_residual[:] = self.above_residual
+        other.started = self.started
+        return other
+
 
 cdef inline int64_t _predict(int32_t* cur, int32_t* up, int64_t x, int64_t w, bint has_up,
-                             int64_t* grad) noexcept nogil:
+                             int64_t* shape) noexcept nogil:
     """MED on the causal neighbours with ATM.md §4.8.3's stand-ins at the edges; sets
-    the local gradient |NE - N| + |N - NW| + |NW - W|."""
+    the local shape from the differences NE - N, N - NW, NW - W."""
     cdef int64_t W, N, NW, NE, lo, hi
     if has_up:
         N = up[x]
@@ -215,7 +230,8 @@ cdef inline int64_t _predict(int32_t* cur, int32_t* up, int64_t x, int64_t w, bi
         NE = W
     else:
         W = N = NW = NE = 0
-    grad[0] = _abs(NE - N) + _abs(N - NW) + _abs(NW - W)
+    shape[0] = (((_sign(NE - N) + 1) * 9 + (_sign(N - NW) + 1) * 3 + _sign(NW - W) + 1) * BUCKETS
+                + _bucket(_abs(NE - N) + _abs(N - NW) + _abs(NW - W)))
     lo = W if W < N else N
     hi = N if W < N else W
     if NW >= hi:
@@ -226,41 +242,83 @@ cdef inline int64_t _predict(int32_t* cur, int32_t* up, int64_t x, int64_t w, bi
 
 
 cdef inline void _contexts(int32_t* res, int32_t* up_res, int64_t x, int64_t w, bint has_up,
-                           int64_t grad, int* ctx, int* sctx) noexcept nogil:
+                           int64_t shape, int* ctx, int* sctx) noexcept nogil:
     cdef int64_t rW = res[x - 1] if x > 0 else 0
     cdef int64_t rN = 0, rNW = 0, rNE = 0
     if has_up:
         rN = up_res[x]
         rNW = up_res[x - 1] if x > 0 else 0
         rNE = up_res[x + 1] if x + 1 < w else 0
-    ctx[0] = _bucket(_abs(rW) + _abs(rN) + ((_abs(rNW) + _abs(rNE)) >> 1)) * BUCKETS + _bucket(grad)
+    ctx[0] = _bucket(_abs(rW) + _abs(rN) + ((_abs(rNW) + _abs(rNE)) >> 1)) * SHAPES + shape
     sctx[0] = 3 * (_sign(rW) + 1) + _sign(rN) + 1
 
 
-cdef int _code_plane(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int32_t* above,
-                     int32_t* above_res, bint started, int32_t* levels, const uint8_t* holes,
-                     int64_t rows, int64_t w, int64_t max_level) noexcept nogil:
+cdef inline void _put_residual(Encoder* e, uint16_t* node, uint8_t* ncount, uint16_t* sp, uint8_t* sn,
+                               int64_t r) noexcept nogil:
+    """A residual as a unary token (nodes), a sign and raw low bits (ATM.md §4.8.4)."""
+    cdef int64_t a = _abs(r), k
+    cdef int nb = 0, tok
+    if a < 16:
+        tok = <int>a
+    else:
+        k = a
+        while k:
+            k >>= 1
+            nb += 1
+        tok = <int>(16 + 2 * (nb - 5) + ((a >> (nb - 2)) & 1))
+    for k in range(tok):
+        _encode_bit(e, node + k, ncount + k, 1)
+    if tok < NODES:
+        _encode_bit(e, node + tok, ncount + tok, 0)
+    if a:
+        _encode_bit(e, sp, sn, r < 0)
+    if tok >= 16:
+        k = nb - 3
+        while k >= 0:
+            _encode_bit(e, &HALF, NULL, (a >> k) & 1)
+            k -= 1
+
+
+cdef inline int64_t _get_residual(Decoder* d, uint16_t* node, uint8_t* ncount, uint16_t* sp,
+                                  uint8_t* sn) noexcept nogil:
+    cdef int tok = 0, negative, nb
+    cdef int64_t a, k
+    while tok < NODES and _decode_bit(d, node + tok, ncount + tok):
+        tok += 1
+    negative = tok and _decode_bit(d, sp, sn)
+    if tok < 16:
+        a = tok
+    else:
+        nb = 5 + (tok - 16) // 2
+        a = (<int64_t>1 << (nb - 1)) | (<int64_t>((tok - 16) & 1) << (nb - 2))
+        k = nb - 3
+        while k >= 0:
+            a |= <int64_t>_decode_bit(d, &HALF, NULL) << k
+            k -= 1
+    return -a if negative else a
+
+
+cdef int _code_med(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int32_t* above,
+                   int32_t* above_res, bint started, int32_t* levels, const uint8_t* holes,
+                   int64_t rows, int64_t w, int64_t max_level) noexcept nogil:
     """Code (e) or decode (d) rows x w levels in raster order, skipping holes; levels
     is written when decoding. above/above_res: the row before (updated to the last
     row). A hole's level is its left neighbour's (the row above's at the row start,
     0 in the first row of a plane), its residual 0."""
-    cdef int64_t y, x, pred, grad, r, a, nb, k, level
-    cdef int ctx, sctx, tok, bit, negative
+    cdef int64_t y, x, pred, shape, r, level
+    cdef int ctx, sctx
     cdef int32_t* cur
     cdef int32_t* res = <int32_t*>malloc(w * sizeof(int32_t))
     cdef int32_t* up
-    cdef int32_t* up_res
     cdef bint has_up
-    cdef uint16_t* node
-    cdef uint8_t* ncount
     if res == NULL:
         return RESIDUAL_MEMORY
     for y in range(rows):
         cur = levels + y * w
         if y == 0:
-            up, up_res, has_up = above, above_res, started
+            up, has_up = above, started
         else:
-            up, up_res, has_up = levels + (y - 1) * w, above_res, True
+            up, has_up = levels + (y - 1) * w, True
         for x in range(w):
             if holes[y * w + x]:
                 res[x] = 0
@@ -271,50 +329,14 @@ cdef int _code_plane(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int
                 else:
                     cur[x] = 0
                 continue
-            pred = _predict(cur, up, x, w, has_up, &grad)
-            _contexts(res, up_res, x, w, has_up, grad, &ctx, &sctx)
-            node = prob + ctx * NODES
-            ncount = count + ctx * NODES
+            pred = _predict(cur, up, x, w, has_up, &shape)
+            _contexts(res, above_res, x, w, has_up, shape, &ctx, &sctx)
             if e != NULL:
-                r = cur[x] - pred
-                a = _abs(r)
-                if a < 16:
-                    tok = <int>a
-                    nb = 0
-                else:
-                    nb = 0
-                    k = a
-                    while k:
-                        k >>= 1
-                        nb += 1
-                    tok = <int>(16 + 2 * (nb - 5) + ((a >> (nb - 2)) & 1))
-                for k in range(tok):
-                    _encode_bit(e, node + k, ncount + k, 1)
-                if tok < NODES:
-                    _encode_bit(e, node + tok, ncount + tok, 0)
-                if a:
-                    _encode_bit(e, prob + CONTEXTS * NODES + sctx, count + CONTEXTS * NODES + sctx, r < 0)
-                if tok >= 16:
-                    k = nb - 3
-                    while k >= 0:
-                        bit = (a >> k) & 1
-                        _encode_bit(e, &HALF, NULL, bit)
-                        k -= 1
+                _put_residual(e, prob + ctx * NODES, count + ctx * NODES, prob + CONTEXTS * NODES + sctx,
+                              count + CONTEXTS * NODES + sctx, cur[x] - pred)
             else:
-                tok = 0
-                while tok < NODES and _decode_bit(d, node + tok, ncount + tok):
-                    tok += 1
-                negative = tok and _decode_bit(d, prob + CONTEXTS * NODES + sctx, count + CONTEXTS * NODES + sctx)
-                if tok < 16:
-                    a = tok
-                else:
-                    nb = 5 + (tok - 16) // 2
-                    a = (<int64_t>1 << (nb - 1)) | (<int64_t>((tok - 16) & 1) << (nb - 2))
-                    k = nb - 3
-                    while k >= 0:
-                        a |= <int64_t>_decode_bit(d, &HALF, NULL) << k
-                        k -= 1
-                r = -a if negative else a
+                r = _get_residual(d, prob + ctx * NODES, count + ctx * NODES, prob + CONTEXTS * NODES + sctx,
+                                  count + CONTEXTS * NODES + sctx)
                 level = pred + r
                 if level < 0 or level > max_level:
                     free(res)
@@ -329,15 +351,88 @@ cdef int _code_plane(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int
     return RESIDUAL_OK
 
 
-def encode(planes, levels_list, holes, int64_t max_level):
-    """The coded bytes of a chunk: each plane's levels (rows x W int32, holes' entries
-    ignored) in turn, with that plane's `Plane` state (updated)."""
-    cdef Encoder e
-    cdef Plane plane
-    cdef int32_t[:, ::1] lv
-    cdef const uint8_t[:, ::1] hv = holes
-    cdef int status = RESIDUAL_OK
-    cdef int64_t rows = hv.shape[0], w = hv.shape[1]
+cdef inline void _interp_one(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, const int64_t* orig,
+                             int64_t* rec, const uint8_t* holes, int64_t i, int64_t pred, int64_t level,
+                             int64_t error, int64_t top) noexcept nogil:
+    """One sample of the interpolation pyramid: its residual from `pred` quantised
+    with step 2E + 1 around zero, the reconstruction clipped to 0..top."""
+    cdef int64_t ctx = level if level < LEVELS else LEVELS - 1
+    cdef int64_t step = 2 * error + 1, dd, q, v
+    cdef uint16_t* node = prob + INTERP + ctx * NODES
+    cdef uint8_t* ncount = count + INTERP + ctx * NODES
+    cdef uint16_t* sp = prob + INTERP + LEVELS * NODES + ctx
+    cdef uint8_t* sn = count + INTERP + LEVELS * NODES + ctx
+    if holes[i]:
+        rec[i] = pred
+        return
+    if e != NULL:
+        dd = orig[i] - pred
+        q = (_abs(dd) + error) // step
+        q = -q if dd < 0 else q
+        _put_residual(e, node, ncount, sp, sn, q)
+    else:
+        q = _get_residual(d, node, ncount, sp, sn)
+    v = pred + q * step
+    rec[i] = 0 if v < 0 else top if v > top else v
+
+
+cdef void _code_interp(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, const int64_t* orig,
+                       int64_t* rec, const uint8_t* holes, int64_t rows, int64_t w, int64_t error,
+                       int64_t top) noexcept nogil:
+    """Predictor 1 (ATM.md §4.8.5): a hierarchical interpolation over the band, anchors
+    every S pixels, then each halving of the stride's row midpoints and column
+    midpoints from the mean of their two coded neighbours."""
+    cdef int64_t stride = 1, half, y, x, level = 1, prev = (top + 1) // 2, pred, i
+    while stride * 2 < (rows if rows > w else w):
+        stride *= 2
+    y = 0
+    while y < rows:
+        x = 0
+        while x < w:
+            _interp_one(e, d, prob, count, orig, rec, holes, y * w + x, prev, 0, error, top)
+            prev = rec[y * w + x]
+            x += stride
+        y += stride
+    while stride > 1:
+        half = stride // 2
+        y = 0
+        while y < rows:
+            x = half
+            while x < w:
+                i = y * w + x
+                pred = (rec[i - half] + rec[i + half]) >> 1 if x + half < w else rec[i - half]
+                _interp_one(e, d, prob, count, orig, rec, holes, i, pred, level, error, top)
+                x += stride
+            y += stride
+        y = half
+        while y < rows:
+            x = 0
+            while x < w:
+                i = y * w + x
+                pred = (rec[i - half * w] + rec[i + half * w]) >> 1 if y + half < rows else rec[i - half * w]
+                _interp_one(e, d, prob, count, orig, rec, holes, i, pred, level + 1, error, top)
+                x += half
+            y += stride
+        stride = half
+        level += 2
+
+
+cdef void _after_interp(int32_t* above, int32_t* above_res, bint started, const int64_t* last,
+                        const uint8_t* holes, int64_t w, int64_t error) noexcept nogil:
+    """The MED state after an interpolated band: its last row's levels (holes filled
+    as in MED), residuals 0."""
+    cdef int64_t x
+    for x in range(w):
+        above_res[x] = 0
+        if not holes[x]:
+            above[x] = <int32_t>((last[x] + error) // (2 * error + 1))
+        elif x > 0:
+            above[x] = above[x - 1]
+        elif not started:
+            above[x] = 0
+
+
+cdef object _begin_encoder(Encoder* e):
     e.low = 0
     e.rng = 0xFFFFFFFF
     e.cache = 0
@@ -348,18 +443,46 @@ def encode(planes, levels_list, holes, int64_t max_level):
     e.buf = <uint8_t*>malloc(e.cap)
     if e.buf == NULL:
         raise MemoryError()
+
+
+def encode(planes, int predictor, samples_list, holes, int64_t error, int64_t top):
+    """The coded bytes of a chunk: each plane's samples (rows x W int64, holes'
+    entries ignored) in turn with `predictor` (0 MED on levels, 1 interpolation), with
+    that plane's `Plane` state (updated)."""
+    cdef Encoder e
+    cdef Plane plane
+    cdef const int64_t[:, ::1] sv
+    cdef int32_t[:, ::1] lv
+    cdef int64_t[:, ::1] rv
+    cdef const uint8_t[:, ::1] hv = holes
+    cdef int status = RESIDUAL_OK
+    cdef int64_t rows = hv.shape[0], w = hv.shape[1], step = 2 * error + 1
+    if predictor not in (0, 1) or error < 0 or top < 0:
+        raise ValueError("predictor 0 or 1, error and top >= 0")
+    _begin_encoder(&e)
     try:
-        for plane, levels in zip(planes, levels_list):
-            lv = levels.copy()  # holes get filled in place
-            if lv.shape[0] != rows or lv.shape[1] != w or plane.width != w:
-                raise ValueError("levels, holes and plane disagree on the band's shape")
-            with nogil:
-                status = _code_plane(&e, NULL, &plane.prob[0], &plane.count[0], &plane.above[0],
-                                     &plane.above_residual[0], plane.started, &lv[0, 0] if rows else NULL,
-                                     &hv[0, 0] if rows else NULL, rows, w, max_level)
+        for plane, samples in zip(planes, samples_list):
+            sv = samples
+            if sv.shape[0] != rows or sv.shape[1] != w or plane.width != w:
+                raise ValueError("samples, holes and plane disagree on the band's shape")
+            if rows == 0:
+                continue
+            if predictor == 0:
+                lv = ((np.asarray(samples) + error) // step).astype(np.int32)
+                with nogil:
+                    status = _code_med(&e, NULL, &plane.prob[0], &plane.count[0], &plane.above[0],
+                                       &plane.above_residual[0], plane.started, &lv[0, 0], &hv[0, 0], rows, w,
+                                       (top + error) // step)
+            else:
+                rv = np.empty((rows, w), np.int64)
+                with nogil:
+                    _code_interp(&e, NULL, &plane.prob[0], &plane.count[0], &sv[0, 0], &rv[0, 0], &hv[0, 0],
+                                 rows, w, error, top)
+                    _after_interp(&plane.above[0], &plane.above_residual[0], plane.started, &rv[rows - 1, 0],
+                                  &hv[rows - 1, 0], w, error)
             if status != RESIDUAL_OK:
                 raise MemoryError()
-            plane.started = plane.started or rows > 0
+            plane.started = True
         with nogil:
             for _ in range(5):
                 _shift_low(&e)
@@ -371,16 +494,20 @@ def encode(planes, levels_list, holes, int64_t max_level):
         free(e.buf)
 
 
-def decode(planes, const uint8_t[::1] data, holes, int64_t max_level):
-    """(status, [levels per plane]) of a chunk's coded bytes; the planes' states are
-    updated. The caller checked the shapes; the kernel checks every level and byte."""
+def decode(planes, int predictor, const uint8_t[::1] data, holes, int64_t error, int64_t top):
+    """(status, [samples per plane, rows x W int64]) of a chunk's coded bytes; the
+    planes' states are updated. The caller checked the fields; the kernel checks every
+    level and byte."""
     cdef Decoder d
     cdef Plane plane
     cdef int32_t[:, ::1] lv
+    cdef int64_t[:, ::1] rv
     cdef const uint8_t[:, ::1] hv = holes
     cdef int status = RESIDUAL_OK
-    cdef int64_t rows = hv.shape[0], w = hv.shape[1]
+    cdef int64_t rows = hv.shape[0], w = hv.shape[1], step = 2 * error + 1
     cdef int i
+    if predictor not in (0, 1) or error < 0 or top < 0:
+        raise ValueError("predictor 0 or 1, error and top >= 0")
     out = []
     d.buf = &data[0] if data.shape[0] else NULL
     d.size = data.shape[0]
@@ -394,18 +521,28 @@ def decode(planes, const uint8_t[::1] data, holes, int64_t max_level):
     for plane in planes:
         if plane.width != w:
             raise ValueError("holes and plane disagree on the band's width")
-        levels = np.zeros((rows, w), np.int32)
-        lv = levels
-        with nogil:
-            status = _code_plane(NULL, &d, &plane.prob[0], &plane.count[0], &plane.above[0],
-                                 &plane.above_residual[0], plane.started, &lv[0, 0] if rows else NULL,
-                                 &hv[0, 0] if rows else NULL, rows, w, max_level)
+        samples = np.zeros((rows, w), np.int64)
+        rv = samples
+        if rows and predictor == 0:
+            levels = np.zeros((rows, w), np.int32)
+            lv = levels
+            with nogil:
+                status = _code_med(NULL, &d, &plane.prob[0], &plane.count[0], &plane.above[0],
+                                   &plane.above_residual[0], plane.started, &lv[0, 0], &hv[0, 0], rows, w,
+                                   (top + error) // step)
+            samples = np.minimum(levels.astype(np.int64) * step, top)
+        elif rows:
+            with nogil:
+                _code_interp(NULL, &d, &plane.prob[0], &plane.count[0], NULL, &rv[0, 0], &hv[0, 0],
+                             rows, w, error, top)
+                _after_interp(&plane.above[0], &plane.above_residual[0], plane.started, &rv[rows - 1, 0],
+                              &hv[rows - 1, 0], w, error)
         if status == RESIDUAL_OK and d.overrun:
             status = RESIDUAL_OVERRUN
         if status != RESIDUAL_OK:
             return status, None
         plane.started = plane.started or rows > 0
-        out.append(levels)
+        out.append(samples)
     if d.at < d.size:
         return RESIDUAL_TRAILING, None
     return RESIDUAL_OK, out

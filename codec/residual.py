@@ -28,9 +28,11 @@ from .native import _residual
 CHUNK = b"RESD"
 #: y0, rows, predictor, channels, E (in stored sample units).
 FIXED = struct.Struct("<IIBBH")
-#: Predictor codes (ATM.md §4.8.3).
+#: Predictor codes: MED on the levels (ATM.md §4.8.3), hierarchical interpolation
+#: (§4.8.5, what smooth data such as elevations favour at coarse bounds).
 MED = 0
-PREDICTORS = (MED,)
+INTERPOLATION = 1
+PREDICTORS = (MED, INTERPOLATION)
 
 
 #: Vertex density of the mesh stored beside a residual layer, when `points` is not
@@ -42,7 +44,8 @@ PREVIEW_DENSITY = 0.001
 def layer_bound(settings, plan) -> int | None:
     """The bound E in stored sample units if an image with these settings (and this
     pipeline.Plan of them) gets a residual layer, else None: `lossless` (E = 0), or
-    `max_error` alone (float data: the bound left after the 16-bit quantisation)."""
+    `residual` with `max_error` (float data: the bound left after the 16-bit
+    quantisation)."""
     if settings.lossless:
         if plan.dtype.kind == "f":
             raise UnsupportedError(
@@ -50,7 +53,7 @@ def layer_bound(settings, plan) -> int | None:
                 "give max_error (the bound holds on every valid sample) instead"
             )
         return 0
-    if settings.max_error is None or settings.max_rms is not None:
+    if not settings.residual or settings.max_error is None or settings.max_rms is not None:
         return None
     return min(int(math.floor(plan.bound.max_error)), _top(plan.storage))
 
@@ -59,7 +62,7 @@ def mesh_settings(settings, width: int, height: int):
     """The settings of the mesh stored beside a residual layer: no bound of its own
     (the layer meets it), `points` as given or a light preview."""
     points = settings.points or max(4, round(PREVIEW_DENSITY * width * height))
-    return settings.replace(lossless=False, max_error=None, points=points)
+    return settings.replace(lossless=False, residual=False, max_error=None, points=points)
 
 
 def covered_rows(mesh_rows: int, last: bool) -> int:
@@ -89,15 +92,20 @@ class ResidualEncoder:
 
     def band(self, y0: int, rows: np.ndarray, holes: np.ndarray | None) -> bytes:
         """The RESD payload of image rows y0 .. y0 + len(rows) - 1 (stored samples,
-        rows x W or rows x W x C; holes: rows x W booleans or None)."""
+        rows x W or rows x W x C; holes: rows x W booleans or None), with whichever
+        predictor codes the band in fewer bytes."""
         n = len(rows)
-        step = step_of(self.error)
-        levels = (rows.astype(np.int64) + self.error) // step
-        planes = [levels] if self.channels == 1 else [levels[..., c] for c in range(self.channels)]
+        samples = rows.astype(np.int64).reshape(n, self.width, self.channels)
+        planes = [np.ascontiguousarray(samples[..., c]) for c in range(self.channels)]
         mask = np.zeros((n, self.width), np.uint8) if holes is None else np.ascontiguousarray(holes, np.uint8)
-        coded = _residual.encode(self._planes, [np.ascontiguousarray(p, np.int32) for p in planes], mask,
-                                 (_top(self.storage) + self.error) // step)
-        return FIXED.pack(y0, n, MED, self.channels, self.error) + coded
+        best = None
+        for predictor in PREDICTORS:
+            states = [p.copy() for p in self._planes]
+            coded = _residual.encode(states, predictor, planes, mask, self.error, _top(self.storage))
+            if best is None or len(coded) < len(best[1]):
+                best = (predictor, coded, states)
+        predictor, coded, self._planes = best
+        return FIXED.pack(y0, n, predictor, self.channels, self.error) + coded
 
 
 class ResidualDecoder:
@@ -128,9 +136,8 @@ class ResidualDecoder:
         mask = np.zeros((rows, self.width), np.uint8) if holes is None else np.ascontiguousarray(holes[:rows], np.uint8)
         if mask.shape != (rows, self.width):
             raise CorruptError(f"{where}: the band's mask covers {mask.shape[0]} rows, not {rows}")
-        step = step_of(error)
-        status, planes = _residual.decode(self._planes, np.frombuffer(payload, np.uint8, offset=FIXED.size), mask,
-                                          (_top(self.storage) + error) // step)
+        status, planes = _residual.decode(self._planes, predictor, np.frombuffer(payload, np.uint8, offset=FIXED.size),
+                                          mask, error, _top(self.storage))
         codes = _residual.Status
         if status != codes.RESIDUAL_OK:
             why = {
@@ -139,5 +146,5 @@ class ResidualDecoder:
                 codes.RESIDUAL_TRAILING: "has bytes after its coded samples",
             }.get(status, f"cannot be decoded (status {int(status)})")
             raise CorruptError(f"{where} {why}")
-        levels = planes[0] if self.channels == 1 else np.stack(planes, axis=-1)
-        return np.minimum(levels.astype(np.int64) * step, _top(self.storage)).astype(self.storage)
+        samples = planes[0] if self.channels == 1 else np.stack(planes, axis=-1)
+        return samples.astype(self.storage)

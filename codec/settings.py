@@ -89,6 +89,9 @@ class Settings:
     lossless: bool = _option(
         False, "every valid sample decodes exactly (a residual layer over a coarse mesh, ATM.md §4.8); not with an error bound", cli=True
     )
+    residual: bool = _option(
+        False, "with max_error: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound)", cli=True
+    )
 
     def __post_init__(self) -> None:
         if self.points is not None:
@@ -98,15 +101,19 @@ class Settings:
         if self.quality is not None:
             _whole(self.quality, "quality", 1, 100)
         clash = size_conflict(
-            n for n in ("points", "quality", "max_rms", "max_error", "lossless") if getattr(self, n) not in (None, False)
+            n for n in ("points", "quality", "max_rms", "max_error", "lossless", "residual")
+            if getattr(self, n) not in (None, False)
         )
         if clash:
             raise OptionError(f"{clash[0]} and {clash[1]} both set the size: give one of them")
         for name in ("max_rms", "max_error", "precision"):
             if getattr(self, name) is not None:
                 _number(getattr(self, name), name)
-        if not isinstance(self.lossless, bool):
-            raise OptionError(f"lossless must be True or False, not {self.lossless!r}")
+        for name in ("lossless", "residual"):
+            if not isinstance(getattr(self, name), bool):
+                raise OptionError(f"{name} must be True or False, not {getattr(self, name)!r}")
+        if self.residual and self.max_error is None:
+            raise OptionError("residual needs max_error (the bound the layer meets); for exact samples give lossless")
         if self.mesher not in MESHERS:
             raise OptionError(f"unknown mesher {self.mesher!r}; choose one of {', '.join(MESHERS)}")
         if self.value_step != "auto" and (
@@ -176,7 +183,8 @@ def size_conflict(given) -> tuple[str, str] | None:
     bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met."""
     given = list(given)
     for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
-                 ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error")):
+                 ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error"),
+                 ("residual", "quality"), ("residual", "max_rms"), ("lossless", "residual")):
         if a in given and b in given:
             return a, b
     return None

@@ -1076,12 +1076,34 @@ def residual_bucket(v: int) -> int:
     return 0 if v == 0 else min(1 + (v - 1).bit_length(), 11)
 
 
+def sign(v: int) -> int:
+    return (v > 0) - (v < 0)
+
+
+def read_residual(rc: RangeDecoder, nodes: list[list[int]], sign_model: list[int]) -> int:
+    """§4.8.4: a unary token, its sign and raw low bits."""
+    t = 0
+    while t < 39 and rc.bit(nodes[t]):
+        t += 1
+    negative = t > 0 and rc.bit(sign_model)
+    if t < 16:
+        m = t
+    else:
+        b = 5 + (t - 16) // 2
+        m = (1 << (b - 1)) | (((t - 16) & 1) << (b - 2))
+        for k in range(b - 3, -1, -1):
+            m |= rc.bit(None) << k
+    return -m if negative else m
+
+
 class ResidualPlane:
     """One channel's models and last coded row (levels and residuals), kept from band
     to band (§4.8.1)."""
 
     def __init__(self, width: int) -> None:
-        self.tokens = [[[32768, 0] for _ in range(39)] for _ in range(144)]
+        self.tokens = [[[32768, 0] for _ in range(39)] for _ in range(3888)]
+        self.interp_tokens = [[[32768, 0] for _ in range(39)] for _ in range(32)]
+        self.interp_signs = [[32768, 0] for _ in range(32)]
         self.signs = [[32768, 0] for _ in range(9)]
         self.above: list[int] | None = None  # None: the image's first row comes next
         self.above_residuals = [0] * width
@@ -1106,25 +1128,14 @@ class ResidualPlane:
                 lo, hi = min(w, n), max(w, n)
                 pred = lo if nw >= hi else hi if nw <= lo else w + n - nw
                 g = abs(ne - n) + abs(n - nw) + abs(nw - w)
+                signs = 9 * (sign(ne - n) + 1) + 3 * (sign(n - nw) + 1) + sign(nw - w) + 1
                 rw = res[x - 1] if x > 0 else 0
                 rn = up_r[x] if up is not None else 0
                 rnw = up_r[x - 1] if up is not None and x > 0 else 0
                 rne = up_r[x + 1] if up is not None and x + 1 < width else 0
                 activity = abs(rw) + abs(rn) + (abs(rnw) + abs(rne)) // 2
-                nodes = self.tokens[12 * residual_bucket(activity) + residual_bucket(g)]
-                sign_model = self.signs[3 * ((rw > 0) - (rw < 0) + 1) + (rn > 0) - (rn < 0) + 1]
-                t = 0
-                while t < 39 and rc.bit(nodes[t]):
-                    t += 1
-                negative = t > 0 and rc.bit(sign_model)
-                if t < 16:
-                    m = t
-                else:
-                    b = 5 + (t - 16) // 2
-                    m = (1 << (b - 1)) | (((t - 16) & 1) << (b - 2))
-                    for k in range(b - 3, -1, -1):
-                        m |= rc.bit(None) << k
-                r = -m if negative else m
+                nodes = self.tokens[324 * residual_bucket(activity) + 12 * signs + residual_bucket(g)]
+                r = read_residual(rc, nodes, self.signs[3 * (sign(rw) + 1) + sign(rn) + 1])
                 level = pred + r
                 if not 0 <= level <= top_level:
                     raise DecodeError(f"RESD: level {level} outside 0..{top_level}")
@@ -1132,6 +1143,46 @@ class ResidualPlane:
             out.append(cur)
             self.above, self.above_residuals = cur, res
         return out
+
+    def interpolate(self, rc: RangeDecoder, rows: int, width: int, holes: np.ndarray, e: int, top: int) -> list[list[int]]:
+        """§4.8.5: the band's samples by hierarchical interpolation, then the MED state
+        its last row leaves."""
+        v = [[0] * width for _ in range(rows)]
+        step = 2 * e + 1
+
+        def visit(y: int, x: int, pred: int, t: int) -> None:
+            if holes[y, x]:
+                v[y][x] = pred
+                return
+            q = read_residual(rc, self.interp_tokens[min(t, 31)], self.interp_signs[min(t, 31)])
+            v[y][x] = min(max(pred + q * step, 0), top)
+
+        s = 1
+        while 2 * s < max(rows, width):
+            s *= 2
+        prev = (top + 1) // 2
+        for y in range(0, rows, s):
+            for x in range(0, width, s):
+                visit(y, x, prev, 0)
+                prev = v[y][x]
+        t = 1
+        while s > 1:
+            k = s // 2
+            for y in range(0, rows, s):
+                for x in range(k, width, s):
+                    visit(y, x, (v[y][x - k] + v[y][x + k]) // 2 if x + k < width else v[y][x - k], t)
+            for y in range(k, rows, s):
+                for x in range(0, width, k):
+                    visit(y, x, (v[y - k][x] + v[y + k][x]) // 2 if y + k < rows else v[y - k][x], t + 1)
+            s, t = k, t + 2
+        above = list(self.above) if self.above is not None else [0] * width
+        for x in range(width):
+            if not holes[rows - 1, x]:
+                above[x] = (v[rows - 1][x] + e) // step
+            elif x > 0:
+                above[x] = above[x - 1]
+        self.above, self.above_residuals = above, [0] * width
+        return v
 
 
 def decode_residual_layer(header: Header, bands: list[Band]) -> np.ndarray:
@@ -1149,7 +1200,7 @@ def decode_residual_layer(header: Header, bands: list[Band]) -> np.ndarray:
         emitted = band.rows if band.y0 + band.rows == header.height else band.rows - 1
         if (y0, rows) != (band.y0, emitted):
             raise DecodeError(f"RESD: {rows} rows from {y0}, its band emits {emitted} from {band.y0}")
-        if predictor != 0:
+        if predictor not in (0, 1):
             raise UnsupportedError(f"RESD: predictor {predictor}")
         if count != channels or e > top or (bound is not None and e != bound):
             raise DecodeError("RESD: channels or bound do not match the image")
@@ -1158,6 +1209,11 @@ def decode_residual_layer(header: Header, bands: list[Band]) -> np.ndarray:
         holes = band.holes if band.holes is not None else np.zeros((band.rows, width), bool)
         rc = RangeDecoder(payload[12:])
         for c, plane in enumerate(planes):
+            if rows == 0:
+                continue
+            if predictor == 1:
+                image[y0 : y0 + rows, :, c] = np.array(plane.interpolate(rc, rows, width, holes, e, top), np.int64)
+                continue
             levels = plane.decode_rows(rc, rows, width, holes, (top + e) // step)
             image[y0 : y0 + rows, :, c] = np.minimum(np.array(levels, np.int64).reshape(rows, width) * step, top)
         if rc.at != len(rc.data):

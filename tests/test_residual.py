@@ -50,7 +50,7 @@ def test_integer_bound_holds_with_holes(seed, h, w, dtype, hole_share, error, ba
     nodata = _nodata(dtype)
     image[holes] = nodata
     valid = image != nodata
-    options = dict(lossless=True) if error == 0 else dict(max_error=error)
+    options = dict(lossless=True) if error == 0 else dict(max_error=error, residual=True)
     data = codec.encode(image, nodata=nodata if holes.any() else None, band_height=band_height, **options)
     out = codec.decode(data)
     assert out.dtype == image.dtype and out.shape == image.shape
@@ -69,7 +69,7 @@ def test_float_bound_holds_with_nan_holes(seed, h, w, bound, base, hole_share):
     z = (range_scene(w, h, seed=seed).astype(np.float64) * 0.7 + base + rng.normal(0, 0.3, (h, w))).astype(np.float32)
     z[rng.random((h, w)) < hole_share] = np.nan
     valid = ~np.isnan(z)
-    out = codec.decode(codec.encode(z, max_error=bound))
+    out = codec.decode(codec.encode(z, max_error=bound, residual=True))
     assert np.array_equal(np.isnan(out), ~valid)
     assert np.abs(out[valid].astype(np.float64) - z[valid]).max(initial=0) <= bound
 
@@ -82,7 +82,7 @@ def test_cpu_gl_and_stream_agree(seed, h, w, dtype, error, rgb):
     image, holes = _image(seed, h, w, dtype, 0.1)
     if rgb:
         image = np.stack([image, image[::-1], image[:, ::-1]], axis=-1)
-    options = dict(lossless=True) if error == 0 else dict(max_error=error)
+    options = dict(lossless=True) if error == 0 else dict(max_error=error, residual=True)
     data = codec.encode(image, band_height=5, **options)
     cpu = codec.decode(data)
     assert np.abs(cpu.astype(np.int64) - image).max() <= error
@@ -100,9 +100,28 @@ def test_reference_decoder_agrees(seed, h, w, dtype, error, with_holes, band_hei
     image, holes = _image(seed, h, w, dtype, 0.2 if with_holes else 0.0)
     nodata = _nodata(dtype) if holes.any() else None
     image[holes] = _nodata(dtype)
-    options = dict(lossless=True) if error == 0 else dict(max_error=error)
+    options = dict(lossless=True) if error == 0 else dict(max_error=error, residual=True)
     data = codec.encode(image, nodata=nodata, band_height=band_height, **options)
     assert np.array_equal(reference_decoder.decode(data), codec.decode(data))
+
+
+def test_both_predictors_agree_with_the_reference_decoder():
+    """Bands of noise and bands of smooth slopes: the encoder picks each band's
+    predictor by its bytes, and the state one predictor leaves serves the next."""
+    from codec.format_spec import reference_decoder
+
+    yy, xx = np.mgrid[0:60, 0:50]
+    smooth = 20000 + 150 * np.sin(xx / 9.0) * yy + 40 * xx
+    noisy = np.random.default_rng(0).integers(0, 3, (60, 50)) * 7000
+    for image in (np.where(yy < 30, noisy, smooth), np.where(yy >= 30, noisy, smooth)):
+        image = image.astype(np.uint16)
+        image[40:45, 10:20] = 0
+        image[12:14, 0:3] = 0
+        data = codec.encode(image, max_error=60, residual=True, band_height=10, nodata=0)
+        assert {p[8] for _, t, p in chunks(data) if t == residual.CHUNK} == {residual.MED, residual.INTERPOLATION}
+        out = codec.decode(data)
+        assert np.array_equal(reference_decoder.decode(data), out)
+        assert np.abs(out.astype(np.int64) - image)[image != 0].max() <= 60
 
 
 def test_reference_decoder_refuses_a_truncated_layer():
@@ -126,9 +145,9 @@ def test_lossless_uses_the_layer_and_a_light_mesh():
 def test_stream_encoder_gives_the_same_bytes():
     image, holes = _image(5, 50, 33, np.uint16, 0.2)
     image[holes] = 0
-    whole = codec.encode(image, max_error=3, nodata=0, band_height=7)
+    whole = codec.encode(image, max_error=3, residual=True, nodata=0, band_height=7)
     out = io.BytesIO()
-    with codec.StreamEncoder(out, 33, 50, dtype=np.uint16, max_error=3, nodata=0, band_height=7) as enc:
+    with codec.StreamEncoder(out, 33, 50, dtype=np.uint16, max_error=3, residual=True, nodata=0, band_height=7) as enc:
         for y in range(0, 50, 9):
             enc.write(image[y : y + 9])
     assert out.getvalue() == whole
@@ -140,6 +159,12 @@ def test_options_are_checked():
         codec.encode(image, lossless=True, max_error=2)
     with pytest.raises(OptionError, match="lossless must be True or False"):
         codec.encode(image, lossless=1)
+    with pytest.raises(OptionError, match="residual needs max_error"):
+        codec.encode(image, residual=True)
+    with pytest.raises(OptionError, match="residual and quality both set the size"):
+        codec.encode(image, residual=True, quality=50, max_error=3)
+    # without residual=True a bound is met by the mesh, as before: no layer
+    assert residual.CHUNK not in [t for _, t, _ in chunks(codec.encode(image, max_error=3))]
     with pytest.raises(UnsupportedError, match="lossless float"):
         codec.encode(np.zeros((4, 4), np.float32), lossless=True)
 
@@ -176,7 +201,7 @@ def _rebuild(data: bytes, change) -> bytes:
 def _layered(band_height: int = 6) -> tuple[np.ndarray, bytes]:
     image, holes = _image(11, 20, 24, np.uint16, 0.15)
     image[holes] = 0
-    return image, codec.encode(image, max_error=2, nodata=0, band_height=band_height)
+    return image, codec.encode(image, max_error=2, residual=True, nodata=0, band_height=band_height)
 
 
 def _first_resd(change):

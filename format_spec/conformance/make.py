@@ -164,7 +164,7 @@ def main() -> None:
     depth16[5:12, 8:20] = 0
     cases["residual_depth16"] = codec.encode(depth16, lossless=True, nodata=0, band_height=8)
     cases["residual_rgb8"] = codec.encode(
-        np.random.default_rng(13).integers(0, 256, (16, 24, 3), dtype=np.uint8), max_error=2, band_height=6
+        np.random.default_rng(13).integers(0, 256, (16, 24, 3), dtype=np.uint8), max_error=2, residual=True, band_height=6
     )
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
