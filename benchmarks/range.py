@@ -537,10 +537,11 @@ def main(argv: list[str] | None = None) -> int:
         if not args.no_lossless:
             results, enc_r, dec_r = measure(case, LOSSLESS, 0.0, args.repeat)
             refused.update({f"lossless {c} on {label}": r.note for c, r in results.items() if r.size is None})
+            ours = results["atm"]
             lossless_rows.append(
-                [label, "lossless" if results["atm"].error == 0 else f"NOT lossless (err {results['atm'].error:.3g})"]
+                [label, "n/a" if ours.size is None else "lossless" if ours.error == 0 else f"NOT lossless (err {ours.error:.3g})"]
                 + [results[c].cell(0.0) for c in LOSSLESS]
-                + [f"{results['atm'].size / results[p].size:.2f}" if results[p].size else "-" for p in list(LOSSLESS)[1:]]
+                + [f"{ours.size / results[p].size:.2f}" if results[p].size and ours.size else "-" for p in list(LOSSLESS)[1:]]
                 + [f"{enc_r[p]:.1f} / {dec_r[p]:.1f}" if p in enc_r else "-" for p in list(LOSSLESS)[1:]]
             )
     if args.repeat > 0:
