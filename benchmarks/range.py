@@ -556,8 +556,9 @@ def main(argv: list[str] | None = None) -> int:
         print()
     for what, why in refused.items():
         print(f"n/a: {what}: {why}")
-    plot(points, args.plot)
-    print(f"\nplot: {args.plot}")
+    if points:
+        plot(points, args.plot)
+        print(f"\nplot: {args.plot}")
     return 0
 
 

@@ -37,8 +37,11 @@ PREDICTORS = (MED, INTERPOLATION)
 
 #: Vertex density of the mesh stored beside a residual layer, when `points` is not
 #: given: the mesh predicts nothing there (benchmarks/range_study.py measured the mesh
-#: as a predictor not paying on real range data), so it is a light preview.
-PREVIEW_DENSITY = 0.001
+#: as a predictor not paying on real range data), so it is a light preview, about a
+#: vertex per 64 x 64 pixels. Measured at E = 2 % (tum, kinect, disparity, srtm): the
+#: mesh takes 711/715/810/537 bytes at 0.001 and 268/269/293/203 at 0.00025, 2-8 %
+#: of the files' totals saved.
+PREVIEW_DENSITY = 0.00025
 
 
 def layer_bound(settings, plan) -> int | None:
