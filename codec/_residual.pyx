@@ -43,10 +43,6 @@ BUCKET_COUNT = BUCKETS
 SHIFT_LIMIT = MAX_SHIFT
 
 
-#: raw bits are coded with probability one half and no model
-cdef uint16_t HALF = 32768
-
-
 cdef inline int _shift(uint8_t n) noexcept nogil:
     # floor(log2(n + 2)), at most MAX_SHIFT: fast at first, then steadier
     cdef int s = 0
@@ -107,7 +103,8 @@ cdef inline void _shift_low(Encoder* e) noexcept nogil:
 
 
 cdef inline void _encode_bit(Encoder* e, uint16_t* p, uint8_t* n, int bit) noexcept nogil:
-    cdef uint32_t bound = (e.rng >> 16) * p[0]
+    # p NULL: a raw bit, probability one half and no model
+    cdef uint32_t bound = (e.rng >> 16) * (p[0] if p != NULL else 32768)
     if bit:
         e.low += bound
         e.rng -= bound
@@ -139,7 +136,7 @@ cdef inline uint8_t _next(Decoder* d) noexcept nogil:
 
 
 cdef inline int _decode_bit(Decoder* d, uint16_t* p, uint8_t* n) noexcept nogil:
-    cdef uint32_t bound = (d.rng >> 16) * p[0]
+    cdef uint32_t bound = (d.rng >> 16) * (p[0] if p != NULL else 32768)
     cdef int bit
     if d.code < bound:
         d.rng = bound
@@ -275,7 +272,7 @@ cdef inline void _put_residual(Encoder* e, uint16_t* node, uint8_t* ncount, uint
     if tok >= 16:
         k = nb - 3
         while k >= 0:
-            _encode_bit(e, &HALF, NULL, (a >> k) & 1)
+            _encode_bit(e, NULL, NULL, (a >> k) & 1)
             k -= 1
 
 
@@ -293,7 +290,7 @@ cdef inline int64_t _get_residual(Decoder* d, uint16_t* node, uint8_t* ncount, u
         a = (<int64_t>1 << (nb - 1)) | (<int64_t>((tok - 16) & 1) << (nb - 2))
         k = nb - 3
         while k >= 0:
-            a |= <int64_t>_decode_bit(d, &HALF, NULL) << k
+            a |= <int64_t>_decode_bit(d, NULL, NULL) << k
             k -= 1
     return -a if negative else a
 

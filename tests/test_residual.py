@@ -314,3 +314,42 @@ def test_mutated_layers_decode_or_raise_atm_errors():
                 # a CRC flip by join(): both refuse only if the codec did; it decoded
                 raise AssertionError("the reference decoder refused what the codec decoded")
     assert refused > 100
+
+
+def test_threads_give_the_bytes_and_pixels_one_thread_does():
+    from concurrent.futures import ThreadPoolExecutor
+
+    jobs = []
+    for k in range(8):
+        image, holes = _image(k, 40 + k, 50, np.uint16, 0.1)
+        image[holes] = 0
+        jobs.append((image, dict(lossless=True, nodata=0) if k % 2 else dict(max_error=k, residual=True, band_height=9)))
+    alone = [codec.encode(image, **options) for image, options in jobs]
+    with ThreadPoolExecutor(8) as pool:
+        assert list(pool.map(lambda job: codec.encode(job[0], **job[1]), jobs)) == alone
+        decoded = list(pool.map(codec.decode, alone))
+    for got, data in zip(decoded, alone):
+        assert np.array_equal(got, codec.decode(data))
+
+
+def test_stream_decoder_holds_a_band_not_the_image():
+    """Memory while streaming a tall lossless image is bounded by a band, the row above
+    and the models, not by the image's height."""
+    import tracemalloc
+
+    rng = np.random.default_rng(4)
+    image = np.cumsum(rng.integers(-2, 3, (6000, 256)), axis=1).astype(np.int64) + 30000
+    image = image.astype(np.uint16)
+    data = codec.encode(image, lossless=True, band_height=32)
+    source = io.BytesIO(data)
+    tracemalloc.start()
+    try:
+        rows = 0
+        for y0, block in codec.StreamDecoder(source):
+            assert np.array_equal(block, image[y0 : y0 + len(block)])
+            rows += len(block)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert rows == 6000
+    assert peak < image.nbytes / 4, peak  # the image is 3 MB; measured 0.73 MB
