@@ -58,12 +58,11 @@ class ATM(Codec):
                          ("max_rms", self.max_rms), ("nodata", self.nodata), ("precision", self.precision))
             if v is not None
         }
-        if self.lossless:
+        if self.lossless and chunk.dtype.kind in "ui":
+            options["lossless"] = True  # the residual layer: exact, and far fewer bytes than a mesh
+        elif self.lossless:
             # a float chunk's finest bound is its quantisation: half a step (plus rounding)
-            options["max_error"] = 0 if chunk.dtype.kind in "ui" else None
-            if options["max_error"] is None:
-                del options["max_error"]
-                options["quality"] = 100
+            options["quality"] = 100
         if chunk.dtype.kind == "f" and self.nodata is not None and np.isnan(self.nodata):
             del options["nodata"]  # NaN is float data's nodata already
         return options

@@ -3,12 +3,13 @@
 lossless), by construction rather than by refinement.
 
 Each band's RESD chunk codes the rows that band emits (all but its last row, which the
-next band emits; all of them in the band that ends the image). A sample x becomes the
-level (x + E) // (2E + 1); each level is predicted from its decoded causal neighbours
-(MED, as LOCO-I and JPEG-LS) and the difference coded by an adaptive binary range
-coder in contexts of neighbouring residuals and the local gradient (codec._residual).
-The adaptive state carries from band to band, so a stream holds one band and the row
-above it. Holes are skipped: the MASK chunk already gives them exactly. The mesh stays
+next band emits; all of them in the band that ends the image), with the predictor that
+codes it in fewer bytes: MED (as LOCO-I and JPEG-LS) on the levels (x + E) // (2E + 1)
+of its decoded causal neighbours, or a hierarchical interpolation (as SZ3) whose
+residuals are quantised with step 2E + 1. The residuals go through an adaptive binary
+range coder in contexts of neighbouring residuals and the local gradient
+(codec._residual). The adaptive state carries from band to band, so a stream holds one
+band and the row above it. Holes are skipped: the MASK chunk already gives them exactly. The mesh stays
 in the file as what users render; decoders need not render it when this layer is
 there, so the CPU and GL backends give the same pixels by construction.
 """

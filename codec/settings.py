@@ -180,8 +180,12 @@ class Settings:
 def size_conflict(given) -> tuple[str, str] | None:
     """The first pair of the given size options (by name) that cannot go together:
     `points` fixes the vertex count, so it takes no error bound, and `quality` is an RMS
-    bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met."""
+    bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met.
+    With `residual` or `lossless`, a residual layer meets the bound and `points` sets
+    the size of the preview mesh beside it."""
     given = list(given)
+    if "residual" in given and "max_error" in given:
+        given.remove("max_error")  # the layer meets it; points then sizes the preview mesh
     for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
                  ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error"),
                  ("residual", "quality"), ("residual", "max_rms"), ("lossless", "residual")):

@@ -138,8 +138,9 @@ def test_lossless_uses_the_layer_and_a_light_mesh():
     assert residual.CHUNK in [t for _, t, _ in chunks(data)]
     assert codec.info(data)["vertices"] <= 40
     assert np.array_equal(codec.decode(data), image)
-    # points sets the preview mesh's size
+    # points sets the preview mesh's size, with either kind of layer
     assert codec.info(codec.encode(image, lossless=True, points=400))["vertices"] >= 300
+    assert codec.info(codec.encode(image, max_error=5, residual=True, points=400))["vertices"] >= 300
 
 
 def test_stream_encoder_gives_the_same_bytes():
@@ -353,3 +354,12 @@ def test_stream_decoder_holds_a_band_not_the_image():
         tracemalloc.stop()
     assert rows == 6000
     assert peak < image.nbytes / 4, peak  # the image is 3 MB; measured 0.73 MB
+
+
+def test_numcodecs_lossless_integer_chunks_use_the_layer():
+    from codec.numcodecs import ATM
+
+    chunk, _ = _image(6, 32, 48, np.int16, 0.0)
+    data = ATM(lossless=True).encode(chunk)
+    assert residual.CHUNK in [t for _, t, _ in chunks(data)]
+    assert np.array_equal(ATM(lossless=True).decode(data), chunk)
