@@ -26,8 +26,10 @@ DEF SIGN_CONTEXTS = 9
 DEF LEVELS = 32
 DEF INTERP = CONTEXTS * NODES + SIGN_CONTEXTS
 DEF MODELS = INTERP + LEVELS * NODES + LEVELS
-#: Slowest adaptation: p moves by 1/2^MAX_SHIFT of the way to the coded bit.
-DEF MAX_SHIFT = 7
+#: Adaptation: the steady estimate moves by at most 1/2^MAX_SHIFT of the way to the
+#: coded bit, the fast one by at least 1/2^FAST_SHIFT.
+DEF MAX_SHIFT = 8
+DEF FAST_SHIFT = 4
 DEF TOP = 1 << 24
 
 cpdef enum Status:
@@ -54,11 +56,15 @@ cdef inline int _shift(uint8_t n) noexcept nogil:
 
 
 cdef inline void _update(uint16_t* p, uint8_t* n, int bit) noexcept nogil:
+    # two estimates of one model, MODELS apart: a fast one and a steady one
     cdef int s = _shift(n[0])
+    cdef int f = s if s < FAST_SHIFT else FAST_SHIFT
     if bit:
-        p[0] = p[0] - (p[0] >> s)
+        p[0] = p[0] - (p[0] >> f)
+        p[MODELS] = p[MODELS] - (p[MODELS] >> s)
     else:
-        p[0] = p[0] + ((65536 - p[0]) >> s)
+        p[0] = p[0] + ((65536 - p[0]) >> f)
+        p[MODELS] = p[MODELS] + ((65536 - p[MODELS]) >> s)
     if n[0] < 255:
         n[0] += 1
 
@@ -104,7 +110,7 @@ cdef inline void _shift_low(Encoder* e) noexcept nogil:
 
 cdef inline void _encode_bit(Encoder* e, uint16_t* p, uint8_t* n, int bit) noexcept nogil:
     # p NULL: a raw bit, probability one half and no model
-    cdef uint32_t bound = (e.rng >> 16) * (p[0] if p != NULL else 32768)
+    cdef uint32_t bound = (e.rng >> 16) * (((p[0] + p[MODELS]) >> 1) if p != NULL else 32768)
     if bit:
         e.low += bound
         e.rng -= bound
@@ -136,7 +142,7 @@ cdef inline uint8_t _next(Decoder* d) noexcept nogil:
 
 
 cdef inline int _decode_bit(Decoder* d, uint16_t* p, uint8_t* n) noexcept nogil:
-    cdef uint32_t bound = (d.rng >> 16) * (p[0] if p != NULL else 32768)
+    cdef uint32_t bound = (d.rng >> 16) * (((p[0] + p[MODELS]) >> 1) if p != NULL else 32768)
     cdef int bit
     if d.code < bound:
         d.rng = bound
@@ -189,7 +195,7 @@ cdef class Plane:
         if width < 1:
             raise ValueError("a plane is at least one pixel wide")
         self.width = width
-        self.prob = np.full(MODELS, 32768, np.uint16)
+        self.prob = np.full(2 * MODELS, 32768, np.uint16)  # fast estimates, then steady ones
         self.count = np.zeros(MODELS, np.uint8)
         self.above = np.zeros(width, np.int32)
         self.above_residual = np.zeros(width, np.int32)

@@ -1054,8 +1054,8 @@ class RangeDecoder:
         return self.data[self.at - 1]
 
     def bit(self, model: list[int] | None) -> int:
-        """A bit with model [p, n] (updated), or a raw bit (None)."""
-        p = 32768 if model is None else model[0]
+        """A bit with model [p, p', n] (updated), or a raw bit (None)."""
+        p = 32768 if model is None else (model[0] + model[1]) >> 1
         bound = (self.range >> 16) * p
         if self.code < bound:
             self.range, bit = bound, 0
@@ -1065,9 +1065,11 @@ class RangeDecoder:
             self.range = (self.range << 8) & 0xFFFFFFFF
             self.code = ((self.code << 8) | self.byte()) & 0xFFFFFFFF
         if model is not None:
-            s = min((model[1] + 2).bit_length() - 1, 7)
-            model[0] = model[0] - (model[0] >> s) if bit else model[0] + ((65536 - model[0]) >> s)
-            model[1] = min(model[1] + 1, 255)
+            s = min((model[2] + 2).bit_length() - 1, 8)
+            f = min(s, 4)
+            model[0] = model[0] - (model[0] >> f) if bit else model[0] + ((65536 - model[0]) >> f)
+            model[1] = model[1] - (model[1] >> s) if bit else model[1] + ((65536 - model[1]) >> s)
+            model[2] = min(model[2] + 1, 255)
         return bit
 
 
@@ -1101,10 +1103,10 @@ class ResidualPlane:
     to band (§4.8.1)."""
 
     def __init__(self, width: int) -> None:
-        self.tokens = [[[32768, 0] for _ in range(39)] for _ in range(3888)]
-        self.interp_tokens = [[[32768, 0] for _ in range(39)] for _ in range(32)]
-        self.interp_signs = [[32768, 0] for _ in range(32)]
-        self.signs = [[32768, 0] for _ in range(9)]
+        self.tokens = [[[32768, 32768, 0] for _ in range(39)] for _ in range(3888)]
+        self.interp_tokens = [[[32768, 32768, 0] for _ in range(39)] for _ in range(32)]
+        self.interp_signs = [[32768, 32768, 0] for _ in range(32)]
+        self.signs = [[32768, 32768, 0] for _ in range(9)]
         self.above: list[int] | None = None  # None: the image's first row comes next
         self.above_residuals = [0] * width
 
