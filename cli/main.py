@@ -85,6 +85,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
         if i["nodata"] is not None:
             print(f"  holes decode to {i['nodata']:g}")
+        if i["residual"] is not None:
+            what = "lossless" if i["residual"] == 0 else f"every stored sample within {i['residual']}"
+            print(f"  residual layer: {what} (the mesh is a preview)")
         if "precision" in i:
             print(f"  float samples stored in steps of {i['precision']:.6g} from {i['offset']:.10g} (16 bits)")
         for line in geotiff.describe(i["metadata"]):

@@ -159,7 +159,8 @@ def decode_mesh(data: Buffer) -> Mesh:
 
 def info(data: Buffer) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
-    vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
+    vertices, triangles, constraints, bytes, nodata, metadata, residual (the residual
+    layer's bound in stored sample units, 0 for lossless; None without a layer). Read from the header and
     each band's count fields (checksums and limits checked, no mesh decoded)."""
     from . import container
 
@@ -181,6 +182,8 @@ def info(data: Buffer) -> dict:
         "nodata": header.nodata,
         "metadata": header.metadata or {},
         **_sample_mapping(header),
+        # the residual layer's bound in stored sample units (0: lossless), None without one
+        "residual": counts.residual,
     }
 
 

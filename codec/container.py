@@ -591,6 +591,8 @@ class Summary:
     vertices: int
     triangles: int
     polylines: int
+    #: the residual layer's bound E in stored sample units (ATM.md §4.8), None without one
+    residual: int | None = None
 
 
 def summarise(reader: Reader) -> Summary:
@@ -599,10 +601,14 @@ def summarise(reader: Reader) -> Summary:
     the file's bytes, not its meshes')."""
     h = reader.header
     bands = vertices = triangles = polylines = 0
-    next_y0, finished = 0, False
+    next_y0, finished, bound = 0, False, None
     while True:
         ctype, payload, offset = reader._next_chunk()
-        if ctype == schema.MESH:
+        if ctype == RESIDUAL:
+            if len(payload) < 12:
+                raise CorruptError(f"RESD chunk at byte {offset} has {len(payload)} bytes, fewer than its 12 fixed ones")
+            bound = int.from_bytes(payload[10:12], "little")
+        elif ctype == schema.MESH:
             if finished:
                 raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
             fixed, _ = reader._check_frame(payload, f"MESH chunk at byte {offset}", next_y0, whole=False)
@@ -612,7 +618,7 @@ def summarise(reader: Reader) -> Summary:
         elif ctype == schema.END:
             if not finished:
                 raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
-            return Summary(bands, vertices, triangles, polylines)
+            return Summary(bands, vertices, triangles, polylines, bound)
         elif ctype == schema.META:
             reader._read_metadata(payload, offset)
         elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA):

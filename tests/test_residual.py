@@ -144,6 +144,17 @@ def test_lossless_uses_the_layer_and_a_light_mesh():
     assert codec.info(codec.encode(image, max_error=5, residual=True, points=400))["vertices"] >= 300
 
 
+def test_info_reports_the_layer(tmp_path):
+    image, _ = _image(9, 20, 30, np.uint16, 0.0)
+    assert codec.info(codec.encode(image, lossless=True))["residual"] == 0
+    assert codec.info(codec.encode(image, max_error=7, residual=True))["residual"] == 7
+    assert codec.info(codec.encode(image, max_error=7))["residual"] is None
+    path = tmp_path / "x.atm"
+    path.write_bytes(codec.encode(image, lossless=True))
+    shown = subprocess.run([sys.executable, "-m", "codec", "info", str(path)], capture_output=True, text=True, check=True)
+    assert "residual layer: lossless" in shown.stdout
+
+
 def test_stream_encoder_gives_the_same_bytes():
     image, holes = _image(5, 50, 33, np.uint16, 0.2)
     image[holes] = 0
