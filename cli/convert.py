@@ -116,7 +116,7 @@ def encode_file(src_name: str, dst_name: str, options: dict, progress=None) -> t
             dtype=src.dtype,
             channels=src.channels,
             progress=progress,
-            # a gray .npy of shape (H, W, 1) keeps its axis (ATM.md §4.8)
+            # a gray .npy of shape (H, W, 1) keeps its axis (ATM.md §4.9)
             channel_axis=first is not None and src.channels == 1 and first.ndim == 3,
             **options,
         )

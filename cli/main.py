@@ -85,6 +85,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i['bytes']:,} bytes, {8 * i['bytes'] / (i['width'] * i['height']):.3f} bits/pixel")
         if i["nodata"] is not None:
             print(f"  holes decode to {i['nodata']:g}")
+        if i["residual"] is not None:
+            what = "lossless" if i["residual"] == 0 else f"every stored sample within {i['residual']}"
+            print(f"  residual layer: {what} (the mesh is a preview)")
         if "precision" in i:
             print(f"  float samples stored in steps of {i['precision']:.6g} from {i['offset']:.10g} (16 bits)")
         for line in geotiff.describe(i["metadata"]):
@@ -146,6 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); not with a bound")
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
+    enc.add_argument("--lossless", action="store_true", default=None, help="every valid sample decodes exactly; not with a bound")
+    enc.add_argument("--residual", action="store_true", default=None, help="with --max-error: meet it with a residual layer (fewest bytes; the mesh is then a light preview)")
     enc.add_argument(
         "--band-height",
         type=int,

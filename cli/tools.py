@@ -88,7 +88,7 @@ def compare(a: np.ndarray, b: np.ndarray) -> dict:
     PSNR's peak is the sample type's largest value (255, 65535), or the range of a's
     values for float data; pixels that are NaN (holes) in either image are left out.
     """
-    # a gray image compares as gray with or without a channel axis of 1 (ATM.md §4.8)
+    # a gray image compares as gray with or without a channel axis of 1 (ATM.md §4.9)
     a, b = (x[:, :, 0] if x.ndim == 3 and x.shape[2] == 1 else x for x in (a, b))
     for image in (a, b):
         if image.ndim not in (2, 3) or image.dtype.kind not in "uif":

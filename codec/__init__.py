@@ -68,6 +68,8 @@ def encode(
     canny: tuple[float, float] | None = None,
     edge_share: float | None = None,
     region_share: float | None = None,
+    lossless: bool = False,
+    residual: bool = False,
     mask: np.ndarray | None = None,
     **unknown: NoReturn,
 ) -> bytes:
@@ -80,7 +82,10 @@ def encode(
     Size: `points` (target vertex count, within 10 %; default 2.8 % of the pixels), or
     a bound that refinement guarantees on the decoded image, per channel: `quality`
     (1..100 on JPEG's scale: an RMS bound at about JPEG's error, 100 lossless), `max_rms`, `max_error` (sample
-    units; float data: data units). The other options and their defaults:
+    units; float data: data units). `lossless=True`, or `max_error` with `residual=True`,
+    adds a residual layer (ATM.md §4.8) that meets the bound on every valid sample by
+    construction with the fewest bytes, beside a light mesh (`points` sets its size;
+    it is a preview, not within the bound). The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an
     unknown one is refused with the list of valid ones).
     """
@@ -94,7 +99,7 @@ def encode(
         mesher=mesher, value_step=value_step, nodata=nodata, value_range=value_range, precision=precision,
         metadata=metadata, effort=effort, values=values, segment_length=segment_length,
         segment_error=segment_error, tiles=tiles, per_tile=per_tile, canny=canny, edge_share=edge_share,
-        region_share=region_share,
+        region_share=region_share, lossless=lossless, residual=residual,
     )
     return encoder.encode(image, settings, mask)
 
@@ -128,7 +133,7 @@ def decode(data: Buffer, *, out: np.ndarray | None = None, backend: str = "cpu")
     out: an array to fill in place and return, as imagecodecs' decoders take: of the
     decoded dtype and shape; for a gray image (H, W) or (H, W, 1) either way. Without
     `out`, a gray image encoded as (H, W, 1) comes back (H, W, 1) (its file has an `axis`
-    chunk, ATM.md §4.8), one encoded as (H, W) comes back (H, W).
+    chunk, ATM.md §4.9), one encoded as (H, W) comes back (H, W).
     backend: "cpu" (exact integer scanline decoder) or "gl" (OpenGL through EGL; the
     same pixels, BackendError where no GL context can be made).
     """
@@ -155,7 +160,8 @@ def decode_mesh(data: Buffer) -> Mesh:
 
 def info(data: Buffer) -> dict:
     """Header and mesh statistics of .atm bytes: width, height, dtype, channels, bands,
-    vertices, triangles, constraints, bytes, nodata, metadata. Read from the header and
+    vertices, triangles, constraints, bytes, nodata, metadata, residual (the residual
+    layer's bound in stored sample units, 0 for lossless; None without a layer). Read from the header and
     each band's count fields (checksums and limits checked, no mesh decoded)."""
     from . import container
 
@@ -177,6 +183,8 @@ def info(data: Buffer) -> dict:
         "nodata": header.nodata,
         "metadata": header.metadata or {},
         **_sample_mapping(header),
+        # the residual layer's bound in stored sample units (0: lossless), None without one
+        "residual": counts.residual,
     }
 
 

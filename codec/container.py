@@ -26,6 +26,7 @@ from .errors import CorruptError, FormatError, LimitError, TruncatedError, Unsup
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser
+from .residual import CHUNK as RESIDUAL
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,7 @@ class Header:
     nodata: float | None = None
     #: JSON key-values (units, georeferencing, ...) from the meta chunk
     metadata: dict | None = None
-    #: a gray image decodes as (H, W, 1), not (H, W): the file's `axis` chunk (ATM.md §4.8)
+    #: a gray image decodes as (H, W, 1), not (H, W): the file's `axis` chunk (ATM.md §4.9)
     channel_axis: bool = False
 
     @property
@@ -168,10 +169,11 @@ class Writer:
         return self._rows_done == self.header.height
 
     def write_band(self, y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None,
-                   layout: meshcode.Layout | None = None) -> None:
+                   layout: meshcode.Layout | None = None, residual: bytes | None = None) -> None:
         """Write the mesh of rows y0 .. y0 + mesh.height - 1, its samples as
         meshcode.quantise(mesh, step, y0 > 0) left them (any samples with step 1);
-        delaunay and layout as for meshcode.encode_band."""
+        delaunay and layout as for meshcode.encode_band; residual: the band's RESD
+        payload (codec.residual), if the image has a residual layer."""
         h = self.header
         if y0 != self._next_y0:
             raise ValueError(f"band starts at row {y0}, expected {self._next_y0}")
@@ -187,6 +189,8 @@ class Writer:
             self._stream.write(_chunk(schema.MASK, frames.compress(mask)))
         elif mesh.holes is not None and mesh.holes.any():
             raise ValueError("a band with holes needs a header with a nodata value")
+        if residual is not None:
+            self._stream.write(_chunk(RESIDUAL, residual))
         fields = meshcode.encode_band(y0, mesh, step, delaunay, layout)
         raw = schema.MeshPayload.build(fields, **h._fields())
         frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
@@ -313,7 +317,7 @@ class Reader:
             elif ctype == schema.AXIS:
                 if payload or self.header.channel_axis or self.header.channels != 1:
                     raise CorruptError(
-                        f"axis chunk at byte {offset}: it is empty, comes once and only in a gray image (ATM.md §4.8)"
+                        f"axis chunk at byte {offset}: it is empty, comes once and only in a gray image (ATM.md §4.9)"
                     )
                 self.header = dataclasses.replace(self.header, channel_axis=True)
             elif ctype == schema.META and metadata:
@@ -546,10 +550,18 @@ class Reader:
         h = self.header
         next_y0, finished, holes = 0, False, None
         shared = None  # the holes of the last band's last row, which the next band repeats
+        #: the (payload, offset) of the band just yielded's RESD chunk, None without one
+        self.band_residual, residual, layered = None, None, None
         while True:
             ctype, payload, offset = self._next_chunk()
             name = ctype.decode("latin-1")
-            if ctype == schema.MASK:
+            if ctype == RESIDUAL:
+                if residual is not None:
+                    raise CorruptError(f"two RESD chunks before a MESH at byte {offset}")
+                if h.nodata is not None and holes is None:
+                    raise CorruptError(f"RESD chunk at byte {offset} comes before its band's MASK chunk")
+                residual = (payload, offset)
+            elif ctype == schema.MASK:
                 if h.nodata is None:
                     raise CorruptError(f"MASK chunk at byte {offset} in a file without NDAT")
                 if holes is not None:
@@ -560,6 +572,9 @@ class Reader:
                     raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
                 if h.nodata is not None and holes is None:
                     raise CorruptError(f"MESH chunk at byte {offset} has no MASK chunk before it")
+                if layered is not None and layered != (residual is not None):
+                    raise CorruptError(f"MESH chunk at byte {offset}: a residual layer covers every band or none")
+                layered, self.band_residual, residual = residual is not None, residual, None
                 y0, mesh = self._parse_band(payload, offset, next_y0)
                 if holes is not None:
                     if holes.shape != (mesh.height, mesh.width):
@@ -576,6 +591,8 @@ class Reader:
             elif ctype == schema.END:
                 if payload:
                     raise CorruptError("the AEND chunk must be empty")
+                if residual is not None:
+                    raise CorruptError("the file ends with a RESD chunk that no MESH chunk follows")
                 if not finished:
                     raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
                 return
@@ -596,6 +613,8 @@ class Summary:
     vertices: int
     triangles: int
     polylines: int
+    #: the residual layer's bound E in stored sample units (ATM.md §4.8), None without one
+    residual: int | None = None
 
 
 def summarise(reader: Reader) -> Summary:
@@ -604,10 +623,14 @@ def summarise(reader: Reader) -> Summary:
     the file's bytes, not its meshes')."""
     h = reader.header
     bands = vertices = triangles = polylines = 0
-    next_y0, finished = 0, False
+    next_y0, finished, bound = 0, False, None
     while True:
         ctype, payload, offset = reader._next_chunk()
-        if ctype == schema.MESH:
+        if ctype == RESIDUAL:
+            if len(payload) < 12:
+                raise CorruptError(f"RESD chunk at byte {offset} has {len(payload)} bytes, fewer than its 12 fixed ones")
+            bound = int.from_bytes(payload[10:12], "little")
+        elif ctype == schema.MESH:
             if finished:
                 raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
             fixed, _ = reader._check_frame(payload, f"MESH chunk at byte {offset}", next_y0, whole=False)
@@ -617,12 +640,12 @@ def summarise(reader: Reader) -> Summary:
         elif ctype == schema.END:
             if not finished:
                 raise CorruptError(f"the file ends at row {next_y0}, before the image's last row")
-            return Summary(bands, vertices, triangles, polylines)
+            return Summary(bands, vertices, triangles, polylines, bound)
         elif ctype == schema.META:
             reader._read_metadata(payload, offset)
         elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS):
             raise CorruptError(f"misplaced {ctype.decode('latin-1')} chunk at byte {offset}")
-        elif ctype[0] & 0x20 == 0 and ctype != schema.MASK:
+        elif ctype[0] & 0x20 == 0 and ctype not in (schema.MASK, RESIDUAL):
             raise UnsupportedError(f"unknown critical chunk {ctype.decode('latin-1')}; a newer codec wrote this file")
 
 

@@ -32,7 +32,7 @@ def encode(image, settings: Settings, mask=None) -> bytes:
     from .stream import StreamEncoder
 
     img = as_image(image, allow_nan=True)
-    axis = img.ndim == 2 and np.ndim(image) == 3  # H x W x 1, kept in the file (ATM.md §4.8)
+    axis = img.ndim == 2 and np.ndim(image) == 3  # H x W x 1, kept in the file (ATM.md §4.9)
     height, width = img.shape[:2]
     holes = None
     if mask is not None:

@@ -359,7 +359,7 @@ def encode_image(image: np.ndarray, ext: str) -> bytes:
         raise UnsupportedError(
             f"cannot write {ext or 'files without an extension'}; use one of {', '.join(WRITABLE)}"
         )
-    if image.ndim == 3 and image.shape[2] == 1:  # an (H, W, 1) decode (ATM.md §4.8): gray
+    if image.ndim == 3 and image.shape[2] == 1:  # an (H, W, 1) decode (ATM.md §4.9): gray
         image = image[:, :, 0]
     if image.dtype.kind == "f" and ext not in (".tif", ".tiff"):
         # OpenCV would quietly cut float samples to 8 bits

@@ -215,7 +215,7 @@ def write(image: np.ndarray, metadata: dict | None = None, nodata: float | None 
                 if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
                     raise ATMError(f"the geotiff record's {name} is not a list of numbers")
                 extratags.append((code, "H" if kind == 3 else "d", len(value), value, False))
-    if image.ndim == 3 and image.shape[2] == 1:  # an (H, W, 1) decode (ATM.md §4.8): gray
+    if image.ndim == 3 and image.shape[2] == 1:  # an (H, W, 1) decode (ATM.md §4.9): gray
         image = image[:, :, 0]
     rgb = image.ndim == 3
     out = io.BytesIO()

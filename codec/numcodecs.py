@@ -58,12 +58,11 @@ class ATM(Codec):
                          ("max_rms", self.max_rms), ("nodata", self.nodata), ("precision", self.precision))
             if v is not None
         }
-        if self.lossless:
+        if self.lossless and chunk.dtype.kind in "ui":
+            options["lossless"] = True  # the residual layer: exact, and far fewer bytes than a mesh
+        elif self.lossless:
             # a float chunk's finest bound is its quantisation: half a step (plus rounding)
-            options["max_error"] = 0 if chunk.dtype.kind in "ui" else None
-            if options["max_error"] is None:
-                del options["max_error"]
-                options["quality"] = 100
+            options["quality"] = 100
         if chunk.dtype.kind == "f" and self.nodata is not None and np.isnan(self.nodata):
             del options["nodata"]  # NaN is float data's nodata already
         return options
@@ -72,7 +71,7 @@ class ATM(Codec):
         """The .atm bytes of one chunk (an ndarray: zarr hands chunks over as arrays)."""
         import codec
 
-        chunk = np.asarray(buf)  # an H x W x 1 chunk keeps its axis (ATM.md §4.8)
+        chunk = np.asarray(buf)  # an H x W x 1 chunk keeps its axis (ATM.md §4.9)
         if chunk.ndim != 2 and not (chunk.ndim == 3 and chunk.shape[2] in (1, 3)):
             raise UnsupportedError(
                 f"the atm codec stores 2-D chunks (or H x W x 3 RGB), not shape {chunk.shape}: "

@@ -86,6 +86,12 @@ class Settings:
     region_share: float | None = _option(
         None, "share of the budget for curvature samples, 0..1 (default: by effort, less on piecewise-smooth images)", meshers=("adaptive",)
     )
+    lossless: bool = _option(
+        False, "every valid sample decodes exactly (a residual layer over a coarse mesh, ATM.md §4.8); not with an error bound", cli=True
+    )
+    residual: bool = _option(
+        False, "with max_error: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound)", cli=True
+    )
 
     def __post_init__(self) -> None:
         if self.points is not None:
@@ -94,12 +100,20 @@ class Settings:
             _whole(self.band_height, "band_height")
         if self.quality is not None:
             _whole(self.quality, "quality", 1, 100)
-        clash = size_conflict(n for n in ("points", "quality", "max_rms", "max_error") if getattr(self, n) is not None)
+        clash = size_conflict(
+            n for n in ("points", "quality", "max_rms", "max_error", "lossless", "residual")
+            if getattr(self, n) not in (None, False)
+        )
         if clash:
             raise OptionError(f"{clash[0]} and {clash[1]} both set the size: give one of them")
         for name in ("max_rms", "max_error", "precision"):
             if getattr(self, name) is not None:
                 _number(getattr(self, name), name)
+        for name in ("lossless", "residual"):
+            if not isinstance(getattr(self, name), bool):
+                raise OptionError(f"{name} must be True or False, not {getattr(self, name)!r}")
+        if self.residual and self.max_error is None:
+            raise OptionError("residual needs max_error (the bound the layer meets); for exact samples give lossless")
         if self.mesher not in MESHERS:
             raise OptionError(f"unknown mesher {self.mesher!r}; choose one of {', '.join(MESHERS)}")
         if self.value_step != "auto" and (
@@ -166,9 +180,15 @@ class Settings:
 def size_conflict(given) -> tuple[str, str] | None:
     """The first pair of the given size options (by name) that cannot go together:
     `points` fixes the vertex count, so it takes no error bound, and `quality` is an RMS
-    bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met."""
+    bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met.
+    With `residual` or `lossless`, a residual layer meets the bound and `points` sets
+    the size of the preview mesh beside it."""
     given = list(given)
-    for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms")):
+    if "residual" in given and "max_error" in given:
+        given.remove("max_error")  # the layer meets it; points then sizes the preview mesh
+    for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
+                 ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error"),
+                 ("residual", "quality"), ("residual", "max_rms"), ("lossless", "residual")):
         if a in given and b in given:
             return a, b
     return None

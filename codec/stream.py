@@ -11,7 +11,8 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, integers, pipeline
+from . import container, integers, pipeline, residual
+from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
 from .settings import Settings
@@ -68,6 +69,10 @@ class StreamEncoder:
             settings = settings.replace(**{k: v for k, v in options.items() if v is not None})
         self._plan = pipeline.plan(settings, width, height, dtype, channels)
         p = self._plan
+        error = residual.layer_bound(settings, p)
+        self._residual = None if error is None else residual.ResidualEncoder(p.width, p.channels, p.storage, error)
+        if self._residual is not None:
+            self._plan = p = pipeline.plan(residual.mesh_settings(settings, p.width, p.height), width, height, dtype, channels)
         self.width, self.height, self.dtype, self.channels = p.width, p.height, p.dtype, p.channels
         self.band_height = p.band_height
         self._nodata = p.nodata
@@ -148,9 +153,15 @@ class StreamEncoder:
         if self._filled < 2 and self.height > 1:
             return  # only the shared row of a band already written
         band_holes = self._holes[: self._filled]
+        band = self._buf[: self._filled]
+        mesh_holes = band_holes if band_holes.any() else None
+        if self._residual is not None and mesh_holes is not None:
+            # the layer gives the pixels: a mesh of the holes filled need not trace
+            # their outlines (what made `points` balloon on range data with holes)
+            band, mesh_holes = hole_stage.fill(band, band_holes), None
         coded = pipeline.code_band(
-            self._buf[: self._filled],
-            band_holes if band_holes.any() else None,
+            band,
+            mesh_holes,
             self._plan,
             y0=self._y0,
             top=self._top,
@@ -158,7 +169,13 @@ class StreamEncoder:
             step=self._step,
             progress=None if self._progress is None else self._within_band,
         )
-        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout)
+        layer = None
+        if self._residual is not None:
+            n = residual.covered_rows(self._filled, self._received == self.height)
+            layer = self._residual.band(self._y0, self._buf[:n], band_holes[:n] if band_holes.any() else None)
+            if band_holes.any():
+                coded.mesh.holes = band_holes.copy()  # for the band's MASK chunk
+        self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout, layer)
         self.bands += 1
         self.vertices += len(coded.mesh.vertices)
         self.triangles += len(coded.mesh.triangles)
@@ -234,9 +251,21 @@ class StreamDecoder:
         A whole-file decode wants that (codec.decode uses GROUP_PIXELS)."""
         group: list[tuple[int, Mesh]] = []
         pixels = 0
+        layer = None
         try:
             for y0, mesh in self._reader:
                 self.metadata.update(self._reader.header.metadata or {})
+                if self._reader.band_residual is not None:
+                    # the residual layer gives every pixel the band emits (ATM.md §4.8),
+                    # band after band with the coder's state carried over: no render
+                    if group:
+                        yield self._rows(group)
+                        group, pixels = [], 0
+                    if layer is None:
+                        h = self._reader.header
+                        layer = residual.ResidualDecoder(h.width, h.channels, h.storage)
+                    yield self._layered_rows(layer, y0, mesh)
+                    continue
                 size = mesh.width * mesh.height
                 # a band without triangles (a one-pixel-wide image) is rendered alone
                 if group and (pixels + size > group_pixels or not len(mesh.triangles)
@@ -258,19 +287,31 @@ class StreamDecoder:
         from . import decoding
 
         y0, mesh = group[0][0], stack_bands(group)
-        rows = decoding.render(mesh, backend=self._backend)
+        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend))
+
+    def _layered_rows(self, layer: "residual.ResidualDecoder", y0: int, mesh: Mesh) -> tuple[int, np.ndarray]:
+        """(y0, rows) of a band with a residual layer, which gives every row it emits."""
+        payload, offset = self._reader.band_residual
+        last = y0 + mesh.height == self.height
+        rows = layer.band(payload, y0, residual.covered_rows(mesh.height, last), mesh.holes,
+                          f"RESD chunk at byte {offset}")
+        return self._finish(y0, mesh, rows)
+
+    def _finish(self, y0: int, mesh: Mesh, rows: np.ndarray) -> tuple[int, np.ndarray]:
+        """Stored samples -> the image's (dequantised, holes, channel axis), each row once."""
         quant, nodata = self._reader.header.quant, self._reader.header.nodata
         if quant is not None and integers.is_signed(self.dtype):
             rows = integers.restore(rows, quant, self.dtype)
         elif quant is not None:
             rows = quant.dequantise(rows)
         if mesh.holes is not None:
-            rows[mesh.holes] = nodata
-        if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.8)
+            rows[mesh.holes[: len(rows)]] = nodata
+        if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.9)
             rows = rows[:, :, None]
         last = y0 + mesh.height == self.height
-        # the group's last row is the next band's first: emit it once, from there
-        return y0, rows if last else rows[:-1]
+        # the last row is the next band's first: emit it once, from there (a residual
+        # layer already leaves it out)
+        return y0, rows if last or len(rows) < mesh.height else rows[:-1]
 
 
 #: Most pixels of the consecutive bands a whole-file decode renders in one call.

@@ -499,7 +499,7 @@ class Header:
         self.width, self.height, self.sample_type, self.channels = width, height, sample_type, channels
         self.offset, self.scale = 0.0, 1.0
         self.nodata: float | None = None
-        self.channel_axis = False  # an `axis` chunk: gray decodes as height x width x 1 (§4.8)
+        self.channel_axis = False  # an `axis` chunk: gray decodes as height x width x 1 (§4.9)
 
     @property
     def top(self) -> int:
@@ -606,6 +606,7 @@ class Band:
         self.holes: np.ndarray | None = None
         self.base_step = 1
         self.listed = False  # connectivity 0: the triangles were stored, not built
+        self.residual: bytes | None = None  # the band's RESD payload (§4.8)
 
 
 def quadrant(a: int, b: int) -> int:
@@ -973,12 +974,13 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
     header = parse_header(chunks[0][1])
     bands: list[Band] = []
     expect_qunt, have_ndat, mask, complete = header.sample_type >= 2, False, None, False
+    resd = None
     for kind, payload in chunks[1:]:
         name = kind.decode()
         # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
             raise DecodeError(f"{name} where QUNT must follow AHDR directly (sample_type {header.sample_type})")
-        if kind == b"axis":  # §4.8: empty, once, before the first band, gray images only
+        if kind == b"axis":  # §4.9: empty, once, before the first band, gray images only
             if payload or header.channel_axis or header.channels != 1 or bands or mask is not None:
                 raise DecodeError("axis chunk: it is empty and comes once, before the bands, in a gray image")
             header.channel_axis = True
@@ -1002,7 +1004,13 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
                 raise DecodeError("two MASK chunks before one MESH")
             limit = min(16 + 5 * (header.width * header.height + 1), frame_limit(payload))
             mask = parse_mask(decompress(payload, limit, "MASK"), header)
+        elif kind == b"RESD":  # §4.8: kept for the MESH chunk that follows
+            if resd is not None or (have_ndat and mask is None):
+                raise DecodeError("RESD chunk out of place (after its band's MASK, before its MESH)")
+            resd = payload
         elif kind == b"MESH":
+            if bands and (bands[0].residual is None) != (resd is None):
+                raise DecodeError("a residual layer covers every band or none")
             if complete:
                 raise DecodeError("a MESH chunk after the band that ends on the last row")
             if have_ndat and mask is None:
@@ -1018,12 +1026,13 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
                     raise DecodeError(f"MASK: row {band.y0}, shared by two bands, has two different masks")
                 mask = None
             band.values = sample_values(band, header)
+            band.residual, resd = resd, None
             bands.append(band)
             complete = band.y0 + band.rows == header.height
         elif kind == b"AEND":
             if payload:
                 raise DecodeError("AEND chunk is not empty")
-            if not complete or mask is not None:
+            if not complete or mask is not None or resd is not None:
                 raise DecodeError(f"AEND before the bands reach the last row ({header.height - 1})")
         elif kind == b"AHDR":
             raise DecodeError("a second AHDR chunk")
@@ -1043,6 +1052,8 @@ def decode(data: bytes) -> np.ndarray:
         image[band.y0 : band.y0 + band.rows] = render_band(band, band.values, header.width, band.rows)
         if band.holes is not None:
             holes[band.y0 : band.y0 + band.rows] = band.holes
+    if bands and bands[0].residual is not None:
+        image = decode_residual_layer(header, bands)
     return to_samples(image, holes, header)
 
 
@@ -1058,6 +1069,194 @@ def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarr
     if header.nodata is not None:
         out[holes] = header.nodata
     return out[:, :, 0] if header.channels == 1 and not header.channel_axis else out
+
+
+# ---------------------------------------------------------------- §4.8 the residual layer
+
+
+class RangeDecoder:
+    """§4.8.2: LZMA's binary range decoder with 16-bit probabilities."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data, self.at, self.range = data, 0, 0xFFFFFFFF
+        self.code = 0
+        for _ in range(4):
+            self.code = (self.code << 8) | self.byte()
+
+    def byte(self) -> int:
+        if self.at >= len(self.data):
+            raise DecodeError("RESD: the coded bytes end early")
+        self.at += 1
+        return self.data[self.at - 1]
+
+    def bit(self, model: list[int] | None) -> int:
+        """A bit with model [p, p', n] (updated), or a raw bit (None)."""
+        p = 32768 if model is None else (model[0] + model[1]) >> 1
+        bound = (self.range >> 16) * p
+        if self.code < bound:
+            self.range, bit = bound, 0
+        else:
+            self.code, self.range, bit = self.code - bound, self.range - bound, 1
+        while self.range < 1 << 24:
+            self.range = (self.range << 8) & 0xFFFFFFFF
+            self.code = ((self.code << 8) | self.byte()) & 0xFFFFFFFF
+        if model is not None:
+            s = min((model[2] + 2).bit_length() - 1, 8)
+            f = min(s, 4)
+            model[0] = model[0] - (model[0] >> f) if bit else model[0] + ((65536 - model[0]) >> f)
+            model[1] = model[1] - (model[1] >> s) if bit else model[1] + ((65536 - model[1]) >> s)
+            model[2] = min(model[2] + 1, 255)
+        return bit
+
+
+def residual_bucket(v: int) -> int:
+    """§4.8.3: 0, then 1, 2, 3-4, 5-8, ... up to 11."""
+    return 0 if v == 0 else min(1 + (v - 1).bit_length(), 11)
+
+
+def sign(v: int) -> int:
+    return (v > 0) - (v < 0)
+
+
+def read_residual(rc: RangeDecoder, nodes: list[list[int]], sign_model: list[int]) -> int:
+    """§4.8.4: a unary token, its sign and raw low bits."""
+    t = 0
+    while t < 39 and rc.bit(nodes[t]):
+        t += 1
+    negative = t > 0 and rc.bit(sign_model)
+    if t < 16:
+        m = t
+    else:
+        b = 5 + (t - 16) // 2
+        m = (1 << (b - 1)) | (((t - 16) & 1) << (b - 2))
+        for k in range(b - 3, -1, -1):
+            m |= rc.bit(None) << k
+    return -m if negative else m
+
+
+class ResidualPlane:
+    """One channel's models and last coded row (levels and residuals), kept from band
+    to band (§4.8.1)."""
+
+    def __init__(self, width: int) -> None:
+        self.tokens = [[[32768, 32768, 0] for _ in range(39)] for _ in range(3888)]
+        self.interp_tokens = [[[32768, 32768, 0] for _ in range(39)] for _ in range(32)]
+        self.interp_signs = [[32768, 32768, 0] for _ in range(32)]
+        self.signs = [[32768, 32768, 0] for _ in range(9)]
+        self.above: list[int] | None = None  # None: the image's first row comes next
+        self.above_residuals = [0] * width
+
+    def decode_rows(self, rc: RangeDecoder, rows: int, width: int, holes: np.ndarray, top_level: int) -> list[list[int]]:
+        out = []
+        for y in range(rows):
+            up, up_r = self.above, self.above_residuals
+            cur, res = [0] * width, [0] * width
+            for x in range(width):
+                if holes[y, x]:
+                    cur[x] = cur[x - 1] if x > 0 else (up[x] if up is not None else 0)
+                    continue
+                if up is not None:
+                    n = up[x]
+                    ne = up[x + 1] if x + 1 < width else n
+                    w, nw = (cur[x - 1], up[x - 1]) if x > 0 else (n, n)
+                elif x > 0:
+                    w = n = nw = ne = cur[x - 1]
+                else:
+                    w = n = nw = ne = 0
+                lo, hi = min(w, n), max(w, n)
+                pred = lo if nw >= hi else hi if nw <= lo else w + n - nw
+                g = abs(ne - n) + abs(n - nw) + abs(nw - w)
+                signs = 9 * (sign(ne - n) + 1) + 3 * (sign(n - nw) + 1) + sign(nw - w) + 1
+                rw = res[x - 1] if x > 0 else 0
+                rn = up_r[x] if up is not None else 0
+                rnw = up_r[x - 1] if up is not None and x > 0 else 0
+                rne = up_r[x + 1] if up is not None and x + 1 < width else 0
+                activity = abs(rw) + abs(rn) + (abs(rnw) + abs(rne)) // 2
+                nodes = self.tokens[324 * residual_bucket(activity) + 12 * signs + residual_bucket(g)]
+                r = read_residual(rc, nodes, self.signs[3 * (sign(rw) + 1) + sign(rn) + 1])
+                level = pred + r
+                if not 0 <= level <= top_level:
+                    raise DecodeError(f"RESD: level {level} outside 0..{top_level}")
+                cur[x], res[x] = level, r
+            out.append(cur)
+            self.above, self.above_residuals = cur, res
+        return out
+
+    def interpolate(self, rc: RangeDecoder, rows: int, width: int, holes: np.ndarray, e: int, top: int) -> list[list[int]]:
+        """§4.8.5: the band's samples by hierarchical interpolation, then the MED state
+        its last row leaves."""
+        v = [[0] * width for _ in range(rows)]
+        step = 2 * e + 1
+
+        def visit(y: int, x: int, pred: int, t: int) -> None:
+            if holes[y, x]:
+                v[y][x] = pred
+                return
+            q = read_residual(rc, self.interp_tokens[min(t, 31)], self.interp_signs[min(t, 31)])
+            v[y][x] = min(max(pred + q * step, 0), top)
+
+        s = 1
+        while 2 * s < max(rows, width):
+            s *= 2
+        prev = (top + 1) // 2
+        for y in range(0, rows, s):
+            for x in range(0, width, s):
+                visit(y, x, prev, 0)
+                prev = v[y][x]
+        t = 1
+        while s > 1:
+            k = s // 2
+            for y in range(0, rows, s):
+                for x in range(k, width, s):
+                    visit(y, x, (v[y][x - k] + v[y][x + k]) // 2 if x + k < width else v[y][x - k], t)
+            for y in range(k, rows, s):
+                for x in range(0, width, k):
+                    visit(y, x, (v[y - k][x] + v[y + k][x]) // 2 if y + k < rows else v[y - k][x], t + 1)
+            s, t = k, t + 2
+        above = list(self.above) if self.above is not None else [0] * width
+        for x in range(width):
+            if not holes[rows - 1, x]:
+                above[x] = (v[rows - 1][x] + e) // step
+            elif x > 0:
+                above[x] = above[x - 1]
+        self.above, self.above_residuals = above, [0] * width
+        return v
+
+
+def decode_residual_layer(header: Header, bands: list[Band]) -> np.ndarray:
+    """§4.8: the image's samples (height x width x channels, before §4.4's mapping)
+    from every band's RESD chunk."""
+    width, channels, top = header.width, header.channels, header.top
+    image = np.zeros((header.height, width, channels), np.int64)
+    planes = [ResidualPlane(width) for _ in range(channels)]
+    bound = None
+    for band in bands:
+        payload = band.residual
+        if len(payload) < 12:
+            raise DecodeError("RESD: shorter than its fixed fields")
+        y0, rows, predictor, count, e = struct.unpack_from("<IIBBH", payload)
+        emitted = band.rows if band.y0 + band.rows == header.height else band.rows - 1
+        if (y0, rows) != (band.y0, emitted):
+            raise DecodeError(f"RESD: {rows} rows from {y0}, its band emits {emitted} from {band.y0}")
+        if predictor not in (0, 1):
+            raise UnsupportedError(f"RESD: predictor {predictor}")
+        if count != channels or e > top or (bound is not None and e != bound):
+            raise DecodeError("RESD: channels or bound do not match the image")
+        bound = e
+        step = 2 * e + 1
+        holes = band.holes if band.holes is not None else np.zeros((band.rows, width), bool)
+        rc = RangeDecoder(payload[12:])
+        for c, plane in enumerate(planes):
+            if rows == 0:
+                continue
+            if predictor == 1:
+                image[y0 : y0 + rows, :, c] = np.array(plane.interpolate(rc, rows, width, holes, e, top), np.int64)
+                continue
+            levels = plane.decode_rows(rc, rows, width, holes, (top + e) // step)
+            image[y0 : y0 + rows, :, c] = np.minimum(np.array(levels, np.int64).reshape(rows, width) * step, top)
+        if rc.at != len(rc.data):
+            raise DecodeError("RESD: bytes left over after the coded samples")
+    return image
 
 
 def main(argv: list[str]) -> int:

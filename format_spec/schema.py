@@ -39,7 +39,7 @@ QUANT = b"QUNT"
 NODATA = b"NDAT"
 MASK = b"MASK"
 META = b"meta"
-#: ancillary, empty: the decoded gray image keeps a channel axis of 1, (H, W, 1) (§4.8)
+#: ancillary, empty: the decoded gray image keeps a channel axis of 1, (H, W, 1) (§4.9)
 AXIS = b"axis"
 
 #: sample_type codes -> how samples are stored. Code 2 is float data stored as 16-bit

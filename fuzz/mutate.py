@@ -15,7 +15,7 @@ import zlib
 import zstandard
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-KNOWN_TYPES = [b"AHDR", b"MESH", b"AEND", b"tEXt", b"ZZZZ", b"mEta"]
+KNOWN_TYPES = [b"AHDR", b"MESH", b"AEND", b"tEXt", b"ZZZZ", b"mEta", b"RESD"]
 INTERESTING_U32 = [0, 1, 2, 3, 0x7F, 0xFF, 0x100, 0xFFFF, 0x10000, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF]
 
 
@@ -82,6 +82,23 @@ def mutate_mesh_payload(raw: bytes, rng: random.Random) -> bytes:
         (v,) = struct.unpack_from("<I", b, i)
         struct.pack_into("<I", b, i, rng.choice([v + 1, max(v - 1, 0), v ^ 0xFFFF, 0, rng.randrange(1 << 16)]) & 0xFFFFFFFF)
         return bytes(b)
+    return mutate_bytes(bytes(b), rng)
+
+
+def mutate_residual_payload(raw: bytes, rng: random.Random) -> bytes:
+    """Edit a RESD payload (ATM.md §4.8): its fixed fields (y0, rows, predictor,
+    channels, bound) or its range-coded bytes, which no CRC inside protects."""
+    b = bytearray(raw)
+    if len(b) >= 12 and rng.random() < 0.4:
+        field = rng.randrange(5)
+        at, fmt = [(0, "<I"), (4, "<I"), (8, "<B"), (9, "<B"), (10, "<H")][field]
+        (v,) = struct.unpack_from(fmt, b, at)
+        top = 0xFF if fmt == "<B" else 0xFFFF if fmt == "<H" else 0xFFFFFFFF
+        struct.pack_into(fmt, b, at, rng.choice([v + 1, max(v - 1, 0), 0, top, rng.randrange(top + 1)]) & top)
+        return bytes(b)
+    if len(b) > 12 and rng.random() < 0.3:
+        # cut the coded bytes short, or leave extra behind them
+        return bytes(b[: rng.randrange(12, len(b))]) if rng.random() < 0.5 else bytes(b) + bytes(rng.randint(1, 8))
     return mutate_bytes(bytes(b), rng)
 
 
@@ -205,6 +222,8 @@ def mutate(data: bytes, rng: random.Random) -> bytes:
                 payload = zstandard.ZstdCompressor(level=1).compress(raw)
             else:
                 payload = mutate_bytes(payload, rng)
+        elif ctype == b"RESD" and rng.random() < 0.9:
+            payload = mutate_residual_payload(payload, rng)
         elif ctype == b"AHDR" and len(payload) == 10 and rng.random() < 0.7:
             b = bytearray(payload)
             i = rng.choice([0, 4, 8, 9])

@@ -84,7 +84,7 @@ def _axis_chunk() -> bytes:
     ids=["uint8", "uint16 holes", "float", "int16"],
 )
 def test_gray_with_a_channel_axis_comes_back_in_its_shape(image, options, tmp_path):
-    """ATM.md §4.8: an H x W x 1 image decodes as H x W x 1 from decode, read and the
+    """ATM.md §4.9: an H x W x 1 image decodes as H x W x 1 from decode, read and the
     StreamDecoder, without out=; its file is the H x W image's plus one empty `axis`
     chunk, so files of H x W images keep their bytes."""
     data = codec.encode(image, **options)

@@ -265,7 +265,7 @@ def test_ctrl_c_in_a_batch_stops_the_workers_and_leaves_no_files(tmp_path, how):
 
 
 def test_a_gray_image_with_a_channel_axis_through_the_command_line(tmp_path):
-    """#23, ATM.md §4.8: `atm encode` of an (H, W, 1) .npy keeps the axis; `atm decode`
+    """#23, ATM.md §4.9: `atm encode` of an (H, W, 1) .npy keeps the axis; `atm decode`
     writes it back to .npy in that shape and as a gray PNG, PGM or TIFF (formats with
     no such axis), and `atm compare` takes the two shapes as the same gray image."""
     image = range_scene(48, 32, seed=3)[:, :, None].copy()

@@ -118,7 +118,7 @@ def test_save_ignores_the_options_generic_pipelines_pass(tmp_path):
 
 
 def test_open_a_gray_file_with_a_channel_axis(tmp_path):
-    """Pillow has no H x W x 1 mode: a file with an `axis` chunk (ATM.md §4.8) opens as
+    """Pillow has no H x W x 1 mode: a file with an `axis` chunk (ATM.md §4.9) opens as
     the gray image it is."""
     image = range_scene(40, 30, seed=1)
     path = tmp_path / "x.atm"

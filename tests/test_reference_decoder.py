@@ -548,7 +548,7 @@ def test_both_decoders_apply_the_limits_of_section_8():
 
 
 def test_the_axis_chunk_gives_the_shape_and_is_checked():
-    """§4.8: an `axis` chunk makes a gray image H x W x 1 in both decoders; one with a
+    """§4.9: an `axis` chunk makes a gray image H x W x 1 in both decoders; one with a
     payload, a second one or one after the first band is refused by both."""
     data = (VECTORS / "axis_gray8_holes.atm").read_bytes()
     assert_same_image(ref.decode(data), codec.decode(data))

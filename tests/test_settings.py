@@ -61,7 +61,8 @@ def test_every_encode_flag_is_an_option_and_forwarded():
     }
     # the size flags exclude each other (points or a bound; quality or max_rms): three runs
     seen = set()
-    for size in ({"--points": "100"}, {"--quality": "50", "--max-error": "4"}, {"--max-rms": "1.5"}):
+    for size in ({"--points": "100", "--lossless": []}, {"--quality": "50", "--max-error": "4"}, {"--max-rms": "1.5"},
+                 {"--max-error": "4", "--residual": []}):
         argv = ["in.png", "out.atm"]
         for flag, value in {**flags, **size}.items():
             argv += [flag] + (value if isinstance(value, list) else [value])

@@ -102,7 +102,7 @@ def test_zarr_format_3_array_with_the_atm_serializer(tmp_path):
 
 
 def test_a_chunk_with_a_channel_axis_comes_back_in_its_shape():
-    """An (r, c, 1) chunk decodes as (r, c, 1) without out= (ATM.md §4.8's axis chunk),
+    """An (r, c, 1) chunk decodes as (r, c, 1) without out= (ATM.md §4.9's axis chunk),
     and into a numcodecs out= buffer of either shape."""
     chunk = terrain(30, 40, np.int16)[:, :, None]
     c = ATM(lossless=True)

@@ -176,6 +176,17 @@ def main() -> None:
     cases["listed_ties"] = encoder.pack(flipped(lattice, rng, delaunay=True))
     scene = codec.build_mesh(synthetic.range_scene(64, 48, seed=11), points=160)
     cases["listed_not_delaunay"] = encoder.pack(flipped(scene, rng, delaunay=False))
+    # the residual layer (§4.8): lossless 16-bit depth with holes over bands, and
+    # near-lossless RGB (every sample within 2)
+    depth16 = synthetic.range_scene(40, 30, seed=12, dtype=np.uint16)
+    depth16[5:12, 8:20] = 0
+    # (their preview meshes are uniform lattices, so that their bands have exact ties)
+    cases["residual_depth16"] = codec.encode(depth16, lossless=True, nodata=0, band_height=8, points=120,
+                                             mesher="uniform")
+    cases["residual_rgb8"] = codec.encode(
+        np.random.default_rng(13).integers(0, 256, (16, 24, 3), dtype=np.uint8), max_error=2, residual=True,
+        band_height=6, points=60, mesher="uniform",
+    )
     for name, data in cases.items():
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
