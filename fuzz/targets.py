@@ -34,7 +34,7 @@ def run_one(data: bytes) -> bool:
         return False
     info = codec.info(data)
     expected = (info["height"], info["width"]) + ((info["channels"],) if info["channels"] > 1 else ())
-    # a gray file with an `axis` chunk decodes as (H, W, 1) (ATM.md §4.8)
+    # a gray file with an `axis` chunk decodes as (H, W, 1) (ATM.md §4.9)
     if image.shape not in (expected, expected + (1,) * (info["channels"] == 1)) or rows_seen != info["height"]:
         raise AssertionError(f"decoded shape {image.shape}, header says {expected}")
     if not isinstance(image, np.ndarray):
