@@ -41,7 +41,9 @@ kernels=$(cd / && LD_PRELOAD="$runtime" "$venv/bin/python" -c \
 [ -n "$kernels" ] || { echo "fuzz/asan.sh: the kernels do not import" >&2; exit 1; }
 for kernel in $kernels; do
   case $kernel in "$venv"/*) ;; *) echo "fuzz/asan.sh: $kernel is not the venv's" >&2; exit 1 ;; esac
-  if ! nm -D "$kernel" 2>/dev/null | grep -q __asan; then
+  # grep reads all of nm's output: with -q it could stop early, and under pipefail
+  # the SIGPIPE that nm then gets would fail the test
+  if ! nm -D "$kernel" 2>/dev/null | grep __asan >/dev/null; then
     echo "fuzz/asan.sh: $kernel is not instrumented" >&2
     exit 1
   fi
