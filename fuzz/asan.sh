@@ -37,7 +37,7 @@ CC="$cc" CFLAGS="$sanitize" CXXFLAGS="$sanitize" LDFLAGS="-fsanitize=address" \
 # detect_leaks=0: CPython keeps objects until exit, which LeakSanitizer reports.
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_init_order=1"
 kernels=$(cd / && LD_PRELOAD="$runtime" "$venv/bin/python" -c \
-  "import codec._rasterise as r, codec._fields as f, codec._cdt as c; print(r.__file__, f.__file__, c.__file__)")
+  "import codec._rasterise as r, codec._fields as f, codec._cdt as c, codec._residual as e; print(r.__file__, f.__file__, c.__file__, e.__file__)")
 [ -n "$kernels" ] || { echo "fuzz/asan.sh: the kernels do not import" >&2; exit 1; }
 for kernel in $kernels; do
   case $kernel in "$venv"/*) ;; *) echo "fuzz/asan.sh: $kernel is not the venv's" >&2; exit 1 ;; esac
@@ -57,4 +57,4 @@ cd "$src"
 LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
   tests/test_decoders.py tests/test_container.py tests/test_meshcode.py \
   tests/test_fuzz_smoke.py tests/test_stream.py tests/test_conformance.py tests/test_fields.py \
-  tests/test_cdt.py tests/test_canonical.py "$@"
+  tests/test_cdt.py tests/test_canonical.py tests/test_residual.py "$@"
