@@ -4,6 +4,7 @@ band pipeline as codec.StreamEncoder (codec.pipeline)."""
 from __future__ import annotations
 
 import io
+import math
 
 import numpy as np
 
@@ -33,6 +34,11 @@ RMS_SEARCH = 6
 def encode(image, settings: Settings, mask=None) -> bytes:
     """Encode an image as .atm bytes, band by band; same image and settings give the
     same bytes. mask: H x W booleans, True where the image has no data."""
+    if settings.residual == "auto":
+        # the mesh alone is kept on a tie: it is then within the bound too
+        mesh = encode(image, settings.replace(residual=False), mask)
+        layered = encode(image, settings.replace(residual=True), mask)
+        return layered if len(layered) < len(mesh) else mesh
     if settings.residual and settings.max_rms is not None and settings.max_error is None:
         return _layer_under_rms(image, settings, mask)
     return _encode(image, settings, mask)
@@ -44,12 +50,11 @@ def _layer_under_rms(image, settings: Settings, mask) -> bytes:
     while the decoded RMS stays within max_rms, since the RMS of a layer of bound E
     is well under E (about E / sqrt(3) on noisy data, less on smooth data). The
     fewest bytes among the encodes that meet max_rms are kept; the first always does."""
-    import io
-
     from .stream import decode_all
 
     target = float(settings.max_rms)
     img = np.asarray(image)
+    whole = img.dtype.kind in "uib"
     valid = np.ones(img.shape[:2], bool)
     if img.dtype.kind == "f":
         valid &= np.isfinite(img) if img.ndim == 2 else np.isfinite(img).all(axis=-1)
@@ -66,12 +71,17 @@ def _layer_under_rms(image, settings: Settings, mask) -> bytes:
 
     best = _encode(image, settings, mask)
     got = rms(best)
+    if got <= 0:
+        got = target / 4  # exact at this bound: try a wider one
     met, missed = target, None  # the largest max_error known to meet target, the least known not to
     for _ in range(RMS_SEARCH - 1):
-        if got <= 0:
-            break
         bound = met * min(target / got, 4.0) if missed is None else (met + missed) / 2
-        if bound <= met * 1.001 or missed is not None and missed - met < max(1e-9, 0.02 * met):
+        if whole:
+            # integer samples: the layer's bound is floor(max_error), so step by whole levels
+            bound = float(max(math.floor(bound), math.floor(met) + 1))
+            if missed is not None and bound >= missed:
+                break
+        elif bound <= met * 1.001 or missed is not None and missed - met < max(1e-9, 0.02 * met):
             break
         data = _encode(image, settings.replace(max_rms=None, max_error=bound), mask)
         got = rms(data)

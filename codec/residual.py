@@ -21,7 +21,7 @@ import struct
 
 import numpy as np
 
-from .errors import CorruptError, UnsupportedError
+from .errors import CorruptError, OptionError, UnsupportedError
 from .native import _residual
 
 #: The chunk's type: critical (an upper-case first letter), as a decoder that skipped
@@ -59,6 +59,11 @@ def layer_bound(settings, plan) -> int | None:
                 "give max_error (the bound holds on every valid sample) instead"
             )
         return 0
+    if settings.residual == "auto":
+        raise OptionError(
+            "residual='auto' compares two encodes of the whole image: give it to codec.encode, "
+            "or choose residual=True or False for a stream"
+        )
     bounds = [b for b in (plan.bound.max_error, plan.bound.max_rms) if b is not None]
     if not settings.residual or not bounds:
         return None

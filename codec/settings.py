@@ -89,8 +89,9 @@ class Settings:
     lossless: bool = _option(
         False, "every valid sample decodes exactly (a residual layer over a coarse mesh, ATM.md §4.8); not with an error bound", cli=True
     )
-    residual: bool = _option(
-        False, "with max_error or max_rms: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound)", cli=True
+    residual: bool | str = _option(
+        False, "with max_error or max_rms: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound); "
+        "'auto' (codec.encode only): whichever of the layer and the mesh alone gives fewer bytes", cli=True
     )
 
     def __post_init__(self) -> None:
@@ -109,9 +110,10 @@ class Settings:
         for name in ("max_rms", "max_error", "precision"):
             if getattr(self, name) is not None:
                 _number(getattr(self, name), name)
-        for name in ("lossless", "residual"):
-            if not isinstance(getattr(self, name), bool):
-                raise OptionError(f"{name} must be True or False, not {getattr(self, name)!r}")
+        if not isinstance(self.lossless, bool):
+            raise OptionError(f"lossless must be True or False, not {self.lossless!r}")
+        if not isinstance(self.residual, bool) and self.residual != "auto":
+            raise OptionError(f"residual must be True, False or 'auto', not {self.residual!r}")
         if self.residual and self.max_error is None and self.max_rms is None:
             raise OptionError("residual needs max_error or max_rms (the bound the layer meets); for exact samples give lossless")
         if self.mesher not in MESHERS:

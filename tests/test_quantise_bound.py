@@ -125,3 +125,36 @@ def test_stream_encoder_meets_max_rms_with_the_layer_at_the_safe_bound():
         enc.write(img)
     decoded = codec.decode(out.getvalue()).astype(np.int64)
     assert np.abs(decoded - img).max() <= 9
+
+
+def test_residual_auto_keeps_the_smaller_of_mesh_and_layer():
+    yy, xx = np.mgrid[0:64, 0:64]
+    ramp = (3 * xx + 2 * yy).astype(np.uint16)  # a plane: four vertices beat any layer
+    rng = np.random.default_rng(0)
+    noisy = np.clip(range_scene(64, 64, seed=1) + rng.normal(0, 5, (64, 64)), 0, 255).astype(np.uint8)
+    picked = set()
+    for img, bound in ((ramp, dict(max_error=2)), (noisy, dict(max_error=2)), (noisy, dict(max_rms=3.0))):
+        mesh = codec.encode(img, **bound)
+        layered = codec.encode(img, residual=True, **bound)
+        auto = codec.encode(img, residual="auto", **bound)
+        assert auto == min(mesh, layered, key=len)
+        picked.add("layer" if auto == layered else "mesh")
+        d = codec.decode(auto).astype(np.float64) - img
+        if "max_error" in bound:
+            assert np.abs(d).max() <= bound["max_error"]
+        else:
+            assert np.sqrt((d**2).mean()) <= bound["max_rms"]
+    assert picked == {"mesh", "layer"}
+
+
+def test_residual_auto_is_refused_where_it_cannot_compare():
+    import pytest
+
+    from codec.errors import OptionError
+
+    with pytest.raises(OptionError, match="residual='auto' compares two encodes of the whole image"):
+        codec.StreamEncoder(io.BytesIO(), 8, 8, max_error=2, residual="auto")
+    with pytest.raises(OptionError, match="residual must be True, False or 'auto'"):
+        codec.encode(np.zeros((8, 8), np.uint8), max_error=2, residual="yes")
+    with pytest.raises(OptionError, match="residual needs max_error or max_rms"):
+        codec.encode(np.zeros((8, 8), np.uint8), residual="auto")
