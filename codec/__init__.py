@@ -69,7 +69,7 @@ def encode(
     edge_share: float | None = None,
     region_share: float | None = None,
     lossless: bool = False,
-    residual: bool = False,
+    residual: bool | str = False,
     mask: np.ndarray | None = None,
     **unknown: NoReturn,
 ) -> bytes:
@@ -82,10 +82,15 @@ def encode(
     Size: `points` (target vertex count, within 10 %; default 2.8 % of the pixels), or
     a bound that refinement guarantees on the decoded image, per channel: `quality`
     (1..100 on JPEG's scale: an RMS bound at about JPEG's error, 100 lossless), `max_rms`, `max_error` (sample
-    units; float data: data units). `lossless=True`, or `max_error` with `residual=True`,
+    units; float data: data units). On float data `max_error` chooses the quantisation
+    step (about 2 max_error, each level kept exactly by the mesh); `precision` overrides
+    it. `lossless=True`, or `max_error` or `max_rms` with `residual=True`,
     adds a residual layer (ATM.md §4.8) that meets the bound on every valid sample by
     construction with the fewest bytes, beside a light mesh (`points` sets its size;
-    it is a preview, not within the bound). The other options and their defaults:
+    it is a preview, not within the bound); under `max_rms` the layer's bound is widened
+    while the measured RMS stays within it; `residual="auto"` keeps whichever of the
+    layer and the mesh alone is smaller (`atm mesh` and terrain users, who need the
+    stored mesh within the bound, leave it False). The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an
     unknown one is refused with the list of valid ones).
     """

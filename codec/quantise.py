@@ -88,6 +88,21 @@ class Quantiser:
         )
 
 
+def step_for_error(lo: float, hi: float, max_error: float, slack: int) -> float | None:
+    """The quantisation step that leaves the mesh `slack` levels of a float image's
+    max_error (values lo..hi): the widest step s with floor((max_error - s/2 -
+    rounding) / s) = slack, so that the mesh's bound in levels is `slack` (0: every
+    level exact, as a step of 2 max_error). None if 65,536 levels of that step cannot
+    span lo..hi (then the finest step is the best there is)."""
+    # float32 rounding of the decoded values, bounded from above for any step up to
+    # 2 max_error (Quantiser.ulp with the largest top)
+    rounding = max(abs(lo), abs(hi) + 2 * max_error) * 2.0**-24 * 1.001 + F32_HALF_TINY
+    step = (max_error - rounding) / (slack + 0.5)
+    if not step > 0 or step * LEVELS < (hi - lo) or abs(lo) + LEVELS * step > F32_MAX:
+        return None
+    return step
+
+
 def plan(lo: float, hi: float, precision: float | None = None) -> Quantiser:
     """A quantiser for values in lo..hi: step `precision` if given (it must fit 65,536
     levels), otherwise the finest step that does. Refused (OptionError) where the levels

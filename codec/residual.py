@@ -21,7 +21,7 @@ import struct
 
 import numpy as np
 
-from .errors import CorruptError, UnsupportedError
+from .errors import CorruptError, OptionError, UnsupportedError
 from .native import _residual
 
 #: The chunk's type: critical (an upper-case first letter), as a decoder that skipped
@@ -48,8 +48,10 @@ PREVIEW_DENSITY = 0.00025
 def layer_bound(settings, plan) -> int | None:
     """The bound E in stored sample units if an image with these settings (and this
     pipeline.Plan of them) gets a residual layer, else None: `lossless` (E = 0), or
-    `residual` with `max_error` (float data: the bound left after the 16-bit
-    quantisation)."""
+    `residual` with `max_error` and/or `max_rms` (float data: the bound left after
+    the 16-bit quantisation). Every sample within E gives an RMS within E too, so
+    `max_rms` gets E = floor(max_rms) here; codec.encode, which has the whole image,
+    then widens E while the measured RMS stays within max_rms (encoder.py)."""
     if settings.lossless:
         if plan.dtype.kind == "f":
             raise UnsupportedError(
@@ -57,16 +59,22 @@ def layer_bound(settings, plan) -> int | None:
                 "give max_error (the bound holds on every valid sample) instead"
             )
         return 0
-    if not settings.residual or settings.max_error is None or settings.max_rms is not None:
+    if settings.residual == "auto":
+        raise OptionError(
+            "residual='auto' compares two encodes of the whole image: give it to codec.encode, "
+            "or choose residual=True or False for a stream"
+        )
+    bounds = [b for b in (plan.bound.max_error, plan.bound.max_rms) if b is not None]
+    if not settings.residual or not bounds:
         return None
-    return min(int(math.floor(plan.bound.max_error)), _top(plan.storage))
+    return min(int(math.floor(min(bounds))), _top(plan.storage))
 
 
 def mesh_settings(settings, width: int, height: int):
     """The settings of the mesh stored beside a residual layer: no bound of its own
     (the layer meets it), `points` as given or a light preview."""
     points = settings.points or max(4, round(PREVIEW_DENSITY * width * height))
-    return settings.replace(lossless=False, residual=False, max_error=None, points=points)
+    return settings.replace(lossless=False, residual=False, max_error=None, max_rms=None, points=points)
 
 
 def covered_rows(mesh_rows: int, last: bool) -> int:

@@ -68,7 +68,7 @@ class Settings:
     value_range: tuple[float, float] | None = _option(
         None, "float data: (lowest, highest) value, which sets the 16-bit quantisation (default: the image's finite range)", cli=True
     )
-    precision: float | None = _option(None, "float data: the quantisation step (default: the finest 16 bits allow)", cli=True)
+    precision: float | None = _option(None, "float data: the quantisation step (default: about 2 max_error under max_error alone, else the finest 16 bits allow)", cli=True)
     metadata: dict | None = _option(None, "a JSON object stored with the image", cli=True)
     effort: int | None = _option(
         None, "1 (quickest), 2 (default) or 3 (lowest error per byte, about 1.5x slower)", cli=True, meshers=("adaptive",)
@@ -89,8 +89,9 @@ class Settings:
     lossless: bool = _option(
         False, "every valid sample decodes exactly (a residual layer over a coarse mesh, ATM.md §4.8); not with an error bound", cli=True
     )
-    residual: bool = _option(
-        False, "with max_error: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound)", cli=True
+    residual: bool | str = _option(
+        False, "with max_error or max_rms: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound); "
+        "'auto' (codec.encode only): whichever of the layer and the mesh alone gives fewer bytes", cli=True
     )
 
     def __post_init__(self) -> None:
@@ -109,11 +110,12 @@ class Settings:
         for name in ("max_rms", "max_error", "precision"):
             if getattr(self, name) is not None:
                 _number(getattr(self, name), name)
-        for name in ("lossless", "residual"):
-            if not isinstance(getattr(self, name), bool):
-                raise OptionError(f"{name} must be True or False, not {getattr(self, name)!r}")
-        if self.residual and self.max_error is None:
-            raise OptionError("residual needs max_error (the bound the layer meets); for exact samples give lossless")
+        if not isinstance(self.lossless, bool):
+            raise OptionError(f"lossless must be True or False, not {self.lossless!r}")
+        if not isinstance(self.residual, bool) and self.residual != "auto":
+            raise OptionError(f"residual must be True, False or 'auto', not {self.residual!r}")
+        if self.residual and self.max_error is None and self.max_rms is None:
+            raise OptionError("residual needs max_error or max_rms (the bound the layer meets); for exact samples give lossless")
         if self.mesher not in MESHERS:
             raise OptionError(f"unknown mesher {self.mesher!r}; choose one of {', '.join(MESHERS)}")
         if self.value_step != "auto" and (
@@ -184,11 +186,12 @@ def size_conflict(given) -> tuple[str, str] | None:
     With `residual` or `lossless`, a residual layer meets the bound and `points` sets
     the size of the preview mesh beside it."""
     given = list(given)
-    if "residual" in given and "max_error" in given:
-        given.remove("max_error")  # the layer meets it; points then sizes the preview mesh
+    if "residual" in given:
+        # the layer meets them; points then sizes the preview mesh
+        given = [n for n in given if n not in ("max_error", "max_rms")]
     for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
                  ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error"),
-                 ("residual", "quality"), ("residual", "max_rms"), ("lossless", "residual")):
+                 ("residual", "quality"), ("lossless", "residual")):
         if a in given and b in given:
             return a, b
     return None

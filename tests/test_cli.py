@@ -245,3 +245,16 @@ def test_decode_backend_gl_without_context_is_one_line(no_gl, png, tmp_path, cap
     # an unknown backend is bad usage
     assert main(["decode", str(data), str(out), "--backend", "vulkan"]) == 2
     assert "choose one of cpu, gl" in capsys.readouterr().err
+
+
+def test_max_rms_with_residual_layer(png, tmp_path):
+    # issue #21: --residual takes --max-rms as well as --max-error
+    out_atm, out_png = tmp_path / "r.atm", tmp_path / "r.png"
+    r = atm("encode", png, out_atm, "--max-rms", "3", "--residual")
+    assert r.returncode == 0, r.stderr
+    assert atm("decode", out_atm, out_png).returncode == 0
+    assert rms(read_image(out_png), read_image(png)) <= 3
+    info = json.loads(atm("info", out_atm, "--json").stdout)
+    # the CLI streams its rows, so the layer keeps the safe bound floor(max_rms): every
+    # sample within 3 (codec.encode, which holds the whole image, widens it by measuring)
+    assert info["residual"] == 3
