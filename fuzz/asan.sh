@@ -53,8 +53,10 @@ done
 # The tests run from the copy, with the installed package ahead of its sources
 # (--import-mode=append, and the pytest script, which does not put the cwd first);
 # the copy has no compiled kernels, so a test that imported it would fail.
-cd "$src"
+# From / rather than the copy: a test that starts `python -m codec` in a child process
+# would otherwise import the copy's uncompiled sources (the child puts its working folder
+# first on its path).
+cd /
 LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
-  tests/test_decoders.py tests/test_container.py tests/test_meshcode.py \
-  tests/test_fuzz_smoke.py tests/test_stream.py tests/test_conformance.py tests/test_fields.py \
-  tests/test_cdt.py tests/test_canonical.py tests/test_residual.py "$@"
+  --rootdir="$src" -c "$src/pyproject.toml" \
+  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual}.py "$@"
