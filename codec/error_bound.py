@@ -167,6 +167,10 @@ def refine_to_bound(
         count = max(8, int(len(mesh.vertices) * GROWTH))
         new = _spread(np.where(candidates, worst, 0.0), count)
         on_walls = int((bad & walls & ~is_vertex).sum())
+        # the triangles before this round are the unique triangulation of ATM.md §4.2.5
+        # of their vertices and of the walls the new one keeps (so inserting vertices
+        # changes only triangles that come to touch one: see below)
+        unique_before = delaunay
         if on_walls and (len(new) == 0 and not at_vertex.any() or WALL_TAIL * int(candidates.sum()) < on_walls):
             # (almost) only wall pixels are left: take them, splitting walls is better
             # than failing; once the walls are gone their pixels are like any other
@@ -175,6 +179,7 @@ def refine_to_bound(
             new = _spread(np.where(bad & ~is_vertex, worst, 0.0), count)
             mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [], mesh.holes)
             walls = np.zeros((h, w), bool)
+            unique_before = False
         # per vertex: sampled (its own pixel value from now on; so far, or now), its
         # value so far (new ones: their pixel's), fixed
         old_sampled, old_triangles = sampled, mesh.triangles
@@ -208,7 +213,17 @@ def refine_to_bound(
             # most of the time: 16 s of 30 on the SRTM DEM at max_error=2)
             renumber = np.empty(len(order), np.int64)
             renumber[order] = np.arange(len(order))
-            touched = _new_triangles(renumber[old_triangles], triangles, len(vertices))
+            if unique_before:
+                # inserting a vertex into that triangulation replaces only triangles
+                # whose circumcircle holds it, by triangles that have it as a corner
+                # (the triangulation is unique, so however it is built): the new
+                # triangles are those with a new corner (matching all old triangles
+                # against the new cost 1.8 s of 16 on a 512² DEM at max_error=2)
+                is_new = np.zeros(len(vertices), bool)
+                is_new[renumber[len(old_sampled):]] = True
+                touched = is_new[triangles].any(axis=1)
+            else:
+                touched = _new_triangles(renumber[old_triangles], triangles, len(vertices))
             became = (was_sampled & ~np.concatenate([old_sampled, np.zeros(len(new), bool)]))[order]
             touched |= became[triangles].any(axis=1)
             free = np.zeros(len(vertices), bool)
