@@ -39,7 +39,7 @@ from speed import interleaved  # noqa: E402
 
 @contextlib.contextmanager
 def triangle_alone() -> Iterator[None]:
-    """Within it, codec.triangulate returns Triangle's triangles unflipped."""
+    """Within it, codec.triangulate.by_triangle returns Triangle's triangles unflipped."""
     kept = triangulate_module.canonicalise
     triangulate_module.canonicalise = lambda vertices, triangles, constraints: np.asarray(triangles, np.int64)
     try:
@@ -62,7 +62,7 @@ def ties_and_flips(data: bytes) -> tuple[int, int, int]:
     for v, walls, tris in bands(data):
         f, t = canonical.tie_count(v, tris, walls)
         with triangle_alone():
-            raw = triangulate_module.triangulate(v, walls)
+            raw = triangulate_module.by_triangle(v, walls)
         free, ties, flips = free + f, ties + t, flips + canonical.flip_to_canonical(v, raw, walls)[1]
     return free, ties, flips
 
@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         work = []
         for v, walls, tris in bands(data):
             with triangle_alone():
-                work.append((v, triangulate_module.triangulate(v, walls), walls))
+                work.append((v, triangulate_module.by_triangle(v, walls), walls))
         times = interleaved({
             "decode": lambda: codec.decode(data),
             "pass": lambda: [canonical.canonicalise(v, raw, walls) for v, raw, walls in work],

@@ -48,7 +48,7 @@ from codec import container, decoder_cpu, decoder_gl  # noqa: E402
 from codec.errors import BackendError  # noqa: E402
 from codec.mesh import segments  # noqa: E402
 from codec.coding import canonical_triangles  # noqa: E402
-from codec.triangulate import delaunay, triangulate  # noqa: E402
+from codec.triangulate import by_triangle, delaunay  # noqa: E402
 
 DENSITY = 0.028
 
@@ -137,7 +137,7 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int) -
         fns["render"] = lambda: decoder_cpu.render(mesh)
         fns["decode"] = lambda: codec.decode(data, backend="cpu")
         fns["triangulate"] = lambda: [delaunay(v, s) for v, s in bands]
-        fns["triangle+canonical"] = lambda: [canonical_triangles(triangulate(v, s)) for v, s in bands]
+        fns["triangle+canonical"] = lambda: [canonical_triangles(by_triangle(v, s)) for v, s in bands]
         if gl:
             fns["gl render"] = lambda: decoder_gl.render(mesh)
             fns["gl decode"] = lambda: codec.decode(data, backend="gl")

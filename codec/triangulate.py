@@ -1,7 +1,8 @@
 """Constrained Delaunay triangulation of sample pixels, the triangulation of ATM.md
 §4.2.5, two ways that give the same triangles: delaunay() by the compiled kernel
-codec._cdt (codec/cdt.hpp; the decoder's), triangulate() by Shewchuk's Triangle and
-the canonical flip pass of codec.canonical (the encoder's meshers)."""
+codec._cdt (codec/cdt.hpp; the decoder's, and through triangulate() the encoder's),
+by_triangle() by Shewchuk's Triangle and the canonical flip pass of codec.canonical
+(an independent construction, kept to check the kernel against)."""
 
 from __future__ import annotations
 
@@ -103,11 +104,21 @@ class Triangulation:
         return self._kernel.changes()
 
 
-def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None, *,
+def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
+    """The encoder's triangulation: delaunay's triangles (canonical order) of integer
+    (x, y) vertices with every segment an edge, cut at the vertices on it; none for
+    fewer than three vertices or all on one line. Crossing segments and repeated
+    vertices are refused (ATMError). The GIL is released while the kernel works."""
+    return delaunay(vertices, segments)
+
+
+def by_triangle(vertices: np.ndarray, segments: np.ndarray | None = None, *,
                 exact: bool = False) -> np.ndarray:
     """delaunay's triangles (not in canonical order) by Shewchuk's Triangle and the
-    canonical flip pass: the construction ATM.md §4.2.5 describes. Crossing segments
-    are refused as by delaunay.
+    canonical flip pass: the construction ATM.md §4.2.5 describes, independent of the
+    kernel (tests and benchmarks compare the two; the codec itself uses the kernel,
+    which is 3-6x faster). Crossing segments are refused as by delaunay; a repeated
+    vertex is dropped by Triangle (delaunay refuses it).
 
     Triangle's exact arithmetic is skipped where that provably changes nothing
     (exact=True keeps it, for tests: the result is identical).

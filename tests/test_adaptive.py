@@ -287,7 +287,7 @@ def test_fast_triangulation_equals_exact(seed, extent, walls):
     vertices at most 4095 apart: on a small grid (many cocircular quadruples, where
     inexact predicates would break ties differently) and far from the origin."""
     from codec.coding import canonical_triangles
-    from codec.triangulate import triangulate
+    from codec.triangulate import by_triangle as triangulate
 
     rng = np.random.default_rng(seed)
     n = min(300, (extent + 1) ** 2 // 2)
@@ -306,7 +306,7 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
     """The mesher's vertices come in raster order and its triangles are the constrained
     Delaunay triangulation of them with the wall steps in their order, and it says so
     (Meshed.delaunay): codec.meshcode then stores the band without triangles and
-    without running Triangle again to check."""
+    without triangulating again to check."""
     from codec import meshcode, triangulate as tri
     from codec.mesh import segments
     from codec.format_spec import schema
@@ -320,18 +320,18 @@ def test_final_triangulation_is_the_one_a_decoder_rebuilds(corpus):
     rebuilt = tri.triangulate(m.vertices, segments(m.constraints))
     assert np.array_equal(rebuilt, m.triangles)
     calls = []
-    run = tri.triangle.triangulate
+    run = meshcode.triangulate
 
     def counted(*args):
         calls.append(1)
         return run(*args)
 
     try:
-        tri.triangle.triangulate = counted
+        meshcode.triangulate = counted
         told = meshcode.encode_band(0, m, delaunay=True)
         checked = meshcode.encode_band(0, m)
     finally:
-        tri.triangle.triangulate = run
+        meshcode.triangulate = run
     assert told == checked and told["connectivity"] == schema.DELAUNAY
     assert len(calls) == 1  # only the call that checked
 

@@ -51,9 +51,9 @@ def shuffled_triangle(rng: np.random.Generator, algorithm: str):
 
 def decode_by_triangle(monkeypatch) -> None:
     """Within the test, codec.decode rebuilds Delaunay bands by Triangle and the
-    canonical pass (codec.triangulate.triangulate) instead of the compiled kernel."""
+    canonical pass (codec.triangulate.by_triangle) instead of the compiled kernel."""
     monkeypatch.setattr(meshcode, "delaunay",
-                        lambda v, w, strict=False: canonical_triangles(triangulate_module.triangulate(v, w)))
+                        lambda v, w, strict=False: canonical_triangles(triangulate_module.by_triangle(v, w)))
 
 
 def lattice(w: int, h: int, sx: int = 1, sy: int = 1) -> np.ndarray:
@@ -189,7 +189,7 @@ def test_a_long_segment_over_a_vertex_stays_an_edge():
     the tie rule would not choose: its pieces are constraints, never flipped."""
     v = lattice(6, 6)
     index = {tuple(p): i for i, p in enumerate(v.tolist())}
-    tris = triangulate(v, np.array([[index[0, 0], index[4, 4]]]))
+    tris = triangulate_module.by_triangle(v, np.array([[index[0, 0], index[4, 4]]]))
     edges = {frozenset(e) for t in tris.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     for k in range(4):
         assert frozenset((index[k, k], index[k + 1, k + 1])) in edges

@@ -16,7 +16,7 @@ from codec import container
 from codec.coding import canonical_triangles
 from codec.errors import ATMError
 from codec.mesh import segments
-from codec.triangulate import delaunay, triangulate
+from codec.triangulate import by_triangle as triangle_and_pass, delaunay
 from tests.test_canonical import local_rule_holds, perturbed_delaunay
 
 CONFORMANCE = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
@@ -24,7 +24,7 @@ CONFORMANCE = Path(__file__).resolve().parent.parent / "format_spec" / "conforma
 
 def by_triangle(vertices: np.ndarray, segs: np.ndarray | None) -> np.ndarray:
     """The reference: Triangle (exact arithmetic) and the canonical flip pass."""
-    return canonical_triangles(triangulate(vertices, segs, exact=True))
+    return canonical_triangles(triangle_and_pass(vertices, segs, exact=True))
 
 
 def ring_points(r2: int) -> np.ndarray:
@@ -247,3 +247,23 @@ def test_a_point_inserted_on_a_wall_cuts_it_into_two_walls():
     every = np.concatenate([corners, [[4, 4], [7, 5], [5, 7], [5, 3]]])
     np.testing.assert_array_equal(tri.triangles(), delaunay(every, np.array([[0, 3]])))
     assert not np.array_equal(delaunay(every), delaunay(every, np.array([[0, 3]])))
+
+
+def test_the_encoder_triangulates_with_the_kernel_alone(corpus, monkeypatch):
+    """Every encoder triangulation (meshers, refinement to a bound, bands, holes, walls,
+    the writer's check) is the compiled kernel's: Triangle is never run, and the files
+    decode as the kernel rebuilds them."""
+    import triangle
+
+    def refused(*args, **kwargs):
+        raise AssertionError("the encoder ran Triangle")
+
+    monkeypatch.setattr(triangle, "triangulate", refused)
+    image = corpus["camera"][:120, :160]
+    depth = corpus["motorcycle_disp"][:120, :160].astype(np.float32)
+    depth[40:60, 50:90] = np.nan
+    for img, options in [(image, {"points": 400}), (image, {"points": 600, "band_height": 32}),
+                         (image, {"quality": 60}), (image, {"max_error": 12, "mesher": "uniform"}),
+                         (depth, {"max_error": 2.0})]:
+        data = codec.encode(img, **options)
+        codec.decode(data)

@@ -4,6 +4,7 @@ only the vertices it is told to, and refinement refits only what a round changed
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import codec
 from codec import decoder_cpu, error_bound
@@ -79,3 +80,112 @@ def test_a_max_error_bound_takes_fewer_rounds(corpus, monkeypatch):
     out = codec.decode(codec.encode(image, max_error=6))
     assert np.abs(out.astype(int) - image).max() <= 6
     assert len(rounds) <= 64
+
+
+def test_inserting_vertices_changes_only_the_triangles_that_touch_them():
+    """The unique triangulation (ATM.md §4.2.5) of more vertices differs from that of
+    fewer only in triangles with a new corner, walls or none: what refinement relies on
+    to find the triangles a round made without matching all of them."""
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        w, h = rng.integers(8, 60, 2)
+        corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]])
+        pixels = rng.permutation(w * h)[: rng.integers(10, w * h // 2)]
+        pts = np.unique(np.r_[corners, np.c_[pixels % w, pixels // w]], axis=0)
+        old = pts[rng.random(len(pts)) < 0.6]
+        old = np.unique(np.r_[corners, old], axis=0)
+        added = pts[~(pts[:, None] == old[None]).all(axis=2).any(axis=1)]
+        before = triangulate(old)
+        walls = before[rng.permutation(len(before))[:3], :2] if trial % 2 else np.zeros((0, 2), np.int64)
+        before = triangulate(old, walls)
+        vertices = np.r_[old, added]
+        after = triangulate(vertices, walls)
+        made = error_bound._new_triangles(before, after, len(vertices))
+        is_new = np.zeros(len(vertices), bool)
+        is_new[len(old):] = True
+        np.testing.assert_array_equal(made, is_new[after].any(axis=1))
+
+
+def test_refinement_finds_a_rounds_new_triangles_by_their_new_corners(corpus, monkeypatch):
+    """Once the mesh is the unique triangulation, a round's new triangles are found by
+    their new corners: matching the old triangles against the new (1.8 s of 16 on a
+    512² DEM at max_error=2) is left for a round that drops the walls (the test above
+    shows both give the same triangles)."""
+    image = corpus["camera"][:160, :160]
+    matched = []
+    real = error_bound._new_triangles
+    monkeypatch.setattr(error_bound, "_new_triangles", lambda *a: matched.append(1) or real(*a))
+    rounds = []
+    measure = error_bound._squared_errors
+    monkeypatch.setattr(error_bound, "_squared_errors", lambda *a: rounds.append(1) or measure(*a))
+    out = codec.decode(codec.encode(image, max_error=8))
+    assert np.abs(out.astype(int) - image).max() <= 8 and len(rounds) > 5
+    assert len(matched) <= 1  # at most the round that gives up the walls
+
+
+def test_the_kept_triangulation_grows_as_a_full_one_would():
+    """Refinement's kept triangulation (error_bound._Growing: inserting each round's
+    vertices) gives the mesh meshcode.in_stored_order makes by triangulating them all
+    again, triangles in the same canonical order, with walls, round after round."""
+    from codec import meshcode
+    from codec.mesh import segments
+
+    rng = np.random.default_rng(5)
+    w, h = 90, 70
+    corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]])
+    wall = np.array([[10, 10], [40, 25], [70, 20]])
+    start = np.unique(np.r_[corners, wall, rng.integers(0, [w, h], (40, 2))], axis=0)
+    keys = start[:, 1] * w + start[:, 0]
+    line = [np.searchsorted(np.sort(keys), p[1] * w + p[0]) for p in wall]
+    start = start[np.argsort(keys)]
+    mesh = meshcode.in_stored_order(Mesh(start, np.zeros(len(start), np.uint8), np.zeros((0, 3), np.int64),
+                                         w, h, [np.array(line)]))
+    growing = error_bound._Growing(mesh)
+    taken = {tuple(p) for p in mesh.vertices.tolist()}
+    for _ in range(6):
+        pts = [p for p in rng.integers(0, [w, h], (60, 2)).tolist() if tuple(p) not in taken]
+        pts = np.unique(np.array(pts), axis=0)
+        taken |= {tuple(p) for p in pts.tolist()}
+        grown = Mesh(np.r_[mesh.vertices, pts], np.zeros(len(mesh.vertices) + len(pts), np.uint8),
+                     mesh.triangles, w, h, mesh.constraints)
+        full = meshcode.in_stored_order(grown)
+        kept = growing.grow(grown, len(mesh.vertices))
+        np.testing.assert_array_equal(kept.vertices, full.vertices)
+        np.testing.assert_array_equal(kept.triangles, full.triangles)
+        assert [c.tolist() for c in kept.constraints] == [c.tolist() for c in full.constraints]
+        assert len(segments(kept.constraints))
+        mesh = kept
+
+
+def test_a_vertex_outside_the_kept_triangulation_is_refused():
+    """A vertex beyond the first vertices' hull cannot be inserted: ATMError, which
+    refinement answers by triangulating in full (a mesh without its corners)."""
+    from codec import meshcode
+    from codec.errors import ATMError
+
+    v = np.array([[5, 5], [20, 5], [5, 20], [20, 20]])
+    mesh = meshcode.in_stored_order(Mesh(v, np.zeros(4, np.uint8), np.zeros((0, 3), np.int64), 30, 30))
+    grown = Mesh(np.r_[mesh.vertices, [[25, 25]]], np.zeros(5, np.uint8), mesh.triangles, 30, 30)
+    with pytest.raises(ATMError):
+        error_bound._Growing(mesh).grow(grown, 4)
+
+
+def test_renumbered_triangles_come_in_canonical_order():
+    """codec._renumber.canonical_renumbered(t, number) is canonical_triangles(number[t]),
+    and refuses corners or numbers out of range."""
+    from codec.coding import canonical_triangles
+    from codec.native import _renumber
+
+    rng = np.random.default_rng(2)
+    for n in (3, 10, 500, 5000):
+        v = np.unique(rng.integers(0, 200, (n, 2)), axis=0)
+        v = np.r_[[[0, 0], [199, 0], [0, 199], [199, 199]], v[(v % 199 != 0).any(axis=1)]]
+        v = np.unique(v, axis=0)
+        t = triangulate(v)
+        number = rng.permutation(len(v))
+        np.testing.assert_array_equal(_renumber.canonical_renumbered(t, number),
+                                      canonical_triangles(number[t]))
+    with pytest.raises(ValueError):
+        _renumber.canonical_renumbered(np.array([[0, 1, 5]]), np.arange(3))
+    with pytest.raises(ValueError):
+        _renumber.canonical_renumbered(np.array([[0, 1, 2]]), np.array([0, 1, 7]))
