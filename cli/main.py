@@ -157,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ROWS",
         help="rows per band (default: about a megapixel per band)",
     )
-    enc.add_argument("--precision", type=float, metavar="STEP", help="float data: quantisation step (default: the finest 16 bits allow)")
+    enc.add_argument("--precision", type=float, metavar="STEP", help="float data: quantisation step (default: about 2x --max-error when that is the only bound, else the finest 16 bits allow)")
     enc.add_argument("--value-range", type=float, nargs=2, metavar=("LOW", "HIGH"), help="float data: the range of the values (needed when they come from a stream)")
     enc.add_argument("--nodata", type=float, metavar="V", help="samples equal to V are holes, kept exactly (NaN and infinity always are in float data)")
     enc.add_argument("--metadata", metavar="JSON", help='a JSON object stored with the image, e.g. \'{"units": "m"}\'')
