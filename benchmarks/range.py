@@ -452,8 +452,13 @@ def markdown_row(cells: list[str]) -> str:
 
 
 def plot(points: dict[str, list[tuple[float, float, dict[str, Result]]]], path: Path) -> None:
-    """Bytes against E per image, one line per codec; crosses mark missed bounds."""
-    import matplotlib
+    """Bytes against E per image, one line per codec; crosses mark missed bounds. The
+    tables are printed already: without matplotlib (the bench extra) only this is skipped."""
+    try:
+        import matplotlib
+    except ImportError:
+        print(f"\nno plot ({path}): matplotlib is not installed; pip install -e '.[bench]'")
+        return
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -483,6 +488,7 @@ def plot(points: dict[str, list[tuple[float, float, dict[str, Result]]]], path: 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    print(f"\nplot: {path}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -558,7 +564,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"n/a: {what}: {why}")
     if points:
         plot(points, args.plot)
-        print(f"\nplot: {args.plot}")
     return 0
 
 
