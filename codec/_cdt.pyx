@@ -90,9 +90,10 @@ cdef class Triangulation:
 
     cdef CDT cdt
 
-    def start(self, const int64_t[:, ::1] vertices):
+    def start(self, const int64_t[:, ::1] vertices, bint track=False):
         """Triangulate the first N x 2 vertices (pixel coordinates 0 .. MAX_EXTENT,
-        distinct, not all on one line); their indices are their rows."""
+        distinct, not all on one line); their indices are their rows. track: keep
+        what changes() reports (each changed triangle slot's old corners)."""
         cdef int64_t n = vertices.shape[0], i
         if self.cdt.x.size():
             raise ValueError("Triangulation.start: already started")
@@ -110,7 +111,7 @@ cdef class Triangulation:
             status = self.cdt.build()
         if status == CDT_OK and self.cdt.V.size() == 0:
             return CDT_OUTSIDE  # all on one line: nothing to insert into
-        self.cdt.track = True
+        self.cdt.track = track
         self.cdt.dirty.clear()
         self.cdt.old.clear()
         self.cdt.dirty_mark.assign(self.cdt.V.size() // 3, 0)
@@ -167,8 +168,11 @@ cdef class Triangulation:
     def changes(self):
         """(removed, added): the triangles (K x 3 each, corners in their stored
         rotation) that left and that joined the triangulation since start or the last
-        call; a triangle may be in both if it was undone and made again."""
+        call; a triangle may be in both if it was undone and made again. Only for a
+        triangulation started with track=True."""
         cdef size_t j, k = self.cdt.dirty.size()
+        if not self.cdt.track:
+            raise ValueError("Triangulation.changes: started without track=True")
         removed, added = [], []
         for j in range(k):
             t = self.cdt.dirty[j]

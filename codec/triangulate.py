@@ -71,12 +71,14 @@ class Triangulation:
     """delaunay's triangulation kept up to date while points are inserted and segments
     constrained (for a refinement loop): the same triangles as delaunay() of all the
     points and segments so far. Pixel coordinates 0 .. 2^28 - 1; inserted points lie
-    inside the first vertices' hull (an image's corners, say). Owns its buffers."""
+    inside the first vertices' hull (an image's corners, say). Owns its buffers.
+    track_changes: keep what changes() reports (off, it costs a record per changed
+    triangle that nobody reads)."""
 
-    def __init__(self, vertices: np.ndarray) -> None:
+    def __init__(self, vertices: np.ndarray, *, track_changes: bool = False) -> None:
         v = np.ascontiguousarray(vertices, dtype=np.int64).reshape(-1, 2)
         self._kernel = _cdt.Triangulation()
-        status = self._kernel.start(v)
+        status = self._kernel.start(v, track_changes)
         if status != _cdt.OK:
             _refuse(status, len(v))
         self._count = len(v)
@@ -100,7 +102,8 @@ class Triangulation:
         return self._kernel.triangles()
 
     def changes(self) -> tuple[np.ndarray, np.ndarray]:
-        """(removed, added) triangles since construction or the last call."""
+        """(removed, added) triangles since construction or the last call; only with
+        track_changes=True (ValueError otherwise)."""
         return self._kernel.changes()
 
 

@@ -182,7 +182,7 @@ def test_the_incremental_triangulation_equals_the_batch_one(case, batches, walls
     corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
     rest = pts[~((pts[:, 0] % w == 0) & (pts[:, 1] % h == 0))]
     vertices = np.concatenate([corners, rest])
-    tri = Triangulation(corners)
+    tri = Triangulation(corners, track_changes=True)
     state = {tuple(t) for t in canonical_triangles(tri.triangles()).tolist()}
     tri.changes()
 
@@ -233,6 +233,8 @@ def test_the_incremental_triangulation_refuses_bad_points():
         tri.constrain(np.array([[1, 2]]))
     with pytest.raises(ATMError, match="one line"):
         Triangulation(np.array([[0, 0], [1, 1], [2, 2]]))
+    with pytest.raises(ValueError, match="track=True"):
+        tri.changes()  # not kept unless asked for
 
 
 def test_a_point_inserted_on_a_wall_cuts_it_into_two_walls():
