@@ -88,7 +88,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         if i["residual"] is not None:
             what = "lossless" if i["residual"] == 0 else f"every stored sample within {i['residual']}"
             print(f"  residual layer: {what} (the mesh is a preview)")
-        if "precision" in i:
+        if i.get("exact_float"):
+            print(f"  float samples stored exactly (binary32 bits); the mesh preview in steps of {i['precision']:.6g}")
+        elif "precision" in i:
             print(f"  float samples stored in steps of {i['precision']:.6g} from {i['offset']:.10g} (16 bits)")
         for line in geotiff.describe(i["metadata"]):
             print(f"  {line}")

@@ -8,7 +8,7 @@ from typing import BinaryIO, Callable, Iterable, Iterator
 
 import numpy as np
 
-from codec import geotiff, integers, quantise
+from codec import geotiff, integers, lossless_float, quantise
 from codec.errors import ATMError, UnsupportedError
 from codec.files import decode_image, npy_header
 from . import signals
@@ -40,6 +40,11 @@ class RowSource:
         quantise.hole_value); otherwise `options` as they are."""
         if self.scan is None:
             return options
+        if options.get("lossless") and options.get("precision") is None:
+            # exact steps or binary32 keys: decided on all the samples at once
+            image = lossless_float.as_binary32(np.concatenate([b.reshape(-1, self.width) for b in self.scan()]))
+            return dict(options, **lossless_float.options_for(
+                image, None, options.get("nodata"), options.get("value_range"), None))
         out = dict(options)
         nodata = quantise.check_nodata(options.get("nodata"))
         holes: list[np.ndarray] = []

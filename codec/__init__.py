@@ -203,6 +203,9 @@ def _sample_mapping(header) -> dict:
         return {}
     if is_signed(header.dtype):
         return {"offset": int(q.offset)}
+    if header.exact:
+        # binary32 samples kept exactly (ATM.md §4.10); the step is the preview mesh's
+        return {"precision": q.scale, "offset": q.offset, "exact_float": True}
     return {"precision": q.scale, "offset": q.offset}
 
 

@@ -7,7 +7,7 @@ loops release the GIL; the decoder checks every level it makes against the plane
 range and never reads past the chunk (status codes; codec.residual turns them into
 CorruptError)."""
 
-from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint32_t, uint64_t
+from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.stdlib cimport free, malloc, realloc
 from libc.string cimport memcpy
 
@@ -16,16 +16,20 @@ import numpy as np
 #: Contexts: activity bucket (0..BUCKETS-1) x local shape (0..SHAPES-1): the signs of
 #: three neighbour differences (27) x the bucket of their magnitudes' sum.
 DEF BUCKETS = 12
-#: Unary nodes of a token (tokens 0..TOKENS-1; the last has no terminating node).
+#: Unary nodes of a token (tokens 0..TOKENS-1; the last has no terminating node):
+#: 16-bit planes have magnitudes below 2^16, wide planes (binary32 keys, ATM.md
+#: §4.10) below 2^32.
 DEF TOKENS = 40
 DEF NODES = TOKENS - 1
+DEF WIDE_TOKENS = 72
+DEF WIDE_NODES = WIDE_TOKENS - 1
 DEF SHAPES = 27 * BUCKETS
 DEF CONTEXTS = BUCKETS * SHAPES
 DEF SIGN_CONTEXTS = 9
 #: Interpolation (predictor 1): contexts are the pyramid's levels, 0..LEVELS-1.
 DEF LEVELS = 32
-DEF INTERP = CONTEXTS * NODES + SIGN_CONTEXTS
-DEF MODELS = INTERP + LEVELS * NODES + LEVELS
+DEF MODELS = CONTEXTS * NODES + SIGN_CONTEXTS + LEVELS * NODES + LEVELS
+DEF WIDE_MODELS = CONTEXTS * WIDE_NODES + SIGN_CONTEXTS + LEVELS * WIDE_NODES + LEVELS
 #: Adaptation: the steady estimate moves by at most 1/2^MAX_SHIFT of the way to the
 #: coded bit, the fast one by at least 1/2^FAST_SHIFT.
 DEF MAX_SHIFT = 8
@@ -41,6 +45,8 @@ cpdef enum Status:
 
 MODEL_COUNT = MODELS
 TOKEN_COUNT = TOKENS
+WIDE_MODEL_COUNT = WIDE_MODELS
+WIDE_TOKEN_COUNT = WIDE_TOKENS
 BUCKET_COUNT = BUCKETS
 SHIFT_LIMIT = MAX_SHIFT
 
@@ -55,16 +61,17 @@ cdef inline int _shift(uint8_t n) noexcept nogil:
     return s if s < MAX_SHIFT else MAX_SHIFT
 
 
-cdef inline void _update(uint16_t* p, uint8_t* n, int bit) noexcept nogil:
-    # two estimates of one model, MODELS apart: a fast one and a steady one
+cdef inline void _update(uint16_t* p, uint8_t* n, int bit, int64_t stride) noexcept nogil:
+    # two estimates of one model, `stride` (the plane's model count) apart: a fast
+    # one and a steady one
     cdef int s = _shift(n[0])
     cdef int f = s if s < FAST_SHIFT else FAST_SHIFT
     if bit:
         p[0] = p[0] - (p[0] >> f)
-        p[MODELS] = p[MODELS] - (p[MODELS] >> s)
+        p[stride] = p[stride] - (p[stride] >> s)
     else:
         p[0] = p[0] + ((65536 - p[0]) >> f)
-        p[MODELS] = p[MODELS] + ((65536 - p[MODELS]) >> s)
+        p[stride] = p[stride] + ((65536 - p[stride]) >> s)
     if n[0] < 255:
         n[0] += 1
 
@@ -78,6 +85,7 @@ cdef struct Encoder:
     size_t size
     size_t cap
     int failed
+    int64_t stride
 
 
 cdef inline void _put(Encoder* e, uint8_t b) noexcept nogil:
@@ -110,7 +118,7 @@ cdef inline void _shift_low(Encoder* e) noexcept nogil:
 
 cdef inline void _encode_bit(Encoder* e, uint16_t* p, uint8_t* n, int bit) noexcept nogil:
     # p NULL: a raw bit, probability one half and no model
-    cdef uint32_t bound = (e.rng >> 16) * (((p[0] + p[MODELS]) >> 1) if p != NULL else 32768)
+    cdef uint32_t bound = (e.rng >> 16) * (((p[0] + p[e.stride]) >> 1) if p != NULL else 32768)
     if bit:
         e.low += bound
         e.rng -= bound
@@ -120,7 +128,7 @@ cdef inline void _encode_bit(Encoder* e, uint16_t* p, uint8_t* n, int bit) noexc
         e.rng <<= 8
         _shift_low(e)
     if n != NULL:
-        _update(p, n, bit)
+        _update(p, n, bit, e.stride)
 
 
 cdef struct Decoder:
@@ -130,6 +138,7 @@ cdef struct Decoder:
     size_t size
     size_t at
     int overrun
+    int64_t stride
 
 
 cdef inline uint8_t _next(Decoder* d) noexcept nogil:
@@ -142,7 +151,7 @@ cdef inline uint8_t _next(Decoder* d) noexcept nogil:
 
 
 cdef inline int _decode_bit(Decoder* d, uint16_t* p, uint8_t* n) noexcept nogil:
-    cdef uint32_t bound = (d.rng >> 16) * (((p[0] + p[MODELS]) >> 1) if p != NULL else 32768)
+    cdef uint32_t bound = (d.rng >> 16) * (((p[0] + p[d.stride]) >> 1) if p != NULL else 32768)
     cdef int bit
     if d.code < bound:
         d.rng = bound
@@ -155,7 +164,7 @@ cdef inline int _decode_bit(Decoder* d, uint16_t* p, uint8_t* n) noexcept nogil:
         d.rng <<= 8
         d.code = (d.code << 8) | _next(d)
     if n != NULL:
-        _update(p, n, bit)
+        _update(p, n, bit, d.stride)
     return bit
 
 
@@ -186,24 +195,32 @@ cdef class Plane:
 
     cdef uint16_t[::1] prob
     cdef uint8_t[::1] count
-    cdef int32_t[::1] above
-    cdef int32_t[::1] above_residual
+    cdef int64_t[::1] above
+    cdef int64_t[::1] above_residual
     cdef readonly int width
     cdef readonly bint started
+    #: wide: the plane codes 32-bit samples (binary32 keys), with WIDE_NODES nodes a
+    #: token; else 16-bit ones with NODES
+    cdef readonly bint wide
+    cdef readonly int nodes
+    cdef readonly int64_t models
 
-    def __init__(self, int width):
+    def __init__(self, int width, bint wide=False):
         if width < 1:
             raise ValueError("a plane is at least one pixel wide")
         self.width = width
-        self.prob = np.full(2 * MODELS, 32768, np.uint16)  # fast estimates, then steady ones
-        self.count = np.zeros(MODELS, np.uint8)
-        self.above = np.zeros(width, np.int32)
-        self.above_residual = np.zeros(width, np.int32)
+        self.wide = wide
+        self.nodes = WIDE_NODES if wide else NODES
+        self.models = WIDE_MODELS if wide else MODELS
+        self.prob = np.full(2 * self.models, 32768, np.uint16)  # fast estimates, then steady ones
+        self.count = np.zeros(self.models, np.uint8)
+        self.above = np.zeros(width, np.int64)
+        self.above_residual = np.zeros(width, np.int64)
         self.started = False
 
     def copy(self):
         """An independent copy (the encoder tries each predictor on one)."""
-        other = Plane(self.width)
+        other = Plane(self.width, self.wide)
         other.prob[:] = self.prob
         other.count[:] = self.count
         other.above[:] = self.above
@@ -212,7 +229,7 @@ cdef class Plane:
         return other
 
 
-cdef inline int64_t _predict(int32_t* cur, int32_t* up, int64_t x, int64_t w, bint has_up,
+cdef inline int64_t _predict(int64_t* cur, int64_t* up, int64_t x, int64_t w, bint has_up,
                              int64_t* shape) noexcept nogil:
     """MED on the causal neighbours with ATM.md §4.8.3's stand-ins at the edges; sets
     the local shape from the differences NE - N, N - NW, NW - W."""
@@ -244,7 +261,7 @@ cdef inline int64_t _predict(int32_t* cur, int32_t* up, int64_t x, int64_t w, bi
     return W + N - NW
 
 
-cdef inline void _contexts(int32_t* res, int32_t* up_res, int64_t x, int64_t w, bint has_up,
+cdef inline void _contexts(int64_t* res, int64_t* up_res, int64_t x, int64_t w, bint has_up,
                            int64_t shape, int* ctx, int* sctx) noexcept nogil:
     cdef int64_t rW = res[x - 1] if x > 0 else 0
     cdef int64_t rN = 0, rNW = 0, rNE = 0
@@ -257,7 +274,7 @@ cdef inline void _contexts(int32_t* res, int32_t* up_res, int64_t x, int64_t w, 
 
 
 cdef inline void _put_residual(Encoder* e, uint16_t* node, uint8_t* ncount, uint16_t* sp, uint8_t* sn,
-                               int64_t r) noexcept nogil:
+                               int64_t r, int nodes) noexcept nogil:
     """A residual as a unary token (nodes), a sign and raw low bits (ATM.md §4.8.4)."""
     cdef int64_t a = _abs(r), k
     cdef int nb = 0, tok
@@ -271,7 +288,7 @@ cdef inline void _put_residual(Encoder* e, uint16_t* node, uint8_t* ncount, uint
         tok = <int>(16 + 2 * (nb - 5) + ((a >> (nb - 2)) & 1))
     for k in range(tok):
         _encode_bit(e, node + k, ncount + k, 1)
-    if tok < NODES:
+    if tok < nodes:
         _encode_bit(e, node + tok, ncount + tok, 0)
     if a:
         _encode_bit(e, sp, sn, r < 0)
@@ -283,10 +300,10 @@ cdef inline void _put_residual(Encoder* e, uint16_t* node, uint8_t* ncount, uint
 
 
 cdef inline int64_t _get_residual(Decoder* d, uint16_t* node, uint8_t* ncount, uint16_t* sp,
-                                  uint8_t* sn) noexcept nogil:
+                                  uint8_t* sn, int nodes) noexcept nogil:
     cdef int tok = 0, negative, nb
     cdef int64_t a, k
-    while tok < NODES and _decode_bit(d, node + tok, ncount + tok):
+    while tok < nodes and _decode_bit(d, node + tok, ncount + tok):
         tok += 1
     negative = tok and _decode_bit(d, sp, sn)
     if tok < 16:
@@ -301,18 +318,18 @@ cdef inline int64_t _get_residual(Decoder* d, uint16_t* node, uint8_t* ncount, u
     return -a if negative else a
 
 
-cdef int _code_med(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int32_t* above,
-                   int32_t* above_res, bint started, int32_t* levels, const uint8_t* holes,
-                   int64_t rows, int64_t w, int64_t max_level) noexcept nogil:
+cdef int _code_med(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int64_t* above,
+                   int64_t* above_res, bint started, int64_t* levels, const uint8_t* holes,
+                   int64_t rows, int64_t w, int64_t max_level, int nodes) noexcept nogil:
     """Code (e) or decode (d) rows x w levels in raster order, skipping holes; levels
     is written when decoding. above/above_res: the row before (updated to the last
     row). A hole's level is its left neighbour's (the row above's at the row start,
     0 in the first row of a plane), its residual 0."""
     cdef int64_t y, x, pred, shape, r, level
     cdef int ctx, sctx
-    cdef int32_t* cur
-    cdef int32_t* res = <int32_t*>malloc(w * sizeof(int32_t))
-    cdef int32_t* up
+    cdef int64_t* cur
+    cdef int64_t* res = <int64_t*>malloc(w * sizeof(int64_t))
+    cdef int64_t* up
     cdef bint has_up
     if res == NULL:
         return RESIDUAL_MEMORY
@@ -335,36 +352,37 @@ cdef int _code_med(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, int32
             pred = _predict(cur, up, x, w, has_up, &shape)
             _contexts(res, above_res, x, w, has_up, shape, &ctx, &sctx)
             if e != NULL:
-                _put_residual(e, prob + ctx * NODES, count + ctx * NODES, prob + CONTEXTS * NODES + sctx,
-                              count + CONTEXTS * NODES + sctx, cur[x] - pred)
+                _put_residual(e, prob + ctx * nodes, count + ctx * nodes, prob + CONTEXTS * nodes + sctx,
+                              count + CONTEXTS * nodes + sctx, cur[x] - pred, nodes)
             else:
-                r = _get_residual(d, prob + ctx * NODES, count + ctx * NODES, prob + CONTEXTS * NODES + sctx,
-                                  count + CONTEXTS * NODES + sctx)
+                r = _get_residual(d, prob + ctx * nodes, count + ctx * nodes, prob + CONTEXTS * nodes + sctx,
+                                  count + CONTEXTS * nodes + sctx, nodes)
                 level = pred + r
                 if level < 0 or level > max_level:
                     free(res)
                     return RESIDUAL_RANGE
-                cur[x] = <int32_t>level
-            res[x] = <int32_t>(cur[x] - pred)
+                cur[x] = level
+            res[x] = cur[x] - pred
         # this row's residuals become the row above's (levels are read in place)
-        memcpy(above_res, res, w * sizeof(int32_t))
+        memcpy(above_res, res, w * sizeof(int64_t))
     if rows:
-        memcpy(above, levels + (rows - 1) * w, w * sizeof(int32_t))
+        memcpy(above, levels + (rows - 1) * w, w * sizeof(int64_t))
     free(res)
     return RESIDUAL_OK
 
 
 cdef inline void _interp_one(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, const int64_t* orig,
                              int64_t* rec, const uint8_t* holes, int64_t i, int64_t pred, int64_t level,
-                             int64_t error, int64_t top) noexcept nogil:
+                             int64_t error, int64_t top, int nodes) noexcept nogil:
     """One sample of the interpolation pyramid: its residual from `pred` quantised
     with step 2E + 1 around zero, the reconstruction clipped to 0..top."""
     cdef int64_t ctx = level if level < LEVELS else LEVELS - 1
     cdef int64_t step = 2 * error + 1, dd, q, v
-    cdef uint16_t* node = prob + INTERP + ctx * NODES
-    cdef uint8_t* ncount = count + INTERP + ctx * NODES
-    cdef uint16_t* sp = prob + INTERP + LEVELS * NODES + ctx
-    cdef uint8_t* sn = count + INTERP + LEVELS * NODES + ctx
+    cdef int64_t interp = CONTEXTS * nodes + SIGN_CONTEXTS
+    cdef uint16_t* node = prob + interp + ctx * nodes
+    cdef uint8_t* ncount = count + interp + ctx * nodes
+    cdef uint16_t* sp = prob + interp + LEVELS * nodes + ctx
+    cdef uint8_t* sn = count + interp + LEVELS * nodes + ctx
     if holes[i]:
         rec[i] = pred
         return
@@ -372,16 +390,16 @@ cdef inline void _interp_one(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* co
         dd = orig[i] - pred
         q = (_abs(dd) + error) // step
         q = -q if dd < 0 else q
-        _put_residual(e, node, ncount, sp, sn, q)
+        _put_residual(e, node, ncount, sp, sn, q, nodes)
     else:
-        q = _get_residual(d, node, ncount, sp, sn)
+        q = _get_residual(d, node, ncount, sp, sn, nodes)
     v = pred + q * step
     rec[i] = 0 if v < 0 else top if v > top else v
 
 
 cdef void _code_interp(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, const int64_t* orig,
                        int64_t* rec, const uint8_t* holes, int64_t rows, int64_t w, int64_t error,
-                       int64_t top) noexcept nogil:
+                       int64_t top, int nodes) noexcept nogil:
     """Predictor 1 (ATM.md §4.8.5): a hierarchical interpolation over the band, anchors
     every S pixels, then each halving of the stride's row midpoints and column
     midpoints from the mean of their two coded neighbours."""
@@ -392,7 +410,7 @@ cdef void _code_interp(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, c
     while y < rows:
         x = 0
         while x < w:
-            _interp_one(e, d, prob, count, orig, rec, holes, y * w + x, prev, 0, error, top)
+            _interp_one(e, d, prob, count, orig, rec, holes, y * w + x, prev, 0, error, top, nodes)
             prev = rec[y * w + x]
             x += stride
         y += stride
@@ -404,7 +422,7 @@ cdef void _code_interp(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, c
             while x < w:
                 i = y * w + x
                 pred = (rec[i - half] + rec[i + half]) >> 1 if x + half < w else rec[i - half]
-                _interp_one(e, d, prob, count, orig, rec, holes, i, pred, level, error, top)
+                _interp_one(e, d, prob, count, orig, rec, holes, i, pred, level, error, top, nodes)
                 x += stride
             y += stride
         y = half
@@ -413,14 +431,14 @@ cdef void _code_interp(Encoder* e, Decoder* d, uint16_t* prob, uint8_t* count, c
             while x < w:
                 i = y * w + x
                 pred = (rec[i - half * w] + rec[i + half * w]) >> 1 if y + half < rows else rec[i - half * w]
-                _interp_one(e, d, prob, count, orig, rec, holes, i, pred, level + 1, error, top)
+                _interp_one(e, d, prob, count, orig, rec, holes, i, pred, level + 1, error, top, nodes)
                 x += half
             y += stride
         stride = half
         level += 2
 
 
-cdef void _after_interp(int32_t* above, int32_t* above_res, bint started, const int64_t* last,
+cdef void _after_interp(int64_t* above, int64_t* above_res, bint started, const int64_t* last,
                         const uint8_t* holes, int64_t w, int64_t error) noexcept nogil:
     """The MED state after an interpolated band: its last row's levels (holes filled
     as in MED), residuals 0."""
@@ -428,7 +446,7 @@ cdef void _after_interp(int32_t* above, int32_t* above_res, bint started, const 
     for x in range(w):
         above_res[x] = 0
         if not holes[x]:
-            above[x] = <int32_t>((last[x] + error) // (2 * error + 1))
+            above[x] = (last[x] + error) // (2 * error + 1)
         elif x > 0:
             above[x] = above[x - 1]
         elif not started:
@@ -448,6 +466,15 @@ cdef object _begin_encoder(Encoder* e):
         raise MemoryError()
 
 
+def _check_top(planes, int64_t top):
+    # a token holds magnitudes below 2^16 (2^32 in a wide plane): larger samples
+    # could not be coded, and a decoder's levels must stay within them
+    cdef Plane plane
+    for plane in planes:
+        if top > (0xFFFFFFFF if plane.wide else 0xFFFF):
+            raise ValueError(f"samples up to {top} do not fit a {'wide' if plane.wide else '16-bit'} plane")
+
+
 def encode(planes, int predictor, samples_list, holes, int64_t error, int64_t top):
     """The coded bytes of a chunk: each plane's samples (rows x W int64, holes'
     entries ignored) in turn with `predictor` (0 MED on levels, 1 interpolation), with
@@ -455,13 +482,14 @@ def encode(planes, int predictor, samples_list, holes, int64_t error, int64_t to
     cdef Encoder e
     cdef Plane plane
     cdef const int64_t[:, ::1] sv
-    cdef int32_t[:, ::1] lv
+    cdef int64_t[:, ::1] lv
     cdef int64_t[:, ::1] rv
     cdef const uint8_t[:, ::1] hv = holes
     cdef int status = RESIDUAL_OK
     cdef int64_t rows = hv.shape[0], w = hv.shape[1], step = 2 * error + 1
     if predictor not in (0, 1) or error < 0 or top < 0:
         raise ValueError("predictor 0 or 1, error and top >= 0")
+    _check_top(planes, top)
     _begin_encoder(&e)
     try:
         for plane, samples in zip(planes, samples_list):
@@ -470,17 +498,18 @@ def encode(planes, int predictor, samples_list, holes, int64_t error, int64_t to
                 raise ValueError("samples, holes and plane disagree on the band's shape")
             if rows == 0:
                 continue
+            e.stride = plane.models
             if predictor == 0:
-                lv = ((np.asarray(samples) + error) // step).astype(np.int32)
+                lv = (np.asarray(samples) + error) // step
                 with nogil:
                     status = _code_med(&e, NULL, &plane.prob[0], &plane.count[0], &plane.above[0],
                                        &plane.above_residual[0], plane.started, &lv[0, 0], &hv[0, 0], rows, w,
-                                       (top + error) // step)
+                                       (top + error) // step, plane.nodes)
             else:
                 rv = np.empty((rows, w), np.int64)
                 with nogil:
                     _code_interp(&e, NULL, &plane.prob[0], &plane.count[0], &sv[0, 0], &rv[0, 0], &hv[0, 0],
-                                 rows, w, error, top)
+                                 rows, w, error, top, plane.nodes)
                     _after_interp(&plane.above[0], &plane.above_residual[0], plane.started, &rv[rows - 1, 0],
                                   &hv[rows - 1, 0], w, error)
             if status != RESIDUAL_OK:
@@ -503,7 +532,7 @@ def decode(planes, int predictor, const uint8_t[::1] data, holes, int64_t error,
     level and byte."""
     cdef Decoder d
     cdef Plane plane
-    cdef int32_t[:, ::1] lv
+    cdef int64_t[:, ::1] lv
     cdef int64_t[:, ::1] rv
     cdef const uint8_t[:, ::1] hv = holes
     cdef int status = RESIDUAL_OK
@@ -511,6 +540,7 @@ def decode(planes, int predictor, const uint8_t[::1] data, holes, int64_t error,
     cdef int i
     if predictor not in (0, 1) or error < 0 or top < 0:
         raise ValueError("predictor 0 or 1, error and top >= 0")
+    _check_top(planes, top)
     out = []
     d.buf = &data[0] if data.shape[0] else NULL
     d.size = data.shape[0]
@@ -526,18 +556,19 @@ def decode(planes, int predictor, const uint8_t[::1] data, holes, int64_t error,
             raise ValueError("holes and plane disagree on the band's width")
         samples = np.zeros((rows, w), np.int64)
         rv = samples
+        d.stride = plane.models
         if rows and predictor == 0:
-            levels = np.zeros((rows, w), np.int32)
+            levels = np.zeros((rows, w), np.int64)
             lv = levels
             with nogil:
                 status = _code_med(NULL, &d, &plane.prob[0], &plane.count[0], &plane.above[0],
                                    &plane.above_residual[0], plane.started, &lv[0, 0], &hv[0, 0], rows, w,
-                                   (top + error) // step)
-            samples = np.minimum(levels.astype(np.int64) * step, top)
+                                   (top + error) // step, plane.nodes)
+            samples = np.minimum(levels * step, top)
         elif rows:
             with nogil:
                 _code_interp(NULL, &d, &plane.prob[0], &plane.count[0], NULL, &rv[0, 0], &hv[0, 0],
-                             rows, w, error, top)
+                             rows, w, error, top, plane.nodes)
                 _after_interp(&plane.above[0], &plane.above_residual[0], plane.started, &rv[rows - 1, 0],
                               &hv[rows - 1, 0], w, error)
         if status == RESIDUAL_OK and d.overrun:

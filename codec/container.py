@@ -46,6 +46,9 @@ class Header:
     metadata: dict | None = None
     #: a gray image decodes as (H, W, 1), not (H, W): the file's `axis` chunk (ATM.md §4.9)
     channel_axis: bool = False
+    #: float32 samples stored exactly as binary32 keys by the residual layer
+    #: (`sample_type` 6, ATM.md §4.10); the mesh is then a preview through `quant`
+    exact: bool = False
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -58,11 +61,17 @@ class Header:
         """The integer type the samples are coded in."""
         return STORAGE if self.quant is not None else np.dtype(self.dtype)
 
+    @property
+    def layer_storage(self) -> np.dtype:
+        """The integer type a residual layer codes: binary32 keys for exact float."""
+        return np.dtype(np.uint32) if self.exact else self.storage
+
     def _fields(self) -> dict:
         dtype = np.dtype(self.dtype)
         code = (
             SAMPLE_TYPES[dtype] if self.quant is None
-            else integers.SAMPLE_TYPES[dtype] if integers.is_signed(dtype) else schema.FLOAT16Q
+            else integers.SAMPLE_TYPES[dtype] if integers.is_signed(dtype)
+            else schema.FLOAT32X if self.exact else schema.FLOAT16Q
         )
         return dict(width=self.width, height=self.height, sample_type=code, channels=self.channels)
 
@@ -284,7 +293,7 @@ class Reader:
         if self.header.sample_type in schema.QUANTISED:
             ctype, payload, offset = self._next_chunk()
             if ctype != schema.QUANT:
-                kind = "float" if self.header.sample_type == schema.FLOAT16Q else "signed integer"
+                kind = "float" if self.header.sample_type in (schema.FLOAT16Q, schema.FLOAT32X) else "signed integer"
                 raise CorruptError(f"{kind} data needs a QUNT chunk after AHDR; found {ctype.decode('latin-1')}")
             self.header = self._parse_quant(self.header, payload)
         self.header = self.header.header
@@ -389,7 +398,7 @@ class Reader:
         if h.sample_type not in schema.SAMPLE_DTYPES:
             raise UnsupportedError(
                 f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16, 2 = quantised float, "
-                "3 = int8, 4 = int16, 5 = int32)"
+                "3 = int8, 4 = int16, 5 = int32, 6 = exact float)"
             )
         if h.channels not in (1, 3):
             raise UnsupportedError(f"{h.channels} channels; .atm has 1 or 3")
@@ -398,9 +407,11 @@ class Reader:
         if h.sample_type in schema.QUANTISED and h.channels != 1:
             raise UnsupportedError("quantised float and signed integer data have one channel")
         limits.check_image_size(h.width, h.height)
-        dtype = np.dtype(np.float32) if h.sample_type == schema.FLOAT16Q else {**DTYPES, **integers.DTYPES}[h.sample_type]
+        exact = h.sample_type == schema.FLOAT32X
+        dtype = (np.dtype(np.float32) if h.sample_type == schema.FLOAT16Q or exact
+                 else {**DTYPES, **integers.DTYPES}[h.sample_type])
         limits.check_image_bytes(h.width, h.height, h.channels, dtype.itemsize)
-        return _RawHeader(h.sample_type, Header(h.width, h.height, dtype, h.channels))
+        return _RawHeader(h.sample_type, Header(h.width, h.height, dtype, h.channels, exact=exact))
 
     @staticmethod
     def _parse_quant(raw: "_RawHeader", payload: bytes) -> "_RawHeader":
@@ -419,7 +430,7 @@ class Reader:
                 f"QUNT chunk of {h.dtype} data has scale {q.scale!r} and offset {q.offset!r}: "
                 "integer data needs scale 1 and a whole-number offset within int32's range"
             )
-        return _RawHeader(raw.sample_type, Header(h.width, h.height, h.dtype, h.channels, quant=Quantiser(q.offset, q.scale)))
+        return _RawHeader(raw.sample_type, dataclasses.replace(h, quant=Quantiser(q.offset, q.scale)))
 
     def _read_metadata(self, payload: bytes, offset: int) -> None:
         where = f"meta chunk at byte {offset}"
@@ -446,6 +457,8 @@ class Reader:
                 raise CorruptError(f"NDAT value {value!r} is not a {h.dtype} sample")
         elif np.isfinite(value) and abs(value) > float(np.finfo(np.float32).max):
             raise CorruptError(f"NDAT value {value!r} is beyond float32's range")
+        elif h.exact and np.isnan(value) and not struct.unpack("<Q", payload)[0] & (0x7FFFFF << 29):
+            raise CorruptError("NDAT is a NaN whose binary32 form would be infinite (ATM.md §4.10)")
         return dataclasses.replace(h, nodata=float(value))
 
     def _parse_mask(self, payload: bytes, offset: int, y0: int) -> np.ndarray:
@@ -574,6 +587,9 @@ class Reader:
                     raise CorruptError(f"MESH chunk at byte {offset} has no MASK chunk before it")
                 if layered is not None and layered != (residual is not None):
                     raise CorruptError(f"MESH chunk at byte {offset}: a residual layer covers every band or none")
+                if h.exact and residual is None:
+                    raise CorruptError(f"MESH chunk at byte {offset} has no RESD chunk: exact float data "
+                                       "(sample_type 6) is stored in its residual layer (ATM.md §4.10)")
                 layered, self.band_residual, residual = residual is not None, residual, None
                 y0, mesh = self._parse_band(payload, offset, next_y0)
                 if holes is not None:

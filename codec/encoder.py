@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from . import container, integers, quantise
+from . import container, integers, lossless_float, quantise
 from .errors import OptionError
 from .image import as_image
 from .mesh import Mesh
@@ -107,6 +107,8 @@ def _encode(image, settings: Settings, mask=None) -> bytes:
             raise OptionError(f"mask must have shape {(height, width)}, not {holes.shape}")
         if img.dtype.kind != "f" and settings.nodata is None:
             settings = settings.replace(nodata=0)
+    if img.dtype.kind == "f" and settings.lossless:
+        img, settings = lossless_float.settle(img, holes, settings)
     if img.dtype.kind == "f":
         # the header carries nodata and the quantisation: both come from the data here
         if settings.nodata is None:

@@ -53,11 +53,8 @@ def layer_bound(settings, plan) -> int | None:
     `max_rms` gets E = floor(max_rms) here; codec.encode, which has the whole image,
     then widens E while the measured RMS stays within max_rms (encoder.py)."""
     if settings.lossless:
-        if plan.dtype.kind == "f":
-            raise UnsupportedError(
-                "lossless float data needs the exact float bits, which .atm does not store yet; "
-                "give max_error (the bound holds on every valid sample) instead"
-            )
+        # float data: exact on q (precision given: codec.lossless_float's exact steps)
+        # or on binary32 keys (exact_floats)
         return 0
     if settings.residual == "auto":
         raise OptionError(
@@ -68,6 +65,13 @@ def layer_bound(settings, plan) -> int | None:
     if not settings.residual or not bounds:
         return None
     return min(int(math.floor(min(bounds))), _top(plan.storage))
+
+
+def exact_floats(settings, plan) -> bool:
+    """Whether the image is stored as binary32 keys (`sample_type` 6, ATM.md §4.10):
+    lossless float data without a precision (with one, every sample must be a whole
+    number of steps from the range's low end, checked as it is written)."""
+    return bool(settings.lossless and plan.dtype.kind == "f" and settings.precision is None)
 
 
 def mesh_settings(settings, width: int, height: int):
@@ -97,10 +101,10 @@ class ResidualEncoder:
 
     def __init__(self, width: int, channels: int, storage: np.dtype, error: int):
         storage = np.dtype(storage)
-        if not 0 <= error <= min(_top(storage), 65535):
+        if not 0 <= error <= min(_top(storage), 65535) or storage.itemsize > 2 and error:
             raise ValueError(f"a residual bound of {error} does not fit {storage} samples")
         self.width, self.channels, self.storage, self.error = width, channels, storage, int(error)
-        self._planes = [_residual.Plane(width) for _ in range(channels)]
+        self._planes = [_residual.Plane(width, storage.itemsize > 2) for _ in range(channels)]
 
     def band(self, y0: int, rows: np.ndarray, holes: np.ndarray | None) -> bytes:
         """The RESD payload of image rows y0 .. y0 + len(rows) - 1 (stored samples,
@@ -125,7 +129,7 @@ class ResidualDecoder:
 
     def __init__(self, width: int, channels: int, storage: np.dtype):
         self.width, self.channels, self.storage = width, channels, np.dtype(storage)
-        self._planes = [_residual.Plane(width) for _ in range(channels)]
+        self._planes = [_residual.Plane(width, self.storage.itemsize > 2) for _ in range(channels)]
         self._error: int | None = None
 
     def band(self, payload: bytes, y0: int, rows: int, holes: np.ndarray | None, where: str) -> np.ndarray:
@@ -142,6 +146,8 @@ class ResidualDecoder:
             raise CorruptError(f"{where} codes {channels} channels; the image has {self.channels}")
         if error > _top(self.storage):
             raise CorruptError(f"{where} has bound {error}, beyond the samples' range 0..{_top(self.storage)}")
+        if error and self.storage.itemsize > 2:
+            raise CorruptError(f"{where} has bound {error}; exact float samples (sample_type 6) have bound 0")
         if self._error is not None and error != self._error:
             raise CorruptError(f"{where} has bound {error}; the image's earlier bands have {self._error}")
         self._error = error

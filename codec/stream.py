@@ -11,7 +11,7 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, integers, pipeline, residual
+from . import container, integers, lossless_float, pipeline, residual
 from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
@@ -70,7 +70,12 @@ class StreamEncoder:
         self._plan = pipeline.plan(settings, width, height, dtype, channels)
         p = self._plan
         error = residual.layer_bound(settings, p)
-        self._residual = None if error is None else residual.ResidualEncoder(p.width, p.channels, p.storage, error)
+        #: lossless float: binary32 keys in the layer (ATM.md §4.10), or (precision
+        #: given) exact steps, each written sample checked
+        self._exact = residual.exact_floats(settings, p)
+        self._steps = bool(settings.lossless) and p.dtype.kind == "f" and not self._exact
+        storage = lossless_float.KEY_STORAGE if self._exact else p.storage
+        self._residual = None if error is None else residual.ResidualEncoder(p.width, p.channels, storage, error)
         if self._residual is not None:
             self._plan = p = pipeline.plan(residual.mesh_settings(settings, p.width, p.height), width, height, dtype, channels)
         self.width, self.height, self.dtype, self.channels = p.width, p.height, p.dtype, p.channels
@@ -86,6 +91,7 @@ class StreamEncoder:
             nodata=None if p.nodata is None else float(p.nodata),
             metadata=settings.metadata,
             channel_axis=channel_axis and p.channels == 1,
+            exact=self._exact,
         )
         if settings.metadata is not None:
             container.encode_metadata(settings.metadata)  # checked before anything is written
@@ -93,6 +99,10 @@ class StreamEncoder:
         shape = (self.band_height + 1, p.width) + ((p.channels,) if p.channels > 1 else ())
         self._buf = np.empty(shape, p.storage)
         self._holes = np.zeros(shape[:2], bool)
+        if self._exact:
+            self._keys = np.empty(shape[:2], lossless_float.KEY_STORAGE)
+            self._hole_bits = lossless_float.hole_bits(p.nodata)
+            self._unfit = np.zeros(shape[:2], bool)  # valid, but not finite: the preview skips them
         self._filled = 0  # rows of the current band in _buf
         self._y0 = 0  # image row of _buf[0]
         self._received = 0
@@ -128,12 +138,29 @@ class StreamEncoder:
             if holes.shape != rows.shape[:2]:
                 raise ATMError(f"holes must have shape {rows.shape[:2]}, not {holes.shape}")
             missing |= holes
-        if self._nodata is not None and not np.isnan(self._nodata):
+        unfit = keys = None
+        if self._exact:
+            # holes are the pixels with the hole value's very bits (so -0.0 is no hole of
+            # 0.0, nor one NaN of another); every other sample is kept as it is
+            floats = lossless_float.as_binary32(rows)
+            missing |= floats.view(np.uint32) == self._hole_bits
+            keys, unfit = lossless_float.keys(floats), ~np.isfinite(floats) & ~missing
+            lo, hi = self._quant.offset, self._quant.top
+            # NaNs out before widening (a signalling NaN would raise the invalid flag)
+            finite = np.where(missing | unfit, np.float32(0), floats).astype(np.float64)
+            rows = self._quant.quantise(np.clip(np.where(missing | unfit, lo, finite), lo, hi))
+        elif self._quant is not None:
+            if self._nodata is not None and not np.isnan(self._nodata):
+                missing |= rows == self._nodata
+            missing |= ~np.isfinite(rows)
+            exact = rows
+            # a binary64 offset (an exact step's grid point need not be a binary32)
+            rows = self._quant.quantise(np.where(missing, np.float64(self._quant.offset), rows))
+            if self._steps:
+                lossless_float.check_steps(exact, rows, missing, self._quant, self._received)
+        elif self._nodata is not None and not np.isnan(self._nodata):
             equal = rows == self._nodata
             missing |= equal if equal.ndim == 2 else equal.all(axis=2)
-        if self._quant is not None:
-            missing |= ~np.isfinite(rows)
-            rows = self._quant.quantise(np.where(missing, self._quant.offset, rows))
         if missing.any() and self._nodata is None:
             raise ATMError("the image has holes: give nodata= (the value hole pixels decode to)")
         if self._received + len(rows) > self.height:
@@ -143,6 +170,9 @@ class StreamEncoder:
             n = min(len(rows) - i, len(self._buf) - self._filled)
             self._buf[self._filled : self._filled + n] = rows[i : i + n]
             self._holes[self._filled : self._filled + n] = missing[i : i + n]
+            if self._exact:
+                self._keys[self._filled : self._filled + n] = keys[i : i + n]
+                self._unfit[self._filled : self._filled + n] = unfit[i : i + n]
             self._filled += n
             self._received += n
             i += n
@@ -155,6 +185,8 @@ class StreamEncoder:
         band_holes = self._holes[: self._filled]
         band = self._buf[: self._filled]
         mesh_holes = band_holes if band_holes.any() else None
+        if self._exact and self._unfit[: self._filled].any():
+            band, mesh_holes = hole_stage.fill(band, band_holes | self._unfit[: self._filled]), None
         if self._residual is not None and mesh_holes is not None:
             # the layer gives the pixels: a mesh of the holes filled need not trace
             # their outlines (what made `points` balloon on range data with holes)
@@ -172,7 +204,8 @@ class StreamEncoder:
         layer = None
         if self._residual is not None:
             n = residual.covered_rows(self._filled, self._received == self.height)
-            layer = self._residual.band(self._y0, self._buf[:n], band_holes[:n] if band_holes.any() else None)
+            coded_rows = self._keys[:n] if self._exact else self._buf[:n]
+            layer = self._residual.band(self._y0, coded_rows, band_holes[:n] if band_holes.any() else None)
             if band_holes.any():
                 coded.mesh.holes = band_holes.copy()  # for the band's MASK chunk
         self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout, layer)
@@ -182,6 +215,8 @@ class StreamEncoder:
         self._top, self._step = coded.bottom_row(), coded.step
         self._buf[0] = self._buf[self._filled - 1]
         self._holes[0] = self._holes[self._filled - 1]
+        if self._exact:
+            self._keys[0], self._unfit[0] = self._keys[self._filled - 1], self._unfit[self._filled - 1]
         self._y0 += self._filled - 1
         self._filled = 1
         if self._progress is not None:
@@ -263,7 +298,7 @@ class StreamDecoder:
                         group, pixels = [], 0
                     if layer is None:
                         h = self._reader.header
-                        layer = residual.ResidualDecoder(h.width, h.channels, h.storage)
+                        layer = residual.ResidualDecoder(h.width, h.channels, h.layer_storage)
                     yield self._layered_rows(layer, y0, mesh)
                     continue
                 size = mesh.width * mesh.height
@@ -300,11 +335,16 @@ class StreamDecoder:
     def _finish(self, y0: int, mesh: Mesh, rows: np.ndarray) -> tuple[int, np.ndarray]:
         """Stored samples -> the image's (dequantised, holes, channel axis), each row once."""
         quant, nodata = self._reader.header.quant, self._reader.header.nodata
-        if quant is not None and integers.is_signed(self.dtype):
+        if self._reader.header.exact:
+            rows = lossless_float.floats(rows)
+            if mesh.holes is not None:
+                # the hole value's exact bits (a NaN's payload too, ATM.md §4.10)
+                rows.view(np.uint32)[mesh.holes[: len(rows)]] = lossless_float.hole_bits(nodata)
+        elif quant is not None and integers.is_signed(self.dtype):
             rows = integers.restore(rows, quant, self.dtype)
         elif quant is not None:
             rows = quant.dequantise(rows)
-        if mesh.holes is not None:
+        if mesh.holes is not None and not self._reader.header.exact:
             rows[mesh.holes[: len(rows)]] = nodata
         if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.9)
             rows = rows[:, :, None]

@@ -503,8 +503,14 @@ class Header:
 
     @property
     def top(self) -> int:
-        """The largest sample value."""
+        """The largest sample value of the mesh."""
         return 255 if self.sample_type == 0 else 65535
+
+    @property
+    def layer_top(self) -> int:
+        """The largest sample value of the residual layer: binary32 keys for
+        sample_type 6 (§4.10)."""
+        return 2**32 - 1 if self.sample_type == 6 else self.top
 
 
 def parse_header(payload: bytes) -> Header:
@@ -516,13 +522,13 @@ def parse_header(payload: bytes) -> Header:
         raise DecodeError(f"image size {width}x{height}: both sides must be at least 1")
     if width > MAX_SIDE or height > MAX_SIDE or width * height > MAX_PIXELS:
         raise DecodeError(f"image size {width}x{height} is over the limits (sides <= 2^20, pixels <= 2^28)")
-    if sample_type not in (0, 1, 2, *SIGNED):
+    if sample_type not in (0, 1, 2, *SIGNED, 6):
         raise UnsupportedError(f"sample_type {sample_type} is reserved")
     if channels not in (1, 3):
         raise UnsupportedError(f"{channels} channels: only 1 (gray) and 3 (RGB) are defined")
     if sample_type >= 2 and channels != 1:
         raise DecodeError(f"sample_type {sample_type} has 1 channel, not {channels}")
-    sample_bytes = {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 4}[sample_type]
+    sample_bytes = {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 4, 6: 4}[sample_type]
     if width * height * channels * sample_bytes > MAX_IMAGE_BYTES:
         raise DecodeError(f"the decoded {width}x{height} image would take more than 2^30 bytes (§8)")
     return Header(width, height, sample_type, channels)
@@ -550,10 +556,13 @@ def parse_nodata(payload: bytes, header: Header) -> None:
     if len(payload) != 8:
         raise DecodeError(f"NDAT payload is {len(payload)} bytes, not 8")
     (value,) = struct.unpack("<d", payload)
-    if header.sample_type == 2:
+    if header.sample_type in (2, 6):
         # NaN, +inf, -inf or a finite binary32 value
         if not (math.isnan(value) or math.isinf(value) or abs(value) <= float(np.finfo(np.float32).max)):
             raise DecodeError(f"NDAT value {value} is outside binary32's range")
+        (bits,) = struct.unpack("<Q", payload)
+        if header.sample_type == 6 and math.isnan(value) and not (bits >> 29) & 0x7FFFFF:
+            raise DecodeError("NDAT: a NaN whose top 23 significand bits are 0 has no binary32 form (§4.10)")
     elif header.sample_type in SIGNED:
         info = np.iinfo(SIGNED[header.sample_type])
         if not (math.isfinite(value) and value == int(value) and info.min <= value <= info.max):
@@ -989,7 +998,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
             continue
         if kind == b"QUNT":
             if not expect_qunt:
-                raise DecodeError("QUNT chunk out of place (only directly after AHDR, for sample_type 2 to 5)")
+                raise DecodeError("QUNT chunk out of place (only directly after AHDR, for sample_type 2 to 6)")
             parse_quantisation(payload, header)
             expect_qunt = False
         elif kind == b"NDAT":
@@ -1011,6 +1020,8 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
         elif kind == b"MESH":
             if bands and (bands[0].residual is None) != (resd is None):
                 raise DecodeError("a residual layer covers every band or none")
+            if header.sample_type == 6 and resd is None:
+                raise DecodeError("sample_type 6: every band needs its RESD chunk (§4.10)")
             if complete:
                 raise DecodeError("a MESH chunk after the band that ends on the last row")
             if have_ndat and mask is None:
@@ -1059,6 +1070,14 @@ def decode(data: bytes) -> np.ndarray:
 
 def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarray:
     """The decoded integers in the header's sample type, holes filled with NDAT."""
+    if header.sample_type == 6:
+        # §4.10: keys back to binary32 bits; holes get NDAT's bits, payload and all
+        keys = image.astype(np.uint64)
+        bits = np.where(keys >> 31, keys ^ 0x80000000, ~keys & 0xFFFFFFFF).astype(np.uint32)
+        if header.nodata is not None:
+            bits[holes] = binary32_bits(header.nodata)
+        out = bits.view(np.float32)
+        return out[:, :, 0] if not header.channel_axis else out
     if header.sample_type == 2:
         out = (header.offset + header.scale * image.astype(np.float64)).astype(np.float32)
     elif header.sample_type in SIGNED:
@@ -1118,10 +1137,19 @@ def sign(v: int) -> int:
     return (v > 0) - (v < 0)
 
 
+def binary32_bits(value: float) -> int:
+    """§4.10: the bits a hole decodes to from the NDAT value."""
+    (bits,) = struct.unpack("<Q", struct.pack("<d", value))
+    if math.isnan(value):
+        return ((bits >> 32) & 0x80000000) | 0x7F800000 | ((bits >> 29) & 0x7FFFFF)
+    return struct.unpack("<I", struct.pack("<f", value))[0]  # rounded to nearest, ties to even
+
+
 def read_residual(rc: RangeDecoder, nodes: list[list[int]], sign_model: list[int]) -> int:
-    """§4.8.4: a unary token, its sign and raw low bits."""
+    """§4.8.4: a unary token, its sign and raw low bits (39 nodes, or 71 in a plane
+    of binary32 keys, §4.10)."""
     t = 0
-    while t < 39 and rc.bit(nodes[t]):
+    while t < len(nodes) and rc.bit(nodes[t]):
         t += 1
     negative = t > 0 and rc.bit(sign_model)
     if t < 16:
@@ -1138,9 +1166,9 @@ class ResidualPlane:
     """One channel's models and last coded row (levels and residuals), kept from band
     to band (§4.8.1)."""
 
-    def __init__(self, width: int) -> None:
-        self.tokens = [[[32768, 32768, 0] for _ in range(39)] for _ in range(3888)]
-        self.interp_tokens = [[[32768, 32768, 0] for _ in range(39)] for _ in range(32)]
+    def __init__(self, width: int, nodes: int = 39) -> None:
+        self.tokens = [[[32768, 32768, 0] for _ in range(nodes)] for _ in range(3888)]
+        self.interp_tokens = [[[32768, 32768, 0] for _ in range(nodes)] for _ in range(32)]
         self.interp_signs = [[32768, 32768, 0] for _ in range(32)]
         self.signs = [[32768, 32768, 0] for _ in range(9)]
         self.above: list[int] | None = None  # None: the image's first row comes next
@@ -1226,9 +1254,9 @@ class ResidualPlane:
 def decode_residual_layer(header: Header, bands: list[Band]) -> np.ndarray:
     """§4.8: the image's samples (height x width x channels, before §4.4's mapping)
     from every band's RESD chunk."""
-    width, channels, top = header.width, header.channels, header.top
+    width, channels, top = header.width, header.channels, header.layer_top
     image = np.zeros((header.height, width, channels), np.int64)
-    planes = [ResidualPlane(width) for _ in range(channels)]
+    planes = [ResidualPlane(width, 71 if header.sample_type == 6 else 39) for _ in range(channels)]
     bound = None
     for band in bands:
         payload = band.residual
@@ -1240,7 +1268,7 @@ def decode_residual_layer(header: Header, bands: list[Band]) -> np.ndarray:
             raise DecodeError(f"RESD: {rows} rows from {y0}, its band emits {emitted} from {band.y0}")
         if predictor not in (0, 1):
             raise UnsupportedError(f"RESD: predictor {predictor}")
-        if count != channels or e > top or (bound is not None and e != bound):
+        if count != channels or e > top or (bound is not None and e != bound) or (e and header.sample_type == 6):
             raise DecodeError("RESD: channels or bound do not match the image")
         bound = e
         step = 2 * e + 1

@@ -44,11 +44,15 @@ AXIS = b"axis"
 
 #: sample_type codes -> how samples are stored. Code 2 is float data stored as 16-bit
 #: integers with the QUNT chunk's scale and offset.
-SAMPLE_DTYPES = {0: np.dtype("<u1"), 1: np.dtype("<u2"), 2: np.dtype("<u2"), 3: np.dtype("<u2"), 4: np.dtype("<u2"), 5: np.dtype("<u2")}
+SAMPLE_DTYPES = {0: np.dtype("<u1"), 1: np.dtype("<u2"), 2: np.dtype("<u2"), 3: np.dtype("<u2"), 4: np.dtype("<u2"), 5: np.dtype("<u2"),
+                 6: np.dtype("<u2")}
 FLOAT16Q = 2
+#: Code 6: binary32 samples stored exactly by the residual layer (§4.10); the mesh is a
+#: preview quantised as for code 2.
+FLOAT32X = 6
 #: Codes 3, 4, 5: int8, int16, int32 samples stored as 16-bit integers plus the QUNT
 #: chunk's whole-number offset (scale 1). Every code in QUANTISED has a QUNT chunk.
-QUANTISED = (2, 3, 4, 5)
+QUANTISED = (2, 3, 4, 5, 6)
 
 
 class NDArray(Construct):

@@ -187,7 +187,24 @@ def main() -> None:
         np.random.default_rng(13).integers(0, 256, (16, 24, 3), dtype=np.uint8), max_error=2, residual=True,
         band_height=6, points=60, mesher="uniform",
     )
+    # lossless float (§4.10): binary32 keys with -0, infinities, a subnormal and a NaN
+    # with a payload as samples, NaN holes over bands; and depths in millimetres as
+    # metres, whole numbers of a step, through sample_type 2 with a lossless layer
+    rng = np.random.default_rng(21)
+    exact = (synthetic.range_scene(40, 30, seed=21).astype(np.float64) * 0.0137 + 1.25
+             + rng.normal(0, 0.002, (30, 40))).astype(np.float32)
+    exact[6:13, 9:21] = np.nan
+    exact.view(np.uint32)[0, :6] = [0x80000000, 0x7F800000, 0xFF800000, 0x00000001, 0x7FC12345, 0xFFC00000]
+    cases["exact_float32_holes"] = codec.encode(exact, lossless=True, band_height=12, points=120, mesher="uniform")
+    millimetres = (synthetic.range_scene(36, 24, seed=22).astype(np.float64) * 7 + 800) / 1000
+    millimetres[3:8, 20:30] = np.nan
+    cases["steps_float_lossless"] = codec.encode(millimetres.astype(np.float32), lossless=True, band_height=10,
+                                                 points=90, mesher="uniform")
+    # `make.py NAME ...` writes only those files (the others keep their bytes)
+    chosen = set(sys.argv[1:]) or set(cases)
     for name, data in cases.items():
+        if name not in chosen:
+            continue
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
         if image.dtype.kind in "fi" or image.shape[2:] == (1,):  # beyond PNG: float, signed, H x W x 1
