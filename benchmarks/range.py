@@ -20,7 +20,13 @@ JPEG-LS near-lossless (NEAR = floor(E), at most 255), ZFP (fixed accuracy), and
 q2E+jxl: the levels of a uniform quantiser of step 2E (2 floor(E) + 1 for integer data,
 holes a level of their own) coded by JPEG XL's lossless mode. Without a mask, holes
 count as kept when thresholding |decoded - nodata| <= E gives back exactly the holes.
-Lossless: .atm with lossless=True against PNG, JPEG-LS and JPEG XL lossless.
+Lossless: .atm with lossless=True against PNG, JPEG-LS and JPEG XL lossless; float
+images (the DEM as float32, the DEM resampled off its grid with NaN holes, the depth
+maps in metres with NaN holes) against JPEG XL lossless of the floats, LERC at max
+error 0 (with a validity mask), ZFP reversible, and zstd (level 19) and deflate
+(level 9) of the TIFF floating-point predictor's bytes; a float codec counts as
+lossless only if every valid sample keeps its binary32 bits and the holes stay NaN.
+    python benchmarks/range.py --images srtm_dem_f32 srtm_f32_holes tum_depth_m kinect_depth_m --errors
 
 Times: encode and decode of every codec run in interleaved rounds (each codec once per
 round; the first round's output is the one measured), so load on a shared machine hits
@@ -142,7 +148,34 @@ def load_cases(range_data: Path = RANGE_DATA) -> dict[str, Callable[[], Case]]:
         # the DEM as float32 metres: float data has no precision of its own for a codec
         # to find (issue #21: max_error alone must choose the quantisation)
         loaders["srtm_dem_f32"] = lambda: Case("srtm_dem_f32", dem().image.astype(np.float32), None)
+        loaders["srtm_f32_holes"] = lambda: resampled_with_holes(dem())
+    for name, per_metre in (("tum_depth", 5000), ("kinect_depth", 1000)):
+        if name in loaders:
+            loaders[f"{name}_m"] = lambda n=name, s=per_metre: in_metres(loaders[n](), s)
     return loaders
+
+
+def resampled_with_holes(dem: Case) -> Case:
+    """A float DEM whose values are no whole numbers of any step: the DEM bilinearly
+    resampled 0.37 px right and 0.61 px down, in float32, with NaN voids (discs
+    covering about 8 %)."""
+    z = dem.image.astype(np.float64)
+    fx, fy = 0.37, 0.61
+    z = ((1 - fy) * ((1 - fx) * z[:-1, :-1] + fx * z[:-1, 1:]) + fy * ((1 - fx) * z[1:, :-1] + fx * z[1:, 1:]))
+    z = z.astype(np.float32)
+    h, w = z.shape
+    y, x = np.mgrid[:h, :w]
+    rng = np.random.default_rng(7)
+    for cy, cx, r in zip(rng.integers(0, h, 12), rng.integers(0, w, 12), rng.integers(8, 30, 12)):
+        z[(y - cy) ** 2 + (x - cx) ** 2 < r * r] = np.nan
+    return Case("srtm_f32_holes", z, math.nan)
+
+
+def in_metres(depth: Case, per_metre: int) -> Case:
+    """A 16-bit depth map as float32 metres, its holes (0) NaN."""
+    metres = (depth.image / per_metre).astype(np.float32)
+    metres[depth.image == 0] = np.nan
+    return Case(f"{depth.name}_m", metres, math.nan)
 
 
 def crop(case: Case, side: int) -> Case:
@@ -316,6 +349,67 @@ def jxl_decode(case: Case, data: bytes) -> np.ndarray:
     return imagecodecs.jpegxl_decode(data)
 
 
+def lerc_lossless_encode(case: Case) -> bytes:
+    return lerc_encode(case, 0.0)
+
+
+def zfp_reversible_encode(case: Case) -> bytes:
+    import imagecodecs
+
+    return imagecodecs.zfp_encode(case.image, mode="R")
+
+
+def zfp_reversible_decode(case: Case, data: bytes) -> np.ndarray:
+    import imagecodecs
+
+    return imagecodecs.zfp_decode(data)
+
+
+def float_predicted(compress: Callable[[bytes], bytes]) -> Encoder:
+    """An encoder: the TIFF floating-point predictor (predictor 3) of the rows, then
+    `compress` of its bytes."""
+    def encode(case: Case) -> bytes:
+        import imagecodecs
+
+        return compress(imagecodecs.floatpred_encode(np.ascontiguousarray(case.image), axis=-1).tobytes())
+
+    return encode
+
+
+def float_unpredicted(decompress: Callable[[bytes], bytes]) -> Decoder:
+    def decode(case: Case, data: bytes) -> np.ndarray:
+        import imagecodecs
+
+        shuffled = np.frombuffer(decompress(data), case.image.dtype).reshape(case.image.shape)
+        return imagecodecs.floatpred_decode(shuffled, axis=-1)
+
+    return decode
+
+
+def _zstd(level: int) -> Callable[[bytes], bytes]:
+    import imagecodecs
+
+    return lambda b: imagecodecs.zstd_encode(b, level=level)
+
+
+def _deflate(level: int) -> Callable[[bytes], bytes]:
+    import imagecodecs
+
+    return lambda b: imagecodecs.zlib_encode(b, level=level)
+
+
+def _unzstd(b: bytes) -> bytes:
+    import imagecodecs
+
+    return imagecodecs.zstd_decode(b)
+
+
+def _inflate(b: bytes) -> bytes:
+    import imagecodecs
+
+    return imagecodecs.zlib_decode(b)
+
+
 Encoder = Callable[[Case], bytes]
 Decoder = Callable[[Case, bytes], np.ndarray]
 
@@ -337,6 +431,14 @@ LOSSLESS: dict[str, tuple[Encoder, Decoder]] = {
     "png": (png_encode, png_decode),
     "jpegls": (jpegls_lossless_encode, jpegls_decode),
     "jxl": (jxl_lossless_encode, jxl_decode),
+}
+LOSSLESS_FLOAT: dict[str, tuple[Encoder, Decoder]] = {
+    "atm": (atm_lossless_encode, atm_decode),
+    "jxl": (jxl_lossless_encode, jxl_decode),
+    "lerc": (lerc_lossless_encode, lerc_decode),
+    "zfp-R": (zfp_reversible_encode, zfp_reversible_decode),
+    "zstd+fpred": (float_predicted(_zstd(19)), float_unpredicted(_unzstd)),
+    "deflate+fpred": (float_predicted(_deflate(9)), float_unpredicted(_inflate)),
 }
 #: the peers issue #21's criterion compares against (ZFP is measured, not counted)
 CRITERION = ("sz3", "lerc", "jpegls", "q2E+jxl")
@@ -397,13 +499,20 @@ def ratios(times: dict[str, list[float]], ours: str, peers: list[str]) -> dict[s
     return {p: statistics.median(a / b for a, b in zip(times[ours], times[p])) for p in peers}
 
 
+def bits_kept(case: Case, decoded: np.ndarray) -> bool:
+    """Float lossless: every valid sample has its binary32 bits, every hole is NaN."""
+    valid = case.valid
+    same = np.array_equal(decoded[valid].view(np.uint32), case.image[valid].view(np.uint32))
+    return bool(same and np.isnan(decoded[~valid]).all())
+
+
 def measure(
-    case: Case, codecs: dict[str, tuple[Encoder, Decoder]], e: float, repeat: int
+    case: Case, codecs: dict[str, tuple[Encoder, Decoder]], e: float, repeat: int, bits: bool = False
 ) -> tuple[dict[str, Result], dict[str, float], dict[str, float]]:
     """Bytes and measured error of every codec, and .atm's encode and decode time ratios
     to each peer over `repeat` interleaved rounds. The first round is the one whose
     output is measured (an .atm encode of a whole DEM takes a minute: it runs `repeat`
-    times, not once more)."""
+    times, not once more). bits: holes_kept is `bits_kept` (float lossless)."""
     results: dict[str, Result] = {}
     blobs: dict[str, bytes] = {}
     first_enc: dict[str, float] = {}
@@ -420,7 +529,8 @@ def measure(
         t0 = time.perf_counter()
         decoded = dec(case, blobs[name])
         first_dec[name] = time.perf_counter() - t0
-        results[name] = Result(len(blobs[name]), max_error(case, decoded), holes_kept(case, decoded, e))
+        kept = bits_kept(case, decoded) if bits else holes_kept(case, decoded, e)
+        results[name] = Result(len(blobs[name]), max_error(case, decoded), kept)
     ran = [n for n in codecs if n in blobs]
     peers = [n for n in ran if n != "atm"]
     if repeat < 1 or "atm" not in blobs or not peers:
@@ -439,6 +549,18 @@ def best_peer(results: dict[str, Result], e: float, among: tuple[str, ...]) -> s
 
 
 # ---------------------------------------------------------------- reporting
+
+
+def lossless_row(label: str, results: dict[str, Result], enc_r: dict[str, float], dec_r: dict[str, float],
+                 codecs: list[str]) -> list[str]:
+    """A lossless table's row: whether .atm was exact, every codec's bytes, .atm's bytes
+    and times as ratios to each peer's."""
+    ours = results["atm"]
+    exact = "n/a" if ours.size is None else "lossless" if ours.meets(0.0) else f"NOT lossless (err {ours.error:.3g})"
+    others = codecs[1:]
+    return ([label, exact] + [results[c].cell(0.0) for c in codecs]
+            + [f"{ours.size / results[p].size:.2f}" if results[p].size and ours.size else "-" for p in others]
+            + [f"{enc_r[p]:.1f} / {dec_r[p]:.1f}" if p in enc_r else "-" for p in others])
 
 
 def markdown(head: list[str], rows: list[list[str]]) -> str:
@@ -517,6 +639,7 @@ def main(argv: list[str] | None = None) -> int:
     time_head = ["image", "E"] + [f"enc / {p}" for p in peers] + [f"dec / {p}" for p in peers]
     time_rows: list[list[str]] = []
     lossless_rows: list[list[str]] = []
+    float_rows: list[list[str]] = []
     refused: dict[str, str] = {}  # "codec on image" -> why it is n/a
     points: dict[str, list[tuple[float, float, dict[str, Result]]]] = {}
     print("## Bytes at max error E on valid pixels (measured max error in brackets; ! = bound missed or holes lost)\n")
@@ -540,16 +663,14 @@ def main(argv: list[str] | None = None) -> int:
                              + [f"{dec_r[p]:.1f}" if p in dec_r else "-" for p in peers])
             points.setdefault(label, []).append((pct, e, results))
             refused.update({f"{c} on {label}": r.note for c, r in results.items() if r.size is None})
-        if not args.no_lossless:
+        if not args.no_lossless and case.image.dtype.kind == "f":
+            results, enc_r, dec_r = measure(case, LOSSLESS_FLOAT, 0.0, args.repeat, bits=True)
+            refused.update({f"lossless {c} on {label}": r.note for c, r in results.items() if r.size is None})
+            float_rows.append(lossless_row(label, results, enc_r, dec_r, list(LOSSLESS_FLOAT)))
+        elif not args.no_lossless:
             results, enc_r, dec_r = measure(case, LOSSLESS, 0.0, args.repeat)
             refused.update({f"lossless {c} on {label}": r.note for c, r in results.items() if r.size is None})
-            ours = results["atm"]
-            lossless_rows.append(
-                [label, "n/a" if ours.size is None else "lossless" if ours.error == 0 else f"NOT lossless (err {ours.error:.3g})"]
-                + [results[c].cell(0.0) for c in LOSSLESS]
-                + [f"{ours.size / results[p].size:.2f}" if results[p].size and ours.size else "-" for p in list(LOSSLESS)[1:]]
-                + [f"{enc_r[p]:.1f} / {dec_r[p]:.1f}" if p in enc_r else "-" for p in list(LOSSLESS)[1:]]
-            )
+            lossless_rows.append(lossless_row(label, results, enc_r, dec_r, list(LOSSLESS)))
     if args.repeat > 0:
         print("\n## .atm time / peer time (median of per-round ratios)\n")
         print(markdown(time_head, time_rows))
@@ -558,6 +679,11 @@ def main(argv: list[str] | None = None) -> int:
         print("\n## Lossless (atm with lossless=True)\n")
         print(markdown(["image", "atm lossless"] + [f"{c} bytes (err)" for c in LOSSLESS]
                        + [f"atm / {p}" for p in others] + [f"enc / dec ÷ {p}" for p in others], lossless_rows))
+    if float_rows:
+        others = list(LOSSLESS_FLOAT)[1:]
+        print("\n## Lossless float (every valid binary32 bit kept, holes NaN; ! = not so)\n")
+        print(markdown(["image", "atm lossless"] + [f"{c} bytes (err)" for c in LOSSLESS_FLOAT]
+                       + [f"atm / {p}" for p in others] + [f"enc / dec ÷ {p}" for p in others], float_rows))
     if refused:
         print()
     for what, why in refused.items():

@@ -85,6 +85,29 @@ def test_range_benchmark_quick_run_meets_its_own_bounds(tmp_path: Path) -> None:
     assert (tmp_path / "range.png").stat().st_size > 0
 
 
+def test_range_benchmark_lossless_float_table(tmp_path: Path) -> None:
+    """benchmarks/range.py's float lossless table on a crop of the DEM resampled with NaN
+    holes: .atm and the bit-exact peers marked lossless, ratios given."""
+    pytest.importorskip("imagecodecs")
+    pytest.importorskip("tifffile")
+    from tests.test_geotiff import shared_file
+
+    shared_file("srtm_dem.tif")
+    run = subprocess.run(
+        [sys.executable, "benchmarks/range.py", "--quick", "--repeat", "1", "--images", "srtm_f32_holes", "--errors",
+         "--plot", str(tmp_path / "range.png")],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    table = next(t for t in run.stdout.split("## ")[1:] if t.startswith("Lossless float"))
+    head, _, row = _table(table)
+    cells = dict(zip(head, row))
+    assert cells["atm lossless"] == "lossless"
+    for codec_name in ("atm", "jxl", "zstd+fpred", "deflate+fpred"):
+        assert cells[f"{codec_name} bytes (err)"].endswith("(0)")
+    assert float(cells["atm / zstd+fpred"]) > 0
+
+
 def _bench(name: str = "range_study"):
     """A module of benchmarks/ (they import each other by their plain names)."""
     import importlib
