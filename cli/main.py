@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); not with a bound")
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
-    enc.add_argument("--lossless", action="store_true", default=None, help="every valid sample decodes exactly; not with a bound")
+    enc.add_argument("--lossless", action="store_true", default=None, help="every valid sample decodes exactly (float data: its binary32 bits); not with a bound")
     enc.add_argument("--residual", action="store_true", default=None, help="with --max-error or --max-rms: meet it with a residual layer (fewest bytes; the mesh is then a light preview; under --max-rms every sample is kept within it)")
     enc.add_argument(
         "--band-height",

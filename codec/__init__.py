@@ -88,7 +88,9 @@ def encode(
     adds a residual layer (ATM.md §4.8) that meets the bound on every valid sample by
     construction with the fewest bytes, beside a light mesh (`points` sets its size;
     it is a preview, not within the bound); under `max_rms` the layer's bound is widened
-    while the measured RMS stays within it; `residual="auto"` keeps whichever of the
+    while the measured RMS stays within it. Lossless float data keeps every binary32
+    bit (codec.lossless_float: 16-bit steps where the values allow, else ATM.md §4.10's
+    binary32 keys). `residual="auto"` keeps whichever of the
     layer and the mesh alone is smaller (`atm mesh` and terrain users, who need the
     stored mesh within the bound, leave it False). The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an

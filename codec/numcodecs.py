@@ -22,9 +22,8 @@ from .errors import OptionError, UnsupportedError
 
 class ATM(Codec):
     """The .atm codec for numcodecs: lossy (`points`, `quality`) or bounded
-    (`max_error`, `max_rms`, in sample or data units), or `lossless` where the data
-    allows it (integer chunks are then exact; float chunks, which .atm quantises to 16
-    bits, are stored to their finest precision). `nodata`: samples equal to it are
+    (`max_error`, `max_rms`, in sample or data units), or `lossless` (every sample
+    exact: integers, and float chunks to their binary32 bits, ATM.md §4.10). `nodata`: samples equal to it are
     holes, kept exactly (NaN always is, in float data). `precision`: float data's
     quantisation step (default: the finest 16 bits allow over each chunk)."""
 
@@ -58,11 +57,8 @@ class ATM(Codec):
                          ("max_rms", self.max_rms), ("nodata", self.nodata), ("precision", self.precision))
             if v is not None
         }
-        if self.lossless and chunk.dtype.kind in "ui":
+        if self.lossless:
             options["lossless"] = True  # the residual layer: exact, and far fewer bytes than a mesh
-        elif self.lossless:
-            # a float chunk's finest bound is its quantisation: half a step (plus rounding)
-            options["quality"] = 100
         if chunk.dtype.kind == "f" and self.nodata is not None and np.isnan(self.nodata):
             del options["nodata"]  # NaN is float data's nodata already
         return options

@@ -87,7 +87,7 @@ class Settings:
         None, "share of the budget for curvature samples, 0..1 (default: by effort, less on piecewise-smooth images)", meshers=("adaptive",)
     )
     lossless: bool = _option(
-        False, "every valid sample decodes exactly (a residual layer over a coarse mesh, ATM.md §4.8); not with an error bound", cli=True
+        False, "every valid sample decodes exactly, float data to its binary32 bits (a residual layer over a coarse mesh, ATM.md §4.8, §4.10); not with an error bound", cli=True
     )
     residual: bool | str = _option(
         False, "with max_error or max_rms: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound); "

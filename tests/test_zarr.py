@@ -101,6 +101,20 @@ def test_zarr_format_3_array_with_the_atm_serializer(tmp_path):
     assert np.nanmax(np.abs(out - z)) <= 0.25
 
 
+def test_lossless_float_chunks_keep_their_bits():
+    """ATM(lossless=True) on float32 chunks: every sample's bits, NaN holes, -0.0 and
+    fractions no step captures (quality=100, what it gave before, was within half a
+    16-bit step only)."""
+    rng = np.random.default_rng(8)
+    chunk = (terrain(30, 40, np.int16).astype(np.float64) * 0.731 + rng.normal(0, 0.01, (30, 40))).astype(np.float32)
+    chunk[5:9, 10:20] = np.nan
+    chunk[0, 0] = -0.0
+    c = ATM(lossless=True)
+    back = c.decode(c.encode(chunk))
+    assert back.dtype == np.float32
+    np.testing.assert_array_equal(back.view(np.uint32), chunk.view(np.uint32))
+
+
 def test_a_chunk_with_a_channel_axis_comes_back_in_its_shape():
     """An (r, c, 1) chunk decodes as (r, c, 1) without out= (ATM.md §4.9's axis chunk),
     and into a numcodecs out= buffer of either shape."""
