@@ -80,7 +80,7 @@ def as_binary32(image: np.ndarray) -> np.ndarray:
             where = tuple(int(i) for i in np.argwhere(lost)[0])
             raise UnsupportedError(
                 f"lossless {image.dtype} data must hold binary32 values (.atm stores float32 exactly); "
-                f"the sample at {where} is {image[where]!r}: convert to float32 first if that is acceptable"
+                f"the sample at {where} is {float(image[where])!r}: convert to float32 first if that is acceptable"
             )
     return narrow
 
@@ -183,7 +183,7 @@ def check_steps(values: np.ndarray, q: np.ndarray, holes: np.ndarray, quant: qua
     if wrong.any():
         y, x = (int(i) for i in np.argwhere(wrong)[0])
         raise ATMError(
-            f"lossless: the sample at row {row0 + y}, column {x} ({values[y, x]!r}) is not "
+            f"lossless: the sample at row {row0 + y}, column {x} ({float(values[y, x])!r}) is not "
             f"{quant.offset!r} + a whole number of steps of {quant.scale!r} exactly; leave precision out "
             "to store the float bits as they are"
         )
