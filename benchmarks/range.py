@@ -21,12 +21,12 @@ q2E+jxl: the levels of a uniform quantiser of step 2E (2 floor(E) + 1 for intege
 holes a level of their own) coded by JPEG XL's lossless mode. Without a mask, holes
 count as kept when thresholding |decoded - nodata| <= E gives back exactly the holes.
 Lossless: .atm with lossless=True against PNG, JPEG-LS and JPEG XL lossless; float
-images (the DEM as float32, the DEM resampled off its grid with NaN holes, the depth
+images (the DEM as float32, in centimetres, resampled off its grid with NaN holes, the depth
 maps in metres with NaN holes) against JPEG XL lossless of the floats, LERC at max
 error 0 (with a validity mask), ZFP reversible, and zstd (level 19) and deflate
 (level 9) of the TIFF floating-point predictor's bytes; a float codec counts as
 lossless only if every valid sample keeps its binary32 bits and the holes stay NaN.
-    python benchmarks/range.py --images srtm_dem_f32 srtm_f32_holes tum_depth_m kinect_depth_m --errors
+    python benchmarks/range.py --images srtm_dem_f32 srtm_cm_f32 srtm_f32_holes tum_depth_m kinect_depth_m --errors
 
 Times: encode and decode of every codec run in interleaved rounds (each codec once per
 round; the first round's output is the one measured), so load on a shared machine hits
@@ -149,6 +149,7 @@ def load_cases(range_data: Path = RANGE_DATA) -> dict[str, Callable[[], Case]]:
         # to find (issue #21: max_error alone must choose the quantisation)
         loaders["srtm_dem_f32"] = lambda: Case("srtm_dem_f32", dem().image.astype(np.float32), None)
         loaders["srtm_f32_holes"] = lambda: resampled_with_holes(dem())
+        loaders["srtm_cm_f32"] = lambda: in_centimetres(dem())
     for name, per_metre in (("tum_depth", 5000), ("kinect_depth", 1000)):
         if name in loaders:
             loaders[f"{name}_m"] = lambda n=name, s=per_metre: in_metres(loaders[n](), s)
@@ -169,6 +170,15 @@ def resampled_with_holes(dem: Case) -> Case:
     for cy, cx, r in zip(rng.integers(0, h, 12), rng.integers(0, w, 12), rng.integers(8, 30, 12)):
         z[(y - cy) ** 2 + (x - cx) ** 2 < r * r] = np.nan
     return Case("srtm_f32_holes", z, math.nan)
+
+
+def in_centimetres(dem: Case) -> Case:
+    """A float32 DEM in whole centimetres spanning more than 65,536 of them: the DEM's
+    2 x 2 means plus up to 3 cm of deterministic noise."""
+    z = dem.image.astype(np.float64)
+    z = 0.25 * (z[:-1, :-1] + z[1:, 1:] + z[:-1, 1:] + z[1:, :-1])
+    noise = np.random.default_rng(0).integers(-3, 4, z.shape)
+    return Case("srtm_cm_f32", (np.round(z * 100 + noise) / 100).astype(np.float32), None)
 
 
 def in_metres(depth: Case, per_metre: int) -> Case:

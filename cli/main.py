@@ -88,7 +88,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         if i["residual"] is not None:
             what = "lossless" if i["residual"] == 0 else f"every stored sample within {i['residual']}"
             print(f"  residual layer: {what} (the mesh is a preview)")
-        if i.get("exact_float"):
+        if i.get("exact_float") and i["exact_step"] is not None:
+            print(f"  float samples stored exactly as steps of {i['exact_step']:.6g} from {i['exact_offset']:.10g} (32 bits)")
+        elif i.get("exact_float"):
             print(f"  float samples stored exactly (binary32 bits); the mesh preview in steps of {i['precision']:.6g}")
         elif "precision" in i:
             print(f"  float samples stored in steps of {i['precision']:.6g} from {i['offset']:.10g} (16 bits)")

@@ -206,8 +206,12 @@ def _sample_mapping(header) -> dict:
     if is_signed(header.dtype):
         return {"offset": int(q.offset)}
     if header.exact:
-        # binary32 samples kept exactly (ATM.md §4.10); the step is the preview mesh's
-        return {"precision": q.scale, "offset": q.offset, "exact_float": True}
+        # binary32 samples kept exactly (ATM.md §4.10); precision is the preview mesh's
+        # step, exact_step the STEP chunk's (§4.10.1; None: binary32 keys)
+        steps = header.steps
+        return {"precision": q.scale, "offset": q.offset, "exact_float": True,
+                "exact_step": None if steps is None else steps.scale,
+                "exact_offset": None if steps is None else steps.offset}
     return {"precision": q.scale, "offset": q.offset}
 
 

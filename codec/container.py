@@ -49,6 +49,9 @@ class Header:
     #: float32 samples stored exactly as binary32 keys by the residual layer
     #: (`sample_type` 6, ATM.md §4.10); the mesh is then a preview through `quant`
     exact: bool = False
+    #: with `exact`, the STEP chunk's offset and scale: the layer's samples are 32-bit
+    #: whole numbers q of value = offset + scale q (ATM.md §4.10.1), not keys
+    steps: Quantiser | None = None
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -165,6 +168,8 @@ class Writer:
         if header.quant is not None:
             q = header.quant
             stream.write(_chunk(schema.QUANT, schema.Quantisation.build(dict(offset=q.offset, scale=q.scale))))
+        if header.steps is not None:
+            stream.write(_chunk(schema.STEP, struct.pack("<dd", header.steps.offset, header.steps.scale)))
         if header.nodata is not None:
             stream.write(_chunk(schema.NODATA, schema.NoData.build(dict(value=header.nodata))))
         if header.channel_axis and header.channels == 1:
@@ -300,6 +305,7 @@ class Reader:
         self._pending_head = None
         self._pending_error = None
         self._largest_payload: int | None = None  # _check_frame's bound, once known
+        after_quant = self.header.quant is not None  # where a STEP chunk may come (ATM.md §4.10.1)
         # the chunks before the first band (NDAT, meta, ancillary ones); the first band's
         # chunk is left unread, so that opening a file reads its header and no more
         while True:
@@ -310,6 +316,12 @@ class Reader:
                 self._pending_error = exc
                 break
             ctype = head[0]
+            if ctype == schema.STEP and after_quant and self.header.exact:
+                self._pending_head = head
+                self.header = self._parse_steps(self.header, self._next_chunk())
+                after_quant = False
+                continue
+            after_quant = False
             if (ctype[0] & 0x20 == 0 and ctype != schema.NODATA) or (
                 ctype == schema.NODATA and self.header.nodata is not None
             ):
@@ -431,6 +443,20 @@ class Reader:
                 "integer data needs scale 1 and a whole-number offset within int32's range"
             )
         return _RawHeader(raw.sample_type, dataclasses.replace(h, quant=Quantiser(q.offset, q.scale)))
+
+    @staticmethod
+    def _parse_steps(h: Header, chunk: tuple[bytes, bytes, int]) -> Header:
+        _, payload, offset = chunk
+        if len(payload) != 16:
+            raise CorruptError(f"STEP chunk at byte {offset} has {len(payload)} bytes, not 16")
+        start, scale = struct.unpack("<dd", payload)
+        top = abs(start) + scale * 0xFFFFFFFF if np.isfinite(start) and np.isfinite(scale) else np.inf
+        if not (scale > 0 and top <= float(np.finfo(np.float32).max)):
+            raise CorruptError(
+                f"STEP chunk at byte {offset} has scale {scale!r} and offset {start!r}: values must be finite "
+                "and within float32's range (ATM.md §4.10.1)"
+            )
+        return dataclasses.replace(h, steps=Quantiser(start, scale))
 
     def _read_metadata(self, payload: bytes, offset: int) -> None:
         where = f"meta chunk at byte {offset}"
@@ -614,7 +640,7 @@ class Reader:
                 return
             elif ctype == schema.META:
                 self._read_metadata(payload, offset)
-            elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS):
+            elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS, schema.STEP):
                 raise CorruptError(f"misplaced {name} chunk at byte {offset}")
             elif ctype[0] & 0x20 == 0:
                 raise UnsupportedError(f"unknown critical chunk {name}; a newer codec wrote this file")
@@ -659,7 +685,7 @@ def summarise(reader: Reader) -> Summary:
             return Summary(bands, vertices, triangles, polylines, bound)
         elif ctype == schema.META:
             reader._read_metadata(payload, offset)
-        elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS):
+        elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS, schema.STEP):
             raise CorruptError(f"misplaced {ctype.decode('latin-1')} chunk at byte {offset}")
         elif ctype[0] & 0x20 == 0 and ctype not in (schema.MASK, RESIDUAL):
             raise UnsupportedError(f"unknown critical chunk {ctype.decode('latin-1')}; a newer codec wrote this file")

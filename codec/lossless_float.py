@@ -7,6 +7,9 @@ Two routes, the cheaper first:
   as ATM.md §4.4 decodes it, gives every valid sample's exact bits for whole q in
   0..65535, the file is an ordinary `sample_type` 2 file whose residual layer codes
   q exactly (§4.8 with E = 0): checked sample by sample before it is chosen.
+- **Exact steps in 32 bits** (`sample_type` 6 with a STEP chunk, ATM.md §4.10.1):
+  the same test with q up to 2^32 - 1, for steps no finer than the binary32 spacing of
+  the largest value (centimetres over more than 655 m); the layer codes q.
 - **Binary32 keys** (`sample_type` 6, ATM.md §4.10): otherwise each sample's bits are
   mapped to an unsigned 32-bit key that orders like the values (`keys`), and the
   residual layer codes the keys exactly in wide planes. -0.0, infinities, subnormals
@@ -26,8 +29,11 @@ import numpy as np
 from . import quantise
 from .errors import OptionError, UnsupportedError
 
-#: The residual layer's samples in `sample_type` 6: keys of binary32 bits.
+#: The residual layer's samples in `sample_type` 6: keys of binary32 bits, or whole
+#: numbers of a STEP chunk's step (ATM.md §4.10.1).
 KEY_STORAGE = np.dtype(np.uint32)
+#: The largest whole number of steps a STEP chunk's layer holds.
+WIDE_LEVELS = 0xFFFFFFFF
 _SIGN = np.uint32(0x80000000)
 #: At most this many candidate steps are checked against all samples.
 STEP_TRIALS = 24
@@ -100,19 +106,19 @@ def _decodes_to(offset: float, scale: float, q: np.ndarray) -> np.ndarray:
     return quantise.Quantiser(offset, scale).dequantise(q).view(np.uint32)
 
 
-def _fits(values: np.ndarray, offset: float, scale: float) -> np.ndarray | None:
-    """The q that decode to exactly `values` (binary32) at this offset and scale, or
-    None if some sample has none."""
+def _fits(values: np.ndarray, offset: float, scale: float, levels: int = quantise.LEVELS) -> np.ndarray | None:
+    """The q (0..levels) that decode to exactly `values` (binary32) at this offset and
+    scale, or None if some sample has none."""
     q = np.rint((values.astype(np.float64) - offset) / scale)
-    if q.size and (q.min() < 0 or q.max() > quantise.LEVELS):  # rint gives -0.0, not below 0, for a start just above
+    if q.size and (q.min() < 0 or q.max() > levels):  # rint gives -0.0, not below 0, for a start just above
         return None
-    q = q.astype(quantise.STORAGE)
+    q = q.astype(quantise.STORAGE if levels <= quantise.LEVELS else KEY_STORAGE)
     if not np.array_equal(_decodes_to(offset, scale, q), values.view(np.uint32)):
         return None
     return q
 
 
-def _candidates(values: np.ndarray) -> list[float]:
+def _candidates(values: np.ndarray, levels: int) -> list[float]:
     """Steps worth trying, coarsest first: round numbers (1, 2 or 5 times a power of
     ten, powers of two) up to the smallest gap between the distinct values, and that
     gap itself."""
@@ -121,7 +127,7 @@ def _candidates(values: np.ndarray) -> list[float]:
         return [1.0]
     gap = float(np.diff(distinct).min())
     span = float(distinct[-1] - distinct[0])
-    finest = span / quantise.LEVELS
+    finest = span / levels
     # binary32 rounding moves the gap between two values by up to a spacing of each
     slack = float(np.abs(distinct).max()) * 2.0**-22
     round_steps = {m * 10.0**k for k in range(-12, 13) for m in (1, 2, 5)} | {2.0**k for k in range(-40, 41)}
@@ -131,9 +137,9 @@ def _candidates(values: np.ndarray) -> list[float]:
     return steps[:STEP_TRIALS]
 
 
-def exact_step(values: np.ndarray) -> tuple[float, float] | None:
+def exact_step(values: np.ndarray, levels: int = quantise.LEVELS) -> tuple[float, float] | None:
     """(offset, scale) under which every one of `values` (binary32, the valid
-    samples, none NaN or infinite) decodes exactly from a whole q in 0..65535, the
+    samples, none NaN or infinite) decodes exactly from a whole q in 0..levels, the
     coarsest such scale of those tried; None if there is none."""
     values = np.ascontiguousarray(values, np.float32).ravel()
     if not values.size:
@@ -144,15 +150,15 @@ def exact_step(values: np.ndarray) -> tuple[float, float] | None:
     if quantise.F32_MAX < abs(offset):
         return None
     probe = values[:: max(1, len(values) // PROBE)]
-    for scale in _candidates(values):
+    for scale in _candidates(values, levels):
         # the lowest value as binary32 lies off the grid of a decimal step (0.501 is
         # 0.50099998...): the grid's own point is tried first
         grid = math.floor(offset / scale) * scale
         grid = grid if grid <= offset else grid - scale  # no sample below the range's low end
         for start in dict.fromkeys((grid, offset)):
-            if abs(start) + quantise.LEVELS * scale > quantise.F32_MAX:
+            if abs(start) + levels * scale > quantise.F32_MAX:
                 continue
-            if _fits(probe, start, scale) is not None and _fits(values, start, scale) is not None:
+            if _fits(probe, start, scale, levels) is not None and _fits(values, start, scale, levels) is not None:
                 return start + 0.0, scale
     return None
 
@@ -208,9 +214,10 @@ def options_for(image: np.ndarray, mask: np.ndarray | None, nodata, value_range,
     masked = np.zeros(image.shape, bool) if mask is None else mask
     nodata = quantise.check_nodata(nodata)
     if precision is None:
-        steps = _exact_steps(image, masked, nodata)
-        if steps is not None:
-            return steps
+        for levels in (quantise.LEVELS, WIDE_LEVELS):
+            steps = _exact_steps(image, masked, nodata, levels)
+            if steps is not None:
+                return steps
     if nodata is None:
         nan = common_nan(image[~masked])
         nodata = math.nan if nan is None else nodata_of_bits(nan)
@@ -222,29 +229,53 @@ def options_for(image: np.ndarray, mask: np.ndarray | None, nodata, value_range,
     return dict(nodata=nodata, value_range=value_range or preview_range(image[~holes]))
 
 
-def _exact_steps(image: np.ndarray, masked: np.ndarray, nodata: float | None) -> dict | None:
-    """The settings of the exact-steps route (`settle`), None if it does not apply."""
+def _exact_steps(image: np.ndarray, masked: np.ndarray, nodata: float | None, levels: int) -> dict | None:
+    """The settings of the exact-steps route (`settle`) in 16 bits (`sample_type` 2)
+    or 32 (levels WIDE_LEVELS: `sample_type` 6 with a STEP chunk), None if it does
+    not apply."""
     holes = masked | ~np.isfinite(image)
     if nodata is not None and not math.isnan(nodata):
         holes |= np.where(holes, False, image) == nodata  # NaNs out: a signalling one would raise
-    found = exact_step(image[~holes])
+    found = exact_step(image[~holes], levels)
     if found is None:
         return None
     offset, scale = found
+    largest = float(np.abs(image[~holes]).max(initial=0))
+    if levels > quantise.LEVELS and scale < largest * 2.0**-23:
+        # finer than the largest values' own spacing: their q would waste low bits that
+        # the keys do not (the DEM resampled off its grid: 439,229 against 433,148 B)
+        return None
     if nodata is None:
         unmasked = image[holes & ~masked]
         nan = common_nan(unmasked)
         nodata = quantise.hole_value([unmasked]) if nan is None else nodata_of_bits(nan)
     # every hole not masked by the caller must decode to its own bits, as the
-    # decoder fills it (NumPy's binary64 -> binary32 conversion)
+    # decoder fills it (sample_type 2: NumPy's binary64 -> binary32 conversion;
+    # 6: ATM.md §4.10's bits h)
     filled = np.empty(1, np.float32)
     filled[0] = nodata
-    if (image[holes & ~masked].view(np.uint32) != filled.view(np.uint32)[0]).any():
+    bits = int(filled.view(np.uint32)[0]) if levels <= quantise.LEVELS else hole_bits(nodata)
+    if (image[holes & ~masked].view(np.uint32) != bits).any():
         return None
     valid = image[~holes]
     top = float(valid.max()) if valid.size else offset
-    try:
-        quantise.plan(offset, top, precision=scale)
-    except OptionError:
-        return None
+    if levels <= quantise.LEVELS:
+        try:
+            quantise.plan(offset, top, precision=scale)
+        except OptionError:
+            return None
     return dict(nodata=nodata, value_range=(offset, top), precision=scale)
+
+
+def wide_steps(settings) -> quantise.Quantiser | None:
+    """The STEP chunk's quantiser (ATM.md §4.10.1) of a lossless float encode whose
+    precision needs more than 65,536 levels over its value range, else None."""
+    if not (settings.lossless and settings.precision is not None and settings.value_range is not None):
+        return None
+    lo, hi = settings.value_range
+    if settings.precision >= (hi - lo) / quantise.LEVELS * (1 - 1e-12):
+        return None  # 16 bits hold it: sample_type 2 (quantise.plan's own test)
+    if abs(lo) + WIDE_LEVELS * settings.precision > quantise.F32_MAX or (hi - lo) / settings.precision > WIDE_LEVELS:
+        raise OptionError(f"lossless: precision {settings.precision:g} needs more than 2^32 levels, or values "
+                          "beyond float32's range, over the value range; leave it out to store the float bits")
+    return quantise.Quantiser(float(lo), float(settings.precision), float(hi))

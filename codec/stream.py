@@ -67,6 +67,11 @@ class StreamEncoder:
         elif options:
             Settings.from_options(**options)  # names checked, and listed if unknown
             settings = settings.replace(**{k: v for k, v in options.items() if v is not None})
+        #: lossless float whose precision 16 bits cannot hold: 32-bit whole numbers of
+        #: it in the layer (ATM.md §4.10.1); the mesh's preview gets the finest step
+        self._wide = lossless_float.wide_steps(settings)
+        if self._wide is not None:
+            settings = settings.replace(precision=None)
         self._plan = pipeline.plan(settings, width, height, dtype, channels)
         p = self._plan
         error = residual.layer_bound(settings, p)
@@ -92,6 +97,7 @@ class StreamEncoder:
             metadata=settings.metadata,
             channel_axis=channel_axis and p.channels == 1,
             exact=self._exact,
+            steps=self._wide,
         )
         if settings.metadata is not None:
             container.encode_metadata(settings.metadata)  # checked before anything is written
@@ -145,6 +151,8 @@ class StreamEncoder:
             floats = lossless_float.as_binary32(rows)
             missing |= floats.view(np.uint32) == self._hole_bits
             keys, unfit = lossless_float.keys(floats), ~np.isfinite(floats) & ~missing
+            if self._wide is not None:
+                keys = self._wide_steps(floats, missing)
             lo, hi = self._quant.offset, self._quant.top
             # NaNs out before widening (a signalling NaN would raise the invalid flag)
             finite = np.where(missing | unfit, np.float32(0), floats).astype(np.float64)
@@ -178,6 +186,15 @@ class StreamEncoder:
             i += n
             if self._filled == len(self._buf) or self._received == self.height:
                 self._flush()
+
+    def _wide_steps(self, floats: np.ndarray, holes: np.ndarray) -> np.ndarray:
+        """The whole numbers of the STEP chunk's step of rows (ATM.md §4.10.1), every
+        valid sample checked to decode to its own bits."""
+        w = self._wide
+        q = np.rint((np.where(holes, np.float32(w.offset), floats).astype(np.float64) - w.offset) / w.scale)
+        q = np.clip(q, 0, lossless_float.WIDE_LEVELS).astype(lossless_float.KEY_STORAGE)
+        lossless_float.check_steps(floats, q, holes, w, self._received)
+        return q
 
     def _flush(self) -> None:
         if self._filled < 2 and self.height > 1:
@@ -336,7 +353,8 @@ class StreamDecoder:
         """Stored samples -> the image's (dequantised, holes, channel axis), each row once."""
         quant, nodata = self._reader.header.quant, self._reader.header.nodata
         if self._reader.header.exact:
-            rows = lossless_float.floats(rows)
+            steps = self._reader.header.steps
+            rows = lossless_float.floats(rows) if steps is None else steps.dequantise(rows)
             if mesh.holes is not None:
                 # the hole value's exact bits (a NaN's payload too, ATM.md §4.10)
                 rows.view(np.uint32)[mesh.holes[: len(rows)]] = lossless_float.hole_bits(nodata)

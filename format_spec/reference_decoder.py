@@ -500,6 +500,7 @@ class Header:
         self.offset, self.scale = 0.0, 1.0
         self.nodata: float | None = None
         self.channel_axis = False  # an `axis` chunk: gray decodes as height x width x 1 (§4.9)
+        self.step: tuple[float, float] | None = None  # a STEP chunk's offset and scale (§4.10.1)
 
     @property
     def top(self) -> int:
@@ -549,6 +550,18 @@ def parse_quantisation(payload: bytes, header: Header) -> None:
     if abs(offset) + 65535 * scale > float(np.finfo(np.float32).max):
         raise DecodeError("QUNT: offset and scale reach values beyond binary32's range")
     header.offset, header.scale = offset, scale
+
+
+def parse_step(payload: bytes, header: Header) -> None:
+    """§4.10.1."""
+    if len(payload) != 16:
+        raise DecodeError(f"STEP payload is {len(payload)} bytes, not 16")
+    offset, scale = struct.unpack("<dd", payload)
+    if not (math.isfinite(offset) and math.isfinite(scale) and scale > 0):
+        raise DecodeError(f"STEP offset {offset} / scale {scale}: both must be finite, the scale > 0")
+    if abs(offset) + (2**32 - 1) * scale > float(np.finfo(np.float32).max):
+        raise DecodeError("STEP: offset and scale reach values beyond binary32's range")
+    header.step = (offset, scale)
 
 
 def parse_nodata(payload: bytes, header: Header) -> None:
@@ -984,7 +997,7 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
     bands: list[Band] = []
     expect_qunt, have_ndat, mask, complete = header.sample_type >= 2, False, None, False
     resd = None
-    for kind, payload in chunks[1:]:
+    for at, (kind, payload) in enumerate(chunks[1:], start=1):
         name = kind.decode()
         # §4: QUNT follows AHDR directly, with no chunk at all between, ancillary or not.
         if expect_qunt and kind != b"QUNT":
@@ -1001,6 +1014,10 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
                 raise DecodeError("QUNT chunk out of place (only directly after AHDR, for sample_type 2 to 6)")
             parse_quantisation(payload, header)
             expect_qunt = False
+        elif kind == b"STEP":  # §4.10.1: directly after QUNT, sample_type 6 only
+            if header.sample_type != 6 or chunks[at - 1][0] != b"QUNT":
+                raise DecodeError("STEP chunk out of place (only directly after QUNT, for sample_type 6)")
+            parse_step(payload, header)
         elif kind == b"NDAT":
             if have_ndat or bands or mask is not None:
                 raise DecodeError("NDAT chunk out of place (once, before the first band)")
@@ -1073,7 +1090,11 @@ def to_samples(image: np.ndarray, holes: np.ndarray, header: Header) -> np.ndarr
     if header.sample_type == 6:
         # §4.10: keys back to binary32 bits; holes get NDAT's bits, payload and all
         keys = image.astype(np.uint64)
-        bits = np.where(keys >> 31, keys ^ 0x80000000, ~keys & 0xFFFFFFFF).astype(np.uint32)
+        if header.step is not None:  # §4.10.1: whole numbers of a step, not keys
+            offset, scale = header.step
+            bits = (offset + scale * image.astype(np.float64)).astype(np.float32).view(np.uint32)
+        else:
+            bits = np.where(keys >> 31, keys ^ 0x80000000, ~keys & 0xFFFFFFFF).astype(np.uint32)
         if header.nodata is not None:
             bits[holes] = binary32_bits(header.nodata)
         out = bits.view(np.float32)

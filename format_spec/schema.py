@@ -36,6 +36,9 @@ HEADER = b"AHDR"
 MESH = b"MESH"
 END = b"AEND"
 QUANT = b"QUNT"
+#: binary32 samples stored as 32-bit whole numbers of a step (sample_type 6, §4.10.1):
+#: offset and scale, binary64, not compressed; directly after QUNT
+STEP = b"STEP"
 NODATA = b"NDAT"
 MASK = b"MASK"
 META = b"meta"

@@ -82,6 +82,95 @@ def test_whole_numbers_of_a_step_take_the_exact_steps(seed, h, w, step, base, ho
         assert codec.info(data)["residual"] == 0
 
 
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 10**9), st.integers(2, 16), st.integers(2, 20), st.sampled_from([0.01, 0.001, 0.1, 1.0]),
+       st.booleans())
+def test_more_steps_than_16_bits_hold_take_a_step_chunk(seed, h, w, step, holes):
+    rng = np.random.default_rng(seed)
+    k = rng.integers(0, 70_000, (h, w))
+    k.flat[0], k.flat[-1] = 0, 69_999 + int(rng.integers(1, 10**6))  # more than 65,536 steps apart
+    image = (np.round(1000 / step) * step + k * step).astype(np.float32)
+    if holes:
+        image[rng.random((h, w)) < 0.2] = np.nan
+        image.flat[0] = np.float32(1000.0)
+    data = codec.encode(image, lossless=True, band_height=5)
+    _decodes_exactly(image, data)
+    info = codec.info(data)
+    if info["exact_step"] is not None:  # a coarser round step may hold fewer than 2^16
+        assert info["exact_float"] and info["exact_step"] >= step * (1 - 1e-9)
+        assert b"STEP" in [t for _, t, _ in chunks(data)]
+    else:
+        assert not info.get("exact_float") or np.ptp(image[np.isfinite(image)]) > 0
+
+
+def test_centimetres_over_2000_m_take_32_bit_steps():
+    rng = np.random.default_rng(9)
+    cm = (range_scene(64, 48, seed=9) * 8.0 + 1000 + rng.integers(-30, 30, (48, 64)) / 100)
+    image = (np.round(cm * 100) / 100).astype(np.float32)
+    data = codec.encode(image, lossless=True)
+    info = codec.info(data)
+    assert info["exact_float"] and info["exact_step"] == 0.01
+    _decodes_exactly(image, data)
+    image[3, 3] = np.float32(1500.0037)  # one sample off every step the values allow: binary32 keys
+    keys = codec.encode(image, lossless=True)
+    assert codec.info(keys)["exact_step"] is None and len(keys) > len(data)
+    _decodes_exactly(image, keys)
+
+
+def test_a_stream_with_a_fine_precision_takes_a_step_chunk():
+    image = (np.arange(200, dtype=np.float64).reshape(10, 20) * 13.37).round(2).astype(np.float32)
+    out = io.BytesIO()
+    lo, hi = float(image.min()), float(image.max())
+    with codec.StreamEncoder(out, 20, 10, dtype=np.float32, lossless=True, precision=0.01, value_range=(lo, hi)) as enc:
+        enc.write(image)
+    assert codec.info(out.getvalue())["exact_step"] == 0.01
+    _decodes_exactly(image, out.getvalue())
+    bad = image.copy()
+    bad[7, 4] += np.float32(0.004)
+    with pytest.raises(ATMError, match="row 7, column 4"):
+        codec.StreamEncoder(io.BytesIO(), 20, 10, dtype=np.float32, lossless=True, precision=0.01,
+                            value_range=(lo, hi)).write(bad)
+
+
+def _steps_file() -> bytes:
+    from tests.test_conformance import VECTORS
+
+    return (VECTORS / "steps32_float_lossless.atm").read_bytes()
+
+
+def _moved_step(data: bytes, before: bytes) -> bytes:
+    """The file with its STEP chunk moved to just before the first `before` chunk."""
+    step = next(p for _, t, p in chunks(data) if t == b"STEP")
+    out, moved = [], False
+    for _, t, p in chunks(data):
+        if t == before and not moved:
+            out.append((b"STEP", step))
+            moved = True
+        if t != b"STEP":
+            out.append((t, p))
+    body = iter(out)
+    return _rebuild(data, lambda t, p: next(body))
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (lambda d: _moved_step(d, b"MASK"), "misplaced STEP"),  # not directly after QUNT
+        (lambda d: _rebuild(d, lambda t, p: (t, struct.pack("<dd", 0.0, 0.0)) if t == b"STEP" else (t, p)), "STEP chunk"),
+        (lambda d: _rebuild(d, lambda t, p: (t, struct.pack("<dd", 0.0, 1e30)) if t == b"STEP" else (t, p)), "STEP chunk"),
+        (lambda d: _rebuild(d, lambda t, p: (t, p[:15]) if t == b"STEP" else (t, p)), "STEP chunk"),
+        # a sample_type 2 file with a STEP chunk
+        (lambda d: _rebuild(d, lambda t, p: (t, p[:8] + b"\x02" + p[9:]) if t == b"AHDR" else (t, p)), "STEP"),
+    ],
+)
+def test_malformed_step_chunks_are_refused(change, match):
+    bad = change(_steps_file())
+    with pytest.raises(CorruptError, match=match):
+        codec.decode(bad)
+    with pytest.raises(_reference().DecodeError):
+        _reference().decode(bad)
+
+
 def test_exact_steps_are_smaller_than_keys():
     rng = np.random.default_rng(3)
     image = (range_scene(64, 48, seed=3) * 4 + rng.integers(0, 3, (48, 64)) + 300).astype(np.float32)
@@ -229,6 +318,9 @@ def test_cli_info_names_exact_floats(tmp_path, capsys):
     path.write_bytes(data)
     assert main(["info", str(path)]) == 0
     assert "stored exactly (binary32 bits)" in capsys.readouterr().out
+    path.write_bytes(_steps_file())
+    assert main(["info", str(path)]) == 0
+    assert "stored exactly as steps of 0.01 from" in capsys.readouterr().out
     assert [t for _, t, _ in chunks(data)].count(residual.CHUNK) == 4
 
 
@@ -241,7 +333,8 @@ def _reference():
     return reference_decoder
 
 
-@pytest.mark.parametrize("name, exact", [("exact_float32_holes", True), ("steps_float_lossless", False)])
+@pytest.mark.parametrize("name, exact", [("exact_float32_holes", True), ("steps_float_lossless", False),
+                                         ("steps32_float_lossless", True)])
 def test_conformance_files_decode_bit_for_bit(name, exact):
     from tests.test_conformance import VECTORS
 
@@ -250,7 +343,7 @@ def test_conformance_files_decode_bit_for_bit(name, exact):
     assert _exact(data) == exact
     for out in (codec.decode(data), _reference().decode(data)):
         assert out.dtype == np.float32 and np.array_equal(_bits(out), _bits(expected))
-    if exact:  # the specials are there, as samples
+    if name == "exact_float32_holes":  # the specials are there, as samples
         assert {0x80000000, 0x7F800000, 0xFF800000, 0x00000001, 0x7FC12345} <= set(_bits(expected).ravel().tolist())
 
 

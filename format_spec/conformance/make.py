@@ -200,6 +200,11 @@ def main() -> None:
     millimetres[3:8, 20:30] = np.nan
     cases["steps_float_lossless"] = codec.encode(millimetres.astype(np.float32), lossless=True, band_height=10,
                                                  points=90, mesher="uniform")
+    centimetres = synthetic.range_scene(40, 30, seed=23).astype(np.float64) * 7.9 + 1000.0
+    centimetres = np.round((centimetres + np.random.default_rng(23).integers(-40, 40, (30, 40)) / 100) * 100) / 100
+    centimetres[2:6, 3:11] = np.nan
+    cases["steps32_float_lossless"] = codec.encode(centimetres.astype(np.float32), lossless=True, band_height=16,
+                                                   points=90, mesher="uniform")
     # `make.py NAME ...` writes only those files (the others keep their bytes)
     chosen = set(sys.argv[1:]) or set(cases)
     for name, data in cases.items():
