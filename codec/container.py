@@ -66,7 +66,8 @@ class Header:
 
     @property
     def layer_storage(self) -> np.dtype:
-        """The integer type a residual layer codes: binary32 keys for exact float."""
+        """The integer type a residual layer codes: 32 bits for exact float (binary32
+        keys, or whole numbers of the STEP chunk's step)."""
         return np.dtype(np.uint32) if self.exact else self.storage
 
     def _fields(self) -> dict:

@@ -35,8 +35,9 @@ KEY_STORAGE = np.dtype(np.uint32)
 #: The largest whole number of steps a STEP chunk's layer holds.
 WIDE_LEVELS = 0xFFFFFFFF
 _SIGN = np.uint32(0x80000000)
-#: At most this many candidate steps are checked against all samples.
-STEP_TRIALS = 24
+#: At most this many candidate steps are tried (each on PROBE samples first, which
+#: rejects a wrong one in microseconds; few distinct values leave many candidates).
+STEP_TRIALS = 256
 #: Candidates are first checked on this many samples spread over the image.
 PROBE = 4096
 

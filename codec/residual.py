@@ -68,9 +68,11 @@ def layer_bound(settings, plan) -> int | None:
 
 
 def exact_floats(settings, plan) -> bool:
-    """Whether the image is stored as binary32 keys (`sample_type` 6, ATM.md §4.10):
-    lossless float data without a precision (with one, every sample must be a whole
-    number of steps from the range's low end, checked as it is written)."""
+    """Whether the image's layer codes 32-bit samples (`sample_type` 6, ATM.md §4.10:
+    binary32 keys, or whole numbers of a STEP chunk's step, which the stream encoder
+    takes out of the precision first): lossless float data without a precision (with
+    one that 16 bits hold, every sample must be a whole number of steps from the
+    range's low end, checked as it is written)."""
     return bool(settings.lossless and plan.dtype.kind == "f" and settings.precision is None)
 
 

@@ -78,7 +78,7 @@ class StreamEncoder:
         #: lossless float: binary32 keys in the layer (ATM.md §4.10), or (precision
         #: given) exact steps, each written sample checked
         self._exact = residual.exact_floats(settings, p)
-        self._steps = bool(settings.lossless) and p.dtype.kind == "f" and not self._exact
+        self._check_steps = bool(settings.lossless) and p.dtype.kind == "f" and not self._exact
         storage = lossless_float.KEY_STORAGE if self._exact else p.storage
         self._residual = None if error is None else residual.ResidualEncoder(p.width, p.channels, storage, error)
         if self._residual is not None:
@@ -164,7 +164,7 @@ class StreamEncoder:
             exact = rows
             # a binary64 offset (an exact step's grid point need not be a binary32)
             rows = self._quant.quantise(np.where(missing, np.float64(self._quant.offset), rows))
-            if self._steps:
+            if self._check_steps:
                 lossless_float.check_steps(exact, rows, missing, self._quant, self._received)
         elif self._nodata is not None and not np.isnan(self._nodata):
             equal = rows == self._nodata
