@@ -15,7 +15,7 @@ import zlib
 import zstandard
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-KNOWN_TYPES = [b"AHDR", b"MESH", b"AEND", b"tEXt", b"ZZZZ", b"mEta", b"RESD"]
+KNOWN_TYPES = [b"AHDR", b"MESH", b"AEND", b"tEXt", b"ZZZZ", b"mEta", b"RESD", b"STEP"]
 INTERESTING_U32 = [0, 1, 2, 3, 0x7F, 0xFF, 0x100, 0xFFFF, 0x10000, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF]
 
 
