@@ -170,6 +170,22 @@ def test_malformed_step_chunks_are_refused(change, match):
         _reference().decode(bad)
 
 
+@pytest.mark.parametrize("name, sample_type", [("steps_float_lossless", 6), ("exact_float32_holes", 2),
+                                               ("steps32_float_lossless", 2), ("residual_depth16", 6)])
+def test_a_relabelled_sample_type_decodes_alike_or_is_refused_by_both(name, sample_type):
+    from tests.test_conformance import VECTORS
+
+    data = (VECTORS / f"{name}.atm").read_bytes()
+    bad = _rebuild(data, lambda t, p: (t, p[:8] + bytes([sample_type]) + p[9:]) if t == b"AHDR" else (t, p))
+    try:
+        out = codec.decode(bad)
+    except CorruptError:
+        with pytest.raises(_reference().DecodeError):
+            _reference().decode(bad)
+        return
+    assert np.array_equal(_bits(_reference().decode(bad)), _bits(out))
+
+
 def test_exact_steps_are_smaller_than_keys():
     rng = np.random.default_rng(3)
     image = (range_scene(64, 48, seed=3) * 4 + rng.integers(0, 3, (48, 64)) + 300).astype(np.float32)
