@@ -216,6 +216,18 @@ def test_nan_holes_keep_their_payload():
     assert np.isnan(codec.info(data)["nodata"])
 
 
+@pytest.mark.parametrize("keys", [False, True])
+def test_a_mask_makes_holes_in_both_routes(keys):
+    rng = np.random.default_rng(10)
+    image = rng.normal(0, 1, (30, 40)) if keys else rng.integers(0, 3000, (30, 40)) * 0.5
+    image = image.astype(np.float32)
+    mask = rng.random((30, 40)) < 0.2
+    data = codec.encode(image, lossless=True, mask=mask)
+    out = codec.decode(data)
+    assert _exact(data) == keys
+    assert np.array_equal(_bits(out[~mask]), _bits(image[~mask])) and np.isnan(out[mask]).all()
+
+
 def test_float16_and_float64_of_binary32_values():
     rng = np.random.default_rng(4)
     half = rng.normal(0, 100, (9, 11)).astype(np.float16)
