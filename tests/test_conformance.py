@@ -22,7 +22,7 @@ def test_there_are_conformance_files():
     assert {"gray8_steps", "gray16_scene", "rgb8_grid", "line_1x9", "bands_gray8", "float_elevation", "holes_float", "walls_hilbert",
             "lattice_ties", "rings_ties", "walls_ties", "listed_ties", "listed_not_delaunay",
             "int8_holes", "int16_dem_holes", "int32_bands_holes", "axis_gray8_holes",
-            "residual_depth16", "residual_rgb8"} <= set(CASES)
+            "residual_depth16", "residual_rgb8", "holes_context16"} <= set(CASES)
 
 
 @pytest.mark.parametrize("name", CASES)

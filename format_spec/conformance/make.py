@@ -187,7 +187,17 @@ def main() -> None:
         np.random.default_rng(13).integers(0, 256, (16, 24, 3), dtype=np.uint8), max_error=2, residual=True,
         band_height=6, points=60, mesher="uniform",
     )
+    # context-coded holes (§4.10): ragged dropouts in the upper bands' HOLE chunks, a
+    # band without holes keeping its MASK chunk (a file may mix them)
+    speckled = synthetic.range_scene(40, 30, seed=16, dtype=np.uint16)
+    speckled[:18][np.random.default_rng(16).random((18, 40)) < 0.25] = 0
+    speckled[2:7, 30:38] = 0
+    cases["holes_context16"] = codec.encode(speckled, mesher="uniform", points=120, band_height=12, nodata=0)
+    # `make.py NAME ...` writes only those (the others keep their bytes)
+    only = set(sys.argv[1:]) or set(cases)
     for name, data in cases.items():
+        if name not in only:
+            continue
         (HERE / f"{name}.atm").write_bytes(data)
         image = codec.decode(data)
         if image.dtype.kind in "fi" or image.shape[2:] == (1,):  # beyond PNG: float, signed, H x W x 1
