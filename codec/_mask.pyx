@@ -8,7 +8,6 @@ decode (status codes; codec.holes turns them into CorruptError)."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.stdlib cimport free, malloc
-from libc.string cimport memset
 
 import numpy as np
 
@@ -32,42 +31,50 @@ cpdef enum Status:
 CONTEXT_BITS = BITS
 
 
+cdef struct Model:
+    # a context's two estimates of the probability of a 0 and its count (§4.8.2)
+    uint16_t fast
+    uint16_t steady
+    uint8_t count
+
+
 cdef struct Models:
-    uint16_t fast[CONTEXTS]
-    uint16_t steady[CONTEXTS]
-    uint8_t count[CONTEXTS]
+    Model m[CONTEXTS]
 
 
-cdef uint8_t SHIFTS[256]
+#: The count's adaptation shifts (§4.8.2): the steady one, floor(log2(n + 2)) at most
+#: MAX_SHIFT, and the fast one, at most FAST_SHIFT.
+cdef uint8_t STEADY[256]
+cdef uint8_t FAST[256]
 cdef int _i
 for _i in range(256):
-    # floor(log2(n + 2)), at most MAX_SHIFT
-    SHIFTS[_i] = min((_i + 2).bit_length() - 1, MAX_SHIFT)
+    STEADY[_i] = min((_i + 2).bit_length() - 1, MAX_SHIFT)
+    FAST[_i] = min(STEADY[_i], FAST_SHIFT)
 
 
 cdef inline void _fresh(Models* m) noexcept nogil:
     cdef int i
     for i in range(CONTEXTS):
-        m.fast[i] = 32768
-        m.steady[i] = 32768
-    memset(m.count, 0, CONTEXTS)
+        m.m[i].fast = 32768
+        m.m[i].steady = 32768
+        m.m[i].count = 0
 
 
-cdef inline uint32_t _p(Models* m, int c) noexcept nogil:
-    return (<uint32_t>m.fast[c] + m.steady[c]) >> 1
+cdef inline uint32_t _p(Model* m) noexcept nogil:
+    return (<uint32_t>m.fast + m.steady) >> 1
 
 
-cdef inline void _update(Models* m, int c, int bit) noexcept nogil:
-    cdef int s = SHIFTS[m.count[c]]
-    cdef int f = s if s < FAST_SHIFT else FAST_SHIFT
-    if bit:
-        m.fast[c] -= m.fast[c] >> f
-        m.steady[c] -= m.steady[c] >> s
-    else:
-        m.fast[c] += (65536 - m.fast[c]) >> f
-        m.steady[c] += (65536 - m.steady[c]) >> s
-    if m.count[c] < 255:
-        m.count[c] += 1
+cdef inline void _zero(Model* m) noexcept nogil:
+    # a 0 was coded: both estimates move towards it
+    m.fast += (65536 - m.fast) >> FAST[m.count]
+    m.steady += (65536 - m.steady) >> STEADY[m.count]
+    m.count += m.count < 255
+
+
+cdef inline void _one(Model* m) noexcept nogil:
+    m.fast -= m.fast >> FAST[m.count]
+    m.steady -= m.steady >> STEADY[m.count]
+    m.count += m.count < 255
 
 
 #: Padding of the rows a coder keeps: PAD zero pixels left of column 0 (the template
@@ -101,6 +108,7 @@ def encode(const uint8_t[:, ::1] holes):
     cdef const uint8_t* up2
     cdef int c, bit
     cdef uint32_t bound
+    cdef Model* model
     if m == NULL:
         raise MemoryError()
     padded = np.zeros((rows + 2, w + PAD + 3), np.uint8)
@@ -117,16 +125,18 @@ def encode(const uint8_t[:, ::1] holes):
                 c = _start(up, up2)
                 for x in range(w):
                     bit = row[x]
-                    bound = (e.rng >> 16) * _p(m, c)
+                    model = &m.m[c]
+                    bound = (e.rng >> 16) * _p(model)
                     if bit:
                         e.low += bound
                         e.rng -= bound
+                        _one(model)
                     else:
                         e.rng = bound
+                        _zero(model)
                     while e.rng < TOP:
                         e.rng <<= 8
                         rc_shift_low(&e)
-                    _update(m, c, bit)
                     c = _next_context(c, bit, up, up2, x)
             rc_flush(&e)
         if e.failed:
@@ -144,6 +154,7 @@ def decode(const uint8_t[::1] data, int64_t rows, int64_t w):
     cdef int64_t x, y, at = 0, size = data.shape[0]
     cdef uint32_t code = 0, rng = 0xFFFFFFFF, bound
     cdef int c, bit, i
+    cdef Model* model
     cdef Models* m = <Models*>malloc(sizeof(Models))
     cdef uint8_t* row
     cdef const uint8_t* up
@@ -163,20 +174,22 @@ def decode(const uint8_t[::1] data, int64_t rows, int64_t w):
                 row, up, up2 = &pv[y + 2, PAD], &pv[y + 1, PAD], &pv[y, PAD]
                 c = _start(up, up2)
                 for x in range(w):
-                    bound = (rng >> 16) * _p(m, c)
+                    model = &m.m[c]
+                    bound = (rng >> 16) * _p(model)
                     if code < bound:
                         rng = bound
                         bit = 0
+                        _zero(model)
                     else:
                         code -= bound
                         rng -= bound
                         bit = 1
+                        _one(model)
                     while rng < TOP:
                         rng <<= 8
                         code = (code << 8) | (buf[at] if at < size else 0)
                         at += 1
                     row[x] = bit
-                    _update(m, c, bit)
                     c = _next_context(c, bit, up, up2, x)
                 if at > size:
                     break  # past the chunk's end: corrupt, whatever follows
