@@ -158,7 +158,10 @@ def check(data: Buffer) -> bool:
 
 
 def decode_mesh(data: Buffer) -> Mesh:
-    """Parse .atm bytes into one validated Mesh of the whole image (bands merged)."""
+    """Parse .atm bytes into one validated Mesh of the whole image (bands merged). In a
+    file with a residual layer (info's `residual`, the default under max_error/max_rms)
+    it is a light preview, not within the bound: encode with residual=False for a mesh
+    that is."""
     from . import container
     from .stream import merge_bands
 
