@@ -9,15 +9,16 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 #: The kernels, each a module of its own.
-KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber"]
+KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber", "codec._mask"]
 
 # MSVC spells optimisation its own way; gcc and clang take -O2.
 OPTIMISE = ["/O2"] if sys.platform == "win32" else ["-O2"]
 
 extensions = [
     # depends: C++ headers beside a kernel (codec/cdt.hpp), rebuilt on change, in the sdist
+    # (and the Cython declarations a kernel cimports, codec/rangecoder.pxd)
     Extension(name, [name.replace(".", "/") + ".pyx"], extra_compile_args=OPTIMISE,
-              depends=glob.glob("codec/*.hpp"))
+              depends=glob.glob("codec/*.hpp") + glob.glob("codec/*.pxd"))
     for name in KERNELS
 ]
 

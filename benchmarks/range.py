@@ -219,8 +219,8 @@ def _float(case: Case) -> np.ndarray:
 
 
 def atm_encode(case: Case, e: float) -> bytes:
-    # the residual layer (ATM.md §4.8) meets the bound with the fewest bytes
-    return codec.encode(case.image, max_error=e, residual=True, nodata=case.nodata)
+    # the defaults, as a user writes it: max_error alone (codec.representation chooses)
+    return codec.encode(case.image, max_error=e, nodata=case.nodata)
 
 
 def atm_decode(case: Case, data: bytes) -> np.ndarray:

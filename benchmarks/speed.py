@@ -18,7 +18,7 @@ the median over the rounds of each round's own ratio, a time the median time.
    times) against one thread decoding them in turn: throughput ratio.
 3. Encode at equal vertex count: codec.encode(image, points=N) against pydelatin's
    Delatin(image, max_points=N) (bench extra; left out without it).
-4. Encode at equal max error: codec.encode(dem, max_error=E) of a float DEM against
+4. Encode at equal max error: codec.encode(dem, max_error=E, residual=False) (the mesh) of a float DEM against
    Delatin(dem, max_error=E), for each E (a synthetic DEM, or --dem-file's GeoTIFF as
    float32), with the .atm bytes and both vertex counts.
 5. Encode to a quality: codec.encode(image, quality=Q) of each gray corpus image
@@ -248,9 +248,9 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
         terrain = tifffile.imread(dem_file).astype(np.float32)
     rows = []
     for e in errors:
-        times = interleaved({"atm": lambda: codec.encode(terrain, max_error=e),
+        times = interleaved({"atm": lambda: codec.encode(terrain, max_error=e, residual=False),
                              "delatin": lambda: Delatin(terrain, max_error=e)}, repeat)
-        data = codec.encode(terrain, max_error=e)
+        data = codec.encode(terrain, max_error=e, residual=False)
         h, w = terrain.shape
         rows.append([f"{w}x{h}", f"{e:g}", f"{len(data):,}", f"{codec.info(data)['vertices']:,}",
                      f"{len(Delatin(terrain, max_error=e).vertices):,}", f"{statistics.median(times['atm']):.0f}",

@@ -88,6 +88,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         if i["residual"] is not None:
             what = "lossless" if i["residual"] == 0 else f"every stored sample within {i['residual']}"
             print(f"  residual layer: {what} (the mesh is a preview)")
+        else:
+            print("  pixels from the mesh alone (no residual layer)")
         if i.get("exact_float") and i["exact_step"] is not None:
             print(f"  float samples stored exactly as steps of {i['exact_step']:.6g} from {i['exact_offset']:.10g} (32 bits)")
         elif i.get("exact_float"):
@@ -154,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
     enc.add_argument("--lossless", action="store_true", default=None, help="every valid sample decodes exactly (float data: its binary32 bits); not with a bound")
-    enc.add_argument("--residual", action="store_true", default=None, help="with --max-error or --max-rms: meet it with a residual layer (fewest bytes; the mesh is then a light preview; under --max-rms every sample is kept within it)")
+    enc.add_argument("--residual", action=argparse.BooleanOptionalAction, default=None, help="how --max-error or --max-rms is met: by default (and with --residual) a residual layer, the fewest bytes (the mesh is then a light preview, not within the bound); --no-residual: the mesh alone, within the bound (for 'atm mesh' and terrain tiles)")
     enc.add_argument(
         "--band-height",
         type=int,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,12 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     data = _read_bytes(args.input)
     dem = terrain.load(data)  # z in data units (metres for a float or quantised DEM)
     mesh = dem.mesh
+    if codec.info(data)["residual"] is not None:
+        print(
+            f"atm: note: {args.input} has a residual layer, so its mesh is a light preview, not within the "
+            "bound it was encoded to; 'atm encode --no-residual' stores a mesh within the bound",
+            file=sys.stderr,
+        )
     if fmt == "obj":
         out = export.to_obj(mesh, dem.heights)
     elif fmt == "ply":

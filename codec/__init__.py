@@ -69,7 +69,7 @@ def encode(
     edge_share: float | None = None,
     region_share: float | None = None,
     lossless: bool = False,
-    residual: bool | str = False,
+    residual: bool | str | None = None,
     mask: np.ndarray | None = None,
     **unknown: NoReturn,
 ) -> bytes:
@@ -84,15 +84,16 @@ def encode(
     (1..100 on JPEG's scale: an RMS bound at about JPEG's error, 100 lossless), `max_rms`, `max_error` (sample
     units; float data: data units). On float data `max_error` chooses the quantisation
     step (about 2 max_error, each level kept exactly by the mesh); `precision` overrides
-    it. `lossless=True`, or `max_error` or `max_rms` with `residual=True`,
-    adds a residual layer (ATM.md §4.8) that meets the bound on every valid sample by
-    construction with the fewest bytes, beside a light mesh (`points` sets its size;
-    it is a preview, not within the bound); under `max_rms` the layer's bound is widened
-    while the measured RMS stays within it. Lossless float data keeps every binary32
-    bit (codec.lossless_float: 16-bit steps where the values allow, else ATM.md §4.10's
-    binary32 keys). `residual="auto"` keeps whichever of the
-    layer and the mesh alone is smaller (`atm mesh` and terrain users, who need the
-    stored mesh within the bound, leave it False). The other options and their defaults:
+    it. `lossless=True`, `max_error` and `max_rms` are met by a residual layer
+    (ATM.md §4.8) that holds the bound on every valid sample by construction, with the
+    fewest bytes (codec.representation has the measurements), beside a light mesh (a
+    preview, not within the bound; with `residual=True`, `points` sets its size); under
+    `max_rms` the layer's bound is the widest whose RMS, computed from the samples, is
+    within it. Lossless float data keeps every binary32 bit (codec.lossless_float: 16-bit
+    steps where the values allow, else ATM.md §4.10's binary32 keys). `residual=False`
+    meets the bound with the mesh alone, for those who use
+    the stored mesh itself (`atm mesh`, terrain tiles; codec.build_mesh always does);
+    `residual="auto"` encodes both and keeps the smaller. The other options and their defaults:
     codec.settings.Settings, which checks them all (OptionError names a bad one; an
     unknown one is refused with the list of valid ones).
     """
@@ -115,7 +116,8 @@ def build_mesh(image: np.ndarray, *, points: int | None = None, mesher: str = "a
     """The mesh the mesher makes of a whole image in one piece: points as for `encode`,
     and the mesher's options (codec.settings.mesher_option_names). With a size bound
     (max_error, max_rms, quality) or samples the file stores with an offset or scale
-    (float, signed), it is the mesh `encode` stores, its values in data units."""
+    (float, signed), it is the mesh `encode(..., residual=False)` stores (the bound met
+    by the mesh itself), its values in data units."""
     from . import encoder, terrain
     from .settings import Settings, mesher_option_names
 
@@ -158,7 +160,10 @@ def check(data: Buffer) -> bool:
 
 
 def decode_mesh(data: Buffer) -> Mesh:
-    """Parse .atm bytes into one validated Mesh of the whole image (bands merged)."""
+    """Parse .atm bytes into one validated Mesh of the whole image (bands merged). In a
+    file with a residual layer (info's `residual`, the default under max_error/max_rms)
+    it is a light preview, not within the bound: encode with residual=False for a mesh
+    that is."""
     from . import container
     from .stream import merge_bands
 

@@ -21,6 +21,7 @@ from construct import ConstructError
 from .format_spec import schema
 
 from . import coding, frames, integers, limits, meshcode
+from . import holemask
 from . import metadata as meta_json
 from .errors import CorruptError, FormatError, LimitError, TruncatedError, UnsupportedError
 from .image import DTYPES, SAMPLE_TYPES
@@ -201,7 +202,10 @@ class Writer:
             mask = schema.MaskPayload.build(
                 dict(y0=y0, rows=mesh.height, run_count=len(runs), runs=coding.varints(runs))
             )
-            self._stream.write(_chunk(schema.MASK, frames.compress(mask)))
+            mask = _chunk(schema.MASK, frames.compress(mask))
+            # ragged holes (sensor depth) cost less context-coded, DEM voids as runs
+            coded = _chunk(holemask.CHUNK, holemask.encode(y0, holes)) if holes.any() else mask
+            self._stream.write(coded if len(coded) < len(mask) else mask)
         elif mesh.holes is not None and mesh.holes.any():
             raise ValueError("a band with holes needs a header with a nodata value")
         if residual is not None:
@@ -601,12 +605,15 @@ class Reader:
                 if h.nodata is not None and holes is None:
                     raise CorruptError(f"RESD chunk at byte {offset} comes before its band's MASK chunk")
                 residual = (payload, offset)
-            elif ctype == schema.MASK:
+            elif ctype in (schema.MASK, holemask.CHUNK):
                 if h.nodata is None:
-                    raise CorruptError(f"MASK chunk at byte {offset} in a file without NDAT")
+                    raise CorruptError(f"{name} chunk at byte {offset} in a file without NDAT")
                 if holes is not None:
-                    raise CorruptError(f"two MASK chunks before a MESH at byte {offset}")
-                holes = self._parse_mask(payload, offset, next_y0)
+                    raise CorruptError(f"two MASK or HOLE chunks before a MESH at byte {offset}")
+                if ctype == schema.MASK:
+                    holes = self._parse_mask(payload, offset, next_y0)
+                else:
+                    holes = holemask.decode(payload, f"HOLE chunk at byte {offset}", next_y0, h.width, h.height)
             elif ctype == schema.MESH:
                 if finished:
                     raise CorruptError(f"MESH chunk at byte {offset} lies beyond the image's last row")
@@ -688,7 +695,7 @@ def summarise(reader: Reader) -> Summary:
             reader._read_metadata(payload, offset)
         elif ctype in (schema.HEADER, schema.QUANT, schema.NODATA, schema.AXIS, schema.STEP):
             raise CorruptError(f"misplaced {ctype.decode('latin-1')} chunk at byte {offset}")
-        elif ctype[0] & 0x20 == 0 and ctype not in (schema.MASK, RESIDUAL):
+        elif ctype[0] & 0x20 == 0 and ctype not in (schema.MASK, RESIDUAL, holemask.CHUNK):
             raise UnsupportedError(f"unknown critical chunk {ctype.decode('latin-1')}; a newer codec wrote this file")
 
 

@@ -4,7 +4,6 @@ band pipeline as codec.StreamEncoder (codec.pipeline)."""
 from __future__ import annotations
 
 import io
-import math
 
 import numpy as np
 
@@ -27,71 +26,17 @@ def build_mesh(image, settings: Settings) -> Mesh:
     return builder(settings.mesher)(img, min(points, width * height), **settings.mesher_options()).mesh
 
 
-#: Encodes at most this many layer bounds when `max_rms` sets a residual layer's bound.
-RMS_SEARCH = 6
-
-
 def encode(image, settings: Settings, mask=None) -> bytes:
     """Encode an image as .atm bytes, band by band; same image and settings give the
-    same bytes. mask: H x W booleans, True where the image has no data."""
+    same bytes. mask: H x W booleans, True where the image has no data. A bound is met
+    by the residual layer unless residual=False (codec.representation), in one encode;
+    only residual='auto' encodes twice, to keep the smaller."""
     if settings.residual == "auto":
         # the mesh alone is kept on a tie: it is then within the bound too
-        mesh = encode(image, settings.replace(residual=False), mask)
-        layered = encode(image, settings.replace(residual=True), mask)
+        mesh = _encode(image, settings.replace(residual=False), mask)
+        layered = _encode(image, settings.replace(residual=True), mask)
         return layered if len(layered) < len(mesh) else mesh
-    if settings.residual and settings.max_rms is not None and settings.max_error is None:
-        return _layer_under_rms(image, settings, mask)
     return _encode(image, settings, mask)
-
-
-def _layer_under_rms(image, settings: Settings, mask) -> bytes:
-    """A residual layer whose decoded RMS is within max_rms, measured: the layer's
-    bound E starts at max_rms (every sample within E, so the RMS is too) and widens
-    while the decoded RMS stays within max_rms, since the RMS of a layer of bound E
-    is well under E (about E / sqrt(3) on noisy data, less on smooth data). The
-    fewest bytes among the encodes that meet max_rms are kept; the first always does."""
-    from .stream import decode_all
-
-    target = float(settings.max_rms)
-    img = np.asarray(image)
-    whole = img.dtype.kind in "uib"
-    valid = np.ones(img.shape[:2], bool)
-    if img.dtype.kind == "f":
-        valid &= np.isfinite(img) if img.ndim == 2 else np.isfinite(img).all(axis=-1)
-    if mask is not None:
-        valid &= ~np.asarray(mask, bool)
-    if settings.nodata is not None and not np.isnan(settings.nodata):
-        valid &= (img != settings.nodata) if img.ndim == 2 else (img != settings.nodata).any(axis=-1)
-
-    def rms(data: bytes) -> float:
-        decoded, _ = decode_all(io.BytesIO(data))
-        diff = decoded.astype(np.float64).reshape(valid.shape + (-1,))[valid] - \
-            img.astype(np.float64).reshape(valid.shape + (-1,))[valid]
-        return float(np.sqrt((diff**2).mean(axis=0)).max()) if diff.size else 0.0
-
-    best = _encode(image, settings, mask)
-    got = rms(best)
-    if got <= 0:
-        got = target / 4  # exact at this bound: try a wider one
-    met, missed = target, None  # the largest max_error known to meet target, the least known not to
-    for _ in range(RMS_SEARCH - 1):
-        bound = met * min(target / got, 4.0) if missed is None else (met + missed) / 2
-        if whole:
-            # integer samples: the layer's bound is floor(max_error), so step by whole levels
-            bound = float(max(math.floor(bound), math.floor(met) + 1))
-            if missed is not None and bound >= missed:
-                break
-        elif bound <= met * 1.001 or missed is not None and missed - met < max(1e-9, 0.02 * met):
-            break
-        data = _encode(image, settings.replace(max_rms=None, max_error=bound), mask)
-        got = rms(data)
-        if got <= target:
-            met = bound
-            if len(data) < len(best):
-                best = data
-        else:
-            missed = bound
-    return best
 
 
 def _encode(image, settings: Settings, mask=None) -> bytes:

@@ -171,7 +171,7 @@ def _float_step(s: Settings) -> float | None:
     values); otherwise None, the finest step 65,536 levels allow."""
     if s.precision is not None:
         return s.precision
-    if s.max_error is None or s.max_rms is not None or s.quality is not None or s.residual or s.lossless:
+    if s.max_error is None or s.max_rms is not None or s.quality is not None or s.layered:
         return None
     return quantise.step_for_error(*s.value_range, s.max_error, MESH_SLACK)
 

@@ -48,10 +48,10 @@ PREVIEW_DENSITY = 0.00025
 def layer_bound(settings, plan) -> int | None:
     """The bound E in stored sample units if an image with these settings (and this
     pipeline.Plan of them) gets a residual layer, else None: `lossless` (E = 0), or
-    `residual` with `max_error` and/or `max_rms` (float data: the bound left after
+    `max_error` and/or `max_rms` when settings.layered (float data: the bound left after
     the 16-bit quantisation). Every sample within E gives an RMS within E too, so
-    `max_rms` gets E = floor(max_rms) here; codec.encode, which has the whole image,
-    then widens E while the measured RMS stays within max_rms (encoder.py)."""
+    `max_rms` gets E = floor(max_rms) here; the StreamEncoder then widens E from the
+    first band's samples (codec.representation)."""
     if settings.lossless:
         # float data: exact on q (precision given: codec.lossless_float's exact steps)
         # or on binary32 keys (exact_floats)
@@ -62,7 +62,7 @@ def layer_bound(settings, plan) -> int | None:
             "or choose residual=True or False for a stream"
         )
     bounds = [b for b in (plan.bound.max_error, plan.bound.max_rms) if b is not None]
-    if not settings.residual or not bounds:
+    if not settings.layered or not bounds:
         return None
     return min(int(math.floor(min(bounds))), _top(plan.storage))
 
@@ -101,8 +101,9 @@ class ResidualEncoder:
     """Codes the residual chunks of one image, band after band (it keeps the adaptive
     state and the last row from one band to the next)."""
 
-    def __init__(self, width: int, channels: int, storage: np.dtype, error: int):
+    def __init__(self, width: int, channels: int, storage: np.dtype, error: int, predictors: tuple[int, ...] = PREDICTORS):
         storage = np.dtype(storage)
+        self.predictors = predictors  # MED alone: its decoded samples depend on E alone (codec.representation)
         if not 0 <= error <= min(_top(storage), 65535) or storage.itemsize > 2 and error:
             raise ValueError(f"a residual bound of {error} does not fit {storage} samples")
         self.width, self.channels, self.storage, self.error = width, channels, storage, int(error)
@@ -117,7 +118,7 @@ class ResidualEncoder:
         planes = [np.ascontiguousarray(samples[..., c]) for c in range(self.channels)]
         mask = np.zeros((n, self.width), np.uint8) if holes is None else np.ascontiguousarray(holes, np.uint8)
         best = None
-        for predictor in PREDICTORS:
+        for predictor in self.predictors:
             states = [p.copy() for p in self._planes]
             coded = _residual.encode(states, predictor, planes, mask, self.error, _top(self.storage))
             if best is None or len(coded) < len(best[1]):

@@ -89,9 +89,11 @@ class Settings:
     lossless: bool = _option(
         False, "every valid sample decodes exactly, float data to its binary32 bits (a residual layer over a coarse mesh, ATM.md §4.8, §4.10); not with an error bound", cli=True
     )
-    residual: bool | str = _option(
-        False, "with max_error or max_rms: meet it with a residual layer (ATM.md §4.8: fewest bytes; the stored mesh is then a light preview, not within the bound); "
-        "'auto' (codec.encode only): whichever of the layer and the mesh alone gives fewer bytes", cli=True
+    residual: bool | str | None = _option(
+        None, "how max_error or max_rms is met: None (the default) chooses the residual layer (ATM.md §4.8), the fewest bytes on "
+        "every range, photo and synthetic image measured (codec.representation); True forces it, False keeps the mesh alone "
+        "within the bound (what `atm mesh`, terrain tiles and codec.build_mesh need: beside a layer the stored mesh is a light "
+        "preview, not within the bound); 'auto' (codec.encode only): encodes both and keeps the smaller", cli=True
     )
 
     def __post_init__(self) -> None:
@@ -112,8 +114,8 @@ class Settings:
                 _number(getattr(self, name), name)
         if not isinstance(self.lossless, bool):
             raise OptionError(f"lossless must be True or False, not {self.lossless!r}")
-        if not isinstance(self.residual, bool) and self.residual != "auto":
-            raise OptionError(f"residual must be True, False or 'auto', not {self.residual!r}")
+        if self.residual is not None and not isinstance(self.residual, bool) and self.residual != "auto":
+            raise OptionError(f"residual must be True, False, 'auto' or None (the codec's choice), not {self.residual!r}")
         if self.residual and self.max_error is None and self.max_rms is None:
             raise OptionError("residual needs max_error or max_rms (the bound the layer meets); for exact samples give lossless")
         if self.mesher not in MESHERS:
@@ -172,6 +174,16 @@ class Settings:
     def mesher_options(self) -> dict:
         """The options given for the mesher's build(), by name."""
         return {n: getattr(self, n) for n in mesher_option_names(self.mesher) if getattr(self, n) is not None}
+
+    @property
+    def layered(self) -> bool:
+        """Whether a residual layer meets the size option: `lossless`, or `max_error` /
+        `max_rms` unless `residual=False` (codec.representation says why)."""
+        if self.lossless:
+            return True
+        if self.max_error is None and self.max_rms is None or self.quality is not None:
+            return False
+        return self.residual is not False
 
     @property
     def bounded(self) -> bool:

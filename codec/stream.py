@@ -11,7 +11,7 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, integers, lossless_float, pipeline, residual
+from . import container, integers, lossless_float, pipeline, representation, residual
 from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
@@ -81,6 +81,9 @@ class StreamEncoder:
         self._check_steps = bool(settings.lossless) and p.dtype.kind == "f" and not self._exact
         storage = lossless_float.KEY_STORAGE if self._exact else p.storage
         self._residual = None if error is None else residual.ResidualEncoder(p.width, p.channels, storage, error)
+        # under max_rms the layer's bound is widened from the first band's samples
+        # (codec.representation); max_error's, if given too, caps it
+        self._rms = None if error is None or p.bound.max_rms is None else (p.bound.max_rms, p.bound.max_error)
         if self._residual is not None:
             self._plan = p = pipeline.plan(residual.mesh_settings(settings, p.width, p.height), width, height, dtype, channels)
         self.width, self.height, self.dtype, self.channels = p.width, p.height, p.dtype, p.channels
@@ -219,10 +222,22 @@ class StreamEncoder:
             progress=None if self._progress is None else self._within_band,
         )
         layer = None
+        if self._rms is not None:
+            # the layer's bound under max_rms, widened from this first band (codec.representation)
+            max_rms, cap = self._rms
+            p = self._plan
+            n = residual.covered_rows(self._filled, self._received == self.height)
+            error, predictor = representation.layer_under_rms(
+                self._buf[:n], band_holes[:n] if band_holes.any() else None, p.channels, p.storage, max_rms,
+                (self.height - n) * p.width, None if cap is None else int(cap // 1),
+            )
+            self._residual = residual.ResidualEncoder(p.width, p.channels, p.storage, error, (predictor,))
+            self._rms = None
         if self._residual is not None:
             n = residual.covered_rows(self._filled, self._received == self.height)
             coded_rows = self._keys[:n] if self._exact else self._buf[:n]
             layer = self._residual.band(self._y0, coded_rows, band_holes[:n] if band_holes.any() else None)
+            self._residual.predictors = residual.PREDICTORS  # later bands' samples are counted at E: either
             if band_holes.any():
                 coded.mesh.holes = band_holes.copy()  # for the band's MASK chunk
         self._writer.write_band(coded.y0, coded.mesh, coded.step, coded.delaunay, coded.layout, layer)

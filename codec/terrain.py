@@ -55,7 +55,9 @@ def data_values(values: np.ndarray, header: container.Header) -> np.ndarray:
 
 
 def load(data: bytes) -> Terrain:
-    """Parse .atm bytes into its mesh and heights in data units (RGB: luma)."""
+    """Parse .atm bytes into its mesh and heights in data units (RGB: luma). A file with
+    a residual layer (codec.info's `residual`) stores a light preview mesh, not one
+    within its bound: encode with residual=False for a mesh that is."""
     from .export import LUMA
     from .stream import merge_bands
 
@@ -195,9 +197,11 @@ def needs_encoder(image: np.ndarray, options: dict) -> bool:
 
 
 def build_mesh(image, **options) -> Mesh:
-    """The mesh `codec.encode(image, **options)` stores, as one piece (one band), its
-    values in data units and the image's dtype (float32 for float data). Accepts every
-    encode option: points, max_error, max_rms, quality, nodata, precision, ..."""
+    """The mesh `codec.encode(image, residual=False, **options)` stores, as one piece
+    (one band), its values in data units and the image's dtype (float32 for float data).
+    Accepts every encode option: points, max_error, max_rms, quality, nodata, precision,
+    ... A bound is met by the mesh itself (the mesh alone, not a residual layer beside a
+    preview), since the mesh is what is returned."""
     from . import encoder
     from .image import as_image
     from .settings import Settings
@@ -207,6 +211,8 @@ def build_mesh(image, **options) -> Mesh:
     height = img.shape[0]
     options.setdefault("band_height", max(height - 1, 1))
     options = {k: v for k, v in options.items() if v is not None}
+    if options.get("max_error") is not None or options.get("max_rms") is not None:
+        options.setdefault("residual", False)  # the mesh is the product: it meets the bound
     mask = options.pop("mask", None)
     settings = Settings.from_options(also=("mask",), **options)
     reader = container.Reader(io.BytesIO(encoder.encode(img, settings, mask)))

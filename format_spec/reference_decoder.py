@@ -1023,13 +1023,16 @@ def read(data: bytes) -> tuple[Header, list[Band]]:
                 raise DecodeError("NDAT chunk out of place (once, before the first band)")
             parse_nodata(payload, header)
             have_ndat = True
-        elif kind == b"MASK":
+        elif kind in (b"MASK", b"HOLE"):  # §4.6, §4.11: the same mask, coded two ways
             if not have_ndat:
-                raise DecodeError("MASK chunk without NDAT")
+                raise DecodeError(f"{name} chunk without NDAT")
             if mask is not None:
-                raise DecodeError("two MASK chunks before one MESH")
-            limit = min(16 + 5 * (header.width * header.height + 1), frame_limit(payload))
-            mask = parse_mask(decompress(payload, limit, "MASK"), header)
+                raise DecodeError("two MASK or HOLE chunks before one MESH")
+            if kind == b"MASK":
+                limit = min(16 + 5 * (header.width * header.height + 1), frame_limit(payload))
+                mask = parse_mask(decompress(payload, limit, "MASK"), header)
+            else:
+                mask = parse_hole(payload, header)
         elif kind == b"RESD":  # §4.8: kept for the MESH chunk that follows
             if resd is not None or (have_ndat and mask is None):
                 raise DecodeError("RESD chunk out of place (after its band's MASK, before its MESH)")
@@ -1337,3 +1340,37 @@ def main(argv: list[str]) -> int:
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv))
+
+
+# ---------------------------------------------------------------- §4.11 the HOLE chunk
+
+
+def parse_hole(data: bytes, header: Header) -> tuple[int, int, np.ndarray]:
+    """§4.11: (y0, rows, holes) with holes a rows x width bool array, each pixel's bit
+    range-decoded (§4.8.2) with the model its twelve-pixel context picks."""
+    r = Reader(data, "HOLE")
+    y0, rows = r.u32(), r.u32()
+    width = header.width
+    if rows < 1 or y0 + rows > header.height:
+        raise DecodeError(f"HOLE: rows {y0}..{y0 + rows - 1} in an image of {header.height} rows")
+    coded = data[8:]
+    try:
+        rc = RangeDecoder(coded)
+        models = [[32768, 32768, 0] for _ in range(4096)]
+        m = np.zeros((rows, width), bool)
+
+        def bit(x: int, y: int) -> int:
+            return int(0 <= x < width and y >= 0 and m[y, x])
+
+        for y in range(rows):
+            for x in range(width):
+                c = (bit(x - 1, y) | bit(x - 2, y) << 1 | bit(x - 3, y) << 2 | bit(x - 4, y) << 3
+                     | bit(x - 2, y - 1) << 4 | bit(x - 1, y - 1) << 5 | bit(x, y - 1) << 6
+                     | bit(x + 1, y - 1) << 7 | bit(x + 2, y - 1) << 8
+                     | bit(x - 1, y - 2) << 9 | bit(x, y - 2) << 10 | bit(x + 1, y - 2) << 11)
+                m[y, x] = rc.bit(models[c])
+    except DecodeError as exc:
+        raise DecodeError(f"HOLE: {exc}") from None
+    if rc.at != len(coded):
+        raise DecodeError(f"HOLE: {len(coded) - rc.at} coded bytes left after the last pixel")
+    return y0, rows, m

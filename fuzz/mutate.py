@@ -15,7 +15,7 @@ import zlib
 import zstandard
 
 SIGNATURE = b"\x89ATM\r\n\x1a\n"
-KNOWN_TYPES = [b"AHDR", b"MESH", b"AEND", b"tEXt", b"ZZZZ", b"mEta", b"RESD", b"STEP"]
+KNOWN_TYPES = [b"AHDR", b"MESH", b"AEND", b"tEXt", b"ZZZZ", b"mEta", b"RESD", b"STEP", b"HOLE", b"MASK"]
 INTERESTING_U32 = [0, 1, 2, 3, 0x7F, 0xFF, 0x100, 0xFFFF, 0x10000, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF]
 
 
@@ -99,6 +99,21 @@ def mutate_residual_payload(raw: bytes, rng: random.Random) -> bytes:
     if len(b) > 12 and rng.random() < 0.3:
         # cut the coded bytes short, or leave extra behind them
         return bytes(b[: rng.randrange(12, len(b))]) if rng.random() < 0.5 else bytes(b) + bytes(rng.randint(1, 8))
+    return mutate_bytes(bytes(b), rng)
+
+
+def mutate_hole_payload(raw: bytes, rng: random.Random) -> bytes:
+    """Edit a HOLE payload (ATM.md §4.11): its fixed fields (y0, rows) or its
+    range-coded bits, which no CRC inside protects."""
+    b = bytearray(raw)
+    if len(b) >= 8 and rng.random() < 0.4:
+        at = rng.choice([0, 4])
+        (v,) = struct.unpack_from("<I", b, at)
+        struct.pack_into("<I", b, at, rng.choice([v + 1, max(v - 1, 0), 0, 1, 0xFFFFFFFF, rng.randrange(1 << 32)]) & 0xFFFFFFFF)
+        return bytes(b)
+    if len(b) > 8 and rng.random() < 0.3:
+        # cut the coded bytes short, or leave extra behind them
+        return bytes(b[: rng.randrange(8, len(b))]) if rng.random() < 0.5 else bytes(b) + bytes(rng.randint(1, 8))
     return mutate_bytes(bytes(b), rng)
 
 
@@ -224,6 +239,8 @@ def mutate(data: bytes, rng: random.Random) -> bytes:
                 payload = mutate_bytes(payload, rng)
         elif ctype == b"RESD" and rng.random() < 0.9:
             payload = mutate_residual_payload(payload, rng)
+        elif ctype == b"HOLE" and rng.random() < 0.9:
+            payload = mutate_hole_payload(payload, rng)
         elif ctype == b"AHDR" and len(payload) == 10 and rng.random() < 0.7:
             b = bytearray(payload)
             i = rng.choice([0, 4, 8, 9])

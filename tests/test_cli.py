@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import codec
 from codec.files import read_image, write_image
 from tests.synthetic import range_scene
 
@@ -255,6 +256,24 @@ def test_max_rms_with_residual_layer(png, tmp_path):
     assert atm("decode", out_atm, out_png).returncode == 0
     assert rms(read_image(out_png), read_image(png)) <= 3
     info = json.loads(atm("info", out_atm, "--json").stdout)
-    # the CLI streams its rows, so the layer keeps the safe bound floor(max_rms): every
-    # sample within 3 (codec.encode, which holds the whole image, widens it by measuring)
-    assert info["residual"] == 3
+    # the layer's bound is widened from the first band's samples, streamed or not
+    # (before, the CLI kept floor(max_rms) = 3 and only codec.encode widened it)
+    assert info["residual"] > 3
+    assert out_atm.read_bytes() == codec.encode(read_image(png), max_rms=3)
+
+
+def test_bounds_give_the_same_file_from_the_cli_and_python(png, tmp_path):
+    # issue #21: `atm encode --max-error E` = codec.encode(img, max_error=E), the residual
+    # layer by default, --no-residual the mesh alone; `atm info` says which
+    image = read_image(png)
+    for flags, options, layered in (
+        (["--max-error", "4"], dict(max_error=4), True),
+        (["--max-rms", "2.5"], dict(max_rms=2.5), True),
+        (["--max-error", "4", "--no-residual"], dict(max_error=4, residual=False), False),
+    ):
+        out = tmp_path / "b.atm"
+        r = atm("encode", png, out, *flags, "--force")
+        assert r.returncode == 0, r.stderr
+        assert out.read_bytes() == codec.encode(image, **options)
+        text = atm("info", out).stdout.decode()
+        assert ("residual layer:" in text) == layered and ("mesh alone" in text) == (not layered), text

@@ -23,7 +23,7 @@ def test_there_are_conformance_files():
             "lattice_ties", "rings_ties", "walls_ties", "listed_ties", "listed_not_delaunay",
             "int8_holes", "int16_dem_holes", "int32_bands_holes", "axis_gray8_holes",
             "residual_depth16", "residual_rgb8", "exact_float32_holes", "steps_float_lossless",
-            "steps32_float_lossless"} <= set(CASES)
+            "steps32_float_lossless", "holes_context16"} <= set(CASES)
 
 
 @pytest.mark.parametrize("name", CASES)

@@ -42,23 +42,28 @@ images = st.tuples(
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(images, st.floats(0, 40), st.sampled_from([None, 3, 16]), st.sampled_from(["uniform", None]))
-def test_max_rms_holds(args, bound, band_height, mesher):
+@given(images, st.floats(0, 40), st.sampled_from([None, 3, 16]), st.sampled_from(["uniform", None]),
+       st.sampled_from([None, False]))
+def test_max_rms_holds(args, bound, band_height, mesher, residual):
+    # refinement of the mesh alone (residual=False), or the default residual layer
     seed, h, w, (dtype, channels), texture = args
     image = make(seed, h, w, dtype, channels, texture)
     scale = np.iinfo(dtype).max / 255
-    out = codec.decode(codec.encode(image, max_rms=bound * scale, band_height=band_height, mesher=mesher))
+    out = codec.decode(codec.encode(image, max_rms=bound * scale, band_height=band_height, mesher=mesher,
+                                    residual=residual))
     rms, _ = per_channel(out, image)
     assert (rms <= bound * scale + 1e-9).all()
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(images, st.integers(0, 60), st.sampled_from([None, 3, 16]), st.sampled_from(["uniform", None]))
-def test_max_error_holds(args, bound, band_height, mesher):
+@given(images, st.integers(0, 60), st.sampled_from([None, 3, 16]), st.sampled_from(["uniform", None]),
+       st.sampled_from([None, False]))
+def test_max_error_holds(args, bound, band_height, mesher, residual):
     seed, h, w, (dtype, channels), texture = args
     image = make(seed, h, w, dtype, channels, texture)
     scale = np.iinfo(dtype).max // 255
-    out = codec.decode(codec.encode(image, max_error=bound * scale, band_height=band_height, mesher=mesher))
+    out = codec.decode(codec.encode(image, max_error=bound * scale, band_height=band_height, mesher=mesher,
+                                    residual=residual))
     _, worst = per_channel(out, image)
     assert (worst <= bound * scale).all()
 

@@ -38,23 +38,26 @@ def make_mask(kind: str, h: int, w: int, seed: int) -> np.ndarray:
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 10**6), st.integers(1, 40), st.integers(1, 40), masks,
-       st.sampled_from([None, 4]), st.integers(0, 30))
-def test_integer_holes_with_a_bound(seed, h, w, kind, band_height, bound):
+       st.sampled_from([None, 4]), st.integers(0, 30), st.sampled_from([None, False]))
+def test_integer_holes_with_a_bound(seed, h, w, kind, band_height, bound, residual):
+    # whatever represents the image: the default (the residual layer) or the mesh alone
     image = range_scene(w, h, seed=seed)
     mask = make_mask(kind, h, w, seed)
-    out = codec.decode(codec.encode(image, mask=mask, nodata=255, max_error=bound, band_height=band_height))
+    out = codec.decode(codec.encode(image, mask=mask, nodata=255, max_error=bound, band_height=band_height,
+                                    residual=residual))
     assert (out[mask] == 255).all()
     if (~mask).any():
         assert np.abs(out[~mask].astype(int) - image[~mask]).max() <= bound
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.integers(0, 10**6), st.integers(1, 40), st.integers(1, 40), masks, st.floats(0.05, 3))
-def test_float_nan_holes_with_a_bound(seed, h, w, kind, bound):
+@given(st.integers(0, 10**6), st.integers(1, 40), st.integers(1, 40), masks, st.floats(0.05, 3),
+       st.sampled_from([None, False]))
+def test_float_nan_holes_with_a_bound(seed, h, w, kind, bound, residual):
     z = range_scene(w, h, seed=seed).astype(np.float64) * 0.25 - 10
     mask = make_mask(kind, h, w, seed)
     z[mask] = np.where(np.random.default_rng(seed).random(mask.sum()) < 0.5, np.nan, np.inf)
-    out = codec.decode(codec.encode(z, max_error=bound, band_height=8))
+    out = codec.decode(codec.encode(z, max_error=bound, band_height=8, residual=residual))
     # one nodata value per file: NaN, unless every hole is +inf (which then comes back)
     expected = np.inf if mask.any() and np.isinf(z[mask]).all() else np.nan
     np.testing.assert_array_equal(out[mask], np.full(mask.sum(), expected, np.float32))
@@ -66,9 +69,10 @@ def test_float_nan_holes_with_a_bound(seed, h, w, kind, bound):
 def test_rms_counts_valid_pixels_only():
     image = range_scene(60, 50, seed=4)
     mask = make_mask("blobs", 50, 60, 4)
-    out = codec.decode(codec.encode(image, mask=mask, nodata=0, max_rms=2.0))
-    err = out[~mask].astype(float) - image[~mask]
-    assert np.sqrt(np.mean(err**2)) <= 2.0
+    for residual in (None, False):
+        out = codec.decode(codec.encode(image, mask=mask, nodata=0, max_rms=2.0, residual=residual))
+        err = out[~mask].astype(float) - image[~mask]
+        assert np.sqrt(np.mean(err**2)) <= 2.0
 
 
 def test_nodata_value_marks_holes_and_streams_match():

@@ -158,7 +158,7 @@ def test_code_band_is_pure():
 
 @pytest.mark.parametrize(
     "options",
-    [dict(points=500), dict(points=600, band_height=20), dict(quality=70), dict(max_error=6, band_height=30),
+    [dict(points=500), dict(points=600, band_height=20), dict(quality=70), dict(max_error=6, band_height=30, residual=False),
      dict(points=500, mesher="uniform"), dict(points=400, mask="holes")],
 )
 def test_the_writer_never_triangulates_again(options):

@@ -473,25 +473,30 @@ def run_lengths(holes: np.ndarray) -> list[int]:
 def test_the_row_two_bands_share_has_one_mask():
     """§4.6: the shared row MUST have the same mask in both bands; a file whose second
     MASK says otherwise is refused by both decoders."""
+    from codec import holemask
     from codec.coding import varints
 
     rng = np.random.default_rng(0)
     image = (rng.normal(size=(12, 10)).cumsum(0).cumsum(1) * 10 + 128).clip(1, 255).astype(np.uint8)
     image[rng.random(image.shape) < 0.2] = 0
     data = codec.encode(image, nodata=0, band_height=6)
-    offset, _, payload = [p for p in chunks(data) if p[1] == b"MASK"][1]
-    y0, rows = struct.unpack_from("<II", zstandard.ZstdDecompressor().decompress(payload))
+    # the second band's mask, a MASK chunk or (§4.11) a HOLE chunk
+    offset, kind, payload = [p for p in chunks(data) if p[1] in (b"MASK", b"HOLE")][1]
+    fixed = payload if kind == b"HOLE" else zstandard.ZstdDecompressor().decompress(payload)
+    y0, rows = struct.unpack_from("<II", fixed)
     holes = image[y0 : y0 + rows] == 0
     assert_same_image(ref.decode(data), codec.decode(data))
     holes[0, np.flatnonzero(~holes[0])[0]] = True  # one more hole on the shared row only
     runs = run_lengths(holes)
     body = bytes(varints(np.array(runs)))
     raw = struct.pack("<IIII", y0, rows, len(runs), len(body)) + body
-    bad = data[:offset] + make_chunk(b"MASK", zstandard.ZstdCompressor().compress(raw)) + data[offset + 12 + len(payload):]
-    with pytest.raises(ref.DecodeError, match="shared by two bands"):
-        ref.decode(bad)
-    with pytest.raises(codec.CorruptError, match="which two bands share"):
-        codec.decode(bad)
+    for chunk in (make_chunk(b"MASK", zstandard.ZstdCompressor().compress(raw)),
+                  make_chunk(b"HOLE", holemask.encode(y0, holes))):
+        bad = data[:offset] + chunk + data[offset + 12 + len(payload):]
+        with pytest.raises(ref.DecodeError, match="shared by two bands"):
+            ref.decode(bad)
+        with pytest.raises(codec.CorruptError, match="which two bands share"):
+            codec.decode(bad)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -148,7 +148,8 @@ def test_info_reports_the_layer(tmp_path):
     image, _ = _image(9, 20, 30, np.uint16, 0.0)
     assert codec.info(codec.encode(image, lossless=True))["residual"] == 0
     assert codec.info(codec.encode(image, max_error=7, residual=True))["residual"] == 7
-    assert codec.info(codec.encode(image, max_error=7))["residual"] is None
+    assert codec.info(codec.encode(image, max_error=7))["residual"] == 7  # the default: the layer
+    assert codec.info(codec.encode(image, max_error=7, residual=False))["residual"] is None
     path = tmp_path / "x.atm"
     path.write_bytes(codec.encode(image, lossless=True))
     shown = subprocess.run([sys.executable, "-m", "codec", "info", str(path)], capture_output=True, text=True, check=True)
@@ -176,8 +177,9 @@ def test_options_are_checked():
         codec.encode(image, residual=True)
     with pytest.raises(OptionError, match="residual and quality both set the size"):
         codec.encode(image, residual=True, quality=50, max_error=3)
-    # without residual=True a bound is met by the mesh, as before: no layer
-    assert residual.CHUNK not in [t for _, t, _ in chunks(codec.encode(image, max_error=3))]
+    # residual=False: the bound is met by the mesh alone, no layer; by default, the layer
+    assert residual.CHUNK not in [t for _, t, _ in chunks(codec.encode(image, max_error=3, residual=False))]
+    assert residual.CHUNK in [t for _, t, _ in chunks(codec.encode(image, max_error=3))]
     # float64 that binary32 cannot hold has no exact form in .atm (tests/test_lossless_float.py)
     with pytest.raises(UnsupportedError, match="lossless float64 data must hold binary32 values"):
         codec.encode(np.full((4, 4), 0.1), lossless=True)

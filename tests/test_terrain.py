@@ -35,7 +35,8 @@ def test_srtm_tile_reads_back_with_its_vertices_and_heights(tmp_path):
     src = shared_file("srtm_dem.tif")
     atm, tile_path = tmp_path / "dem.atm", tmp_path / "dem.terrain"
     bound = 12
-    assert main(["encode", str(src), str(atm), "--max-error", str(bound)]) == 0
+    # terrain is the mesh itself: --no-residual keeps it within the bound
+    assert main(["encode", str(src), str(atm), "--max-error", str(bound), "--no-residual"]) == 0
     assert main(["mesh", str(atm), str(tile_path)]) == 0
     data = atm.read_bytes()
     info = codec.info(data)
@@ -90,7 +91,7 @@ def test_mesh_heights_are_in_data_units(tmp_path, fmt):
     y, x = np.mgrid[:40, :50]
     z = (1234.5 + 3.25 * x - 1.5 * y + 0.01 * x * y).astype(np.float32)
     atm, out = tmp_path / "dem.atm", tmp_path / f"dem.{fmt}"
-    codec.write(atm, z, max_error=0.05)
+    codec.write(atm, z, max_error=0.05, residual=False)  # the mesh itself within the bound
     assert main(["mesh", str(atm), str(out)]) == 0
     if fmt == "obj":
         rows = [line.split()[1:4] for line in out.read_text().splitlines() if line.startswith("v ")]
@@ -125,9 +126,25 @@ def test_build_mesh_takes_encode_bounds_and_sample_types(dtype):
     image = z.astype(dtype) if np.dtype(dtype).kind == "f" else np.round(z).astype(dtype)
     bound = 0.3 if np.dtype(dtype).kind == "f" else 1
     mesh = codec.build_mesh(image, max_error=bound)
-    data = codec.encode(image, max_error=bound, band_height=59)
+    data = codec.encode(image, max_error=bound, band_height=59, residual=False)
     assert len(mesh.vertices) == codec.info(data)["vertices"]
     assert mesh.dtype == (np.float32 if np.dtype(dtype).kind == "f" else dtype)
     at = image[mesh.vertices[:, 1], mesh.vertices[:, 0]].astype(np.float64)
     assert np.abs(mesh.values.astype(np.float64) - at).max() <= bound + 1e-4  # data units
     assert len(codec.build_mesh(image, quality=90).vertices) >= 3
+
+
+def test_mesh_of_a_layered_file_says_it_is_a_preview(tmp_path, capsys):
+    # max_error's default is the residual layer, beside which the mesh is a preview:
+    # `atm mesh` says so (and how to get a mesh within the bound); with --no-residual, silence
+    y, x = np.mgrid[:40, :50]
+    z = (1234.5 + 3.25 * x - 1.5 * y + 0.3 * np.sin(x)).astype(np.float32)
+    src = tmp_path / "dem.npy"
+    np.save(src, z)
+    for extra, noted in (([], True), (["--no-residual"], False)):
+        atm, out = tmp_path / "dem.atm", tmp_path / "dem.obj"
+        assert main(["encode", str(src), str(atm), "--max-error", "0.05", "--force", *extra]) == 0
+        capsys.readouterr()
+        assert main(["mesh", str(atm), str(out), "--force"]) == 0
+        err = capsys.readouterr().err
+        assert ("light preview" in err and "--no-residual" in err) == noted, err

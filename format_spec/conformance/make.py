@@ -205,6 +205,12 @@ def main() -> None:
     centimetres[2:6, 3:11] = np.nan
     cases["steps32_float_lossless"] = codec.encode(centimetres.astype(np.float32), lossless=True, band_height=16,
                                                    points=90, mesher="uniform")
+    # context-coded holes (§4.11): ragged dropouts in the upper bands' HOLE chunks, a
+    # band without holes keeping its MASK chunk (a file may mix them)
+    speckled = synthetic.range_scene(40, 30, seed=16, dtype=np.uint16)
+    speckled[:18][np.random.default_rng(16).random((18, 40)) < 0.25] = 0
+    speckled[2:7, 30:38] = 0
+    cases["holes_context16"] = codec.encode(speckled, mesher="uniform", points=120, band_height=12, nodata=0)
     # `make.py NAME ...` writes only those files (the others keep their bytes)
     chosen = set(sys.argv[1:]) or set(cases)
     for name, data in cases.items():
