@@ -194,7 +194,14 @@ class Statistics:
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
+        self.shape = (h, w)
         self.planes = Planes(planes)
+        # the columns of the kernel's sums (codec._elements.triangle_sums) in the order of
+        # __call__'s: the moments, b, xb, y b, bb, then per channel b_c, x b_c, y b_c
+        k = len(planes)
+        self._from_kernel = np.array(
+            [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
+        )
         # sums of x^k over columns [0, x): a span's sums of x and xx in two look-ups
         # each (exact integers in float64 for widths up to about 180,000)
         cols = np.arange(w, dtype=np.float64)
@@ -220,9 +227,26 @@ class Statistics:
         for c in range(fit):
             cols[10 + 3 * c : 12 + 3 * c] = d[3 + 2 * c : 5 + 2 * c]
             np.multiply(y, d[3 + 2 * c], out=cols[12 + 3 * c])
-        out = raster.reduce(cols)
-        # to coordinates relative to each element's origin: u = x - ox, v = y - oy
-        ox, oy = (raster.origin[:, k].astype(np.float64) for k in (0, 1))
+        return self._to_origin(raster.reduce(cols), raster.origin)
+
+    def of_triangles(self, vertices: np.ndarray, triangles: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """M x width: the statistics of `triangles` (their origins `origin`, as
+        triangle_raster gives them), the numbers __call__ gives for their raster, from
+        one compiled walk over their pixels (codec._elements) instead of span arrays."""
+        from .. import native
+
+        h, w = self.shape
+        sums = native._elements.triangle_sums(
+            np.ascontiguousarray(vertices, dtype=np.int64), np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
+            w, h, self.planes.table, self._powers[1], self._powers[2],
+        )
+        return self._to_origin(sums[:, self._from_kernel], origin)
+
+    def _to_origin(self, out: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """Sums in image coordinates (E x width) to coordinates relative to each
+        element's origin: u = x - ox, v = y - oy (in place)."""
+        fit = len(self._fit) if self.own else 0
+        ox, oy = (origin[:, k].astype(np.float64) for k in (0, 1))
         sn, sx, sy, sxx, sxy, syy = out[:, :6].T.copy()
         out[:, 1] = sx - ox * sn
         out[:, 2] = sy - oy * sn
@@ -372,6 +396,27 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
         return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
     empty = np.zeros(0, np.int64)
     return Raster(width, height, t, origin, coef, den, empty, empty, empty, empty)
+
+
+def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, vertex_values: np.ndarray,
+                 width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For each of `triangles` that owns pixels: its pixel farthest from the mesh
+    through `vertex_values`, the first in raster order of those tied, as
+    Raster.worst_pixels finds it, from one compiled walk over the triangles' pixels.
+    Returns (index into `triangles`, x, y, |error|)."""
+    from .. import native
+
+    v = np.ascontiguousarray(vertices, dtype=np.int64)
+    t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    weights = triangle_raster(v, t, width, height, spans=False)
+    if plane.dtype != np.float32:
+        plane = plane.astype(np.float64)
+    x, y, err = native._elements.worst_pixels(
+        v, t, width, height, np.ascontiguousarray(weights.affine(vertex_values)),
+        np.ascontiguousarray(weights.origin), np.ascontiguousarray(plane),
+    )
+    owns = np.flatnonzero(err >= 0)
+    return owns, x[owns], y[owns], err[owns]
 
 
 def line_raster(vertices: np.ndarray, width: int, height: int) -> Raster:

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from ..triangulate import split_at_vertices, triangulate
-from .elements import Statistics, concat, element_sse, line_raster, triangle_raster
+from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
 #: from round to round (later rounds see the effect of the earlier ones).
@@ -65,9 +65,8 @@ class _Cache:
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
                 last: bool = False):
-        """(statistics and squared error of every triangle, indices of the new ones, a
-        raster of the new ones). last: no round follows, so the squared errors are not
-        needed (None) and the cache is not updated."""
+        """(statistics and squared error of every triangle). last: no round follows,
+        so the squared errors are not needed (None) and the cache is not updated."""
         keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
         known = np.zeros(len(triangles), bool)
         pos = np.zeros(len(triangles), np.int64)
@@ -80,15 +79,16 @@ class _Cache:
                 pos[by_key] = found
                 known[by_key] = self.keys[found] == sorted_keys
         fresh = np.flatnonzero(~known)
-        raster = triangle_raster(vertices, triangles[fresh], width, height)
+        # the new triangles' weights (no spans: the kernel walks their pixels itself)
+        raster = triangle_raster(vertices, triangles[fresh], width, height, spans=False)
         stats = np.empty((len(triangles), self.layout.width))
         sse = np.empty(len(triangles))
-        measured = self.layout(raster)
+        measured = self.layout.of_triangles(vertices, triangles[fresh], raster.origin)
         stats[fresh] = measured
         if known.any():
             stats[known] = np.take(self.stats, pos[known], axis=0)
         if last:
-            return stats, None, fresh, raster
+            return stats, None
         sse[fresh] = element_sse(raster, measured, z)
         if known.any():
             sse[known] = self.sse[pos[known]]
@@ -98,18 +98,7 @@ class _Cache:
             self.keys = sorted_keys
             self.stats = np.take(stats, by_key, axis=0)
             self.sse = sse[by_key]
-        return stats, sse, fresh, raster
-
-
-def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, height):
-    """(triangle, x, y, |error|) of the worst pixel of each candidate triangle (sorted),
-    from the raster of the new triangles where the candidate is one of them."""
-    where = np.searchsorted(fresh, cand)
-    is_new = (where < len(fresh)) & (fresh[np.minimum(where, len(fresh) - 1)] == cand) if len(fresh) else np.zeros(len(cand), bool)
-    e1, x1, y1, err1 = fresh_raster.worst_pixels(gray, z, where[is_new])
-    old = cand[~is_new]
-    e2, x2, y2, err2 = triangle_raster(vertices, tris[old], width, height).worst_pixels(gray, z, np.arange(len(old)))
-    return np.r_[fresh[e1], old[e2]], np.r_[x1, x2], np.r_[y1, y2], np.r_[err1, err2]
+        return stats, sse
 
 
 def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_walls: bool = False):
@@ -173,7 +162,7 @@ def refine_to_budget(
             ordered = True
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         tris = triangulate(vertices, segments)
-        tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height, ordered)
+        tri_stats, tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
             break
@@ -195,10 +184,10 @@ def refine_to_budget(
             cand = np.arange(len(sse))
         cand = np.sort(cand[sse[cand] > 0])
         on_tri = cand[cand < len(tris)]
-        t, x, y, err = _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, on_tri, width, height)
+        # each candidate triangle's worst pixel (candidates sorted: in triangle order)
+        _, x, y, err = worst_pixels(gray, vertices, tris[on_tri], z, width, height)
         _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
-        order = np.argsort(t, kind="stable")
-        x, y, err = np.r_[x[order], lx], np.r_[y[order], ly], np.r_[err[order], lerr]
+        x, y, err = np.r_[x, lx], np.r_[y, ly], np.r_[err, lerr]
         big = err > 0.5
         if not big.any() and finish is not None:
             rounds = r + 1  # nothing worth a vertex, but the caller's still go in

@@ -1,0 +1,101 @@
+"""The compiled walk over each triangle's pixels (codec._elements) gives exactly the
+numbers of the span arrays it replaced (codec.mesher.elements.Raster, Statistics), on
+meshes with flat tops and bottoms, slivers and ties, for every prefix-sum type."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from codec import native
+from codec.mesher.elements import Statistics, triangle_raster, worst_pixels
+from codec.triangulate import triangulate
+
+
+def _mesh(rng: np.random.Generator, width: int, height: int, count: int, grid: bool):
+    """Vertices (the corners, then random or lattice pixels) and their triangulation."""
+    corners = [[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]]
+    if grid:
+        # a lattice: many flat-topped and flat-bottomed triangles, cocircular ties
+        xs, ys = np.meshgrid(np.arange(0, width, 3), np.arange(0, height, 4))
+        pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    else:
+        pts = np.stack([rng.integers(0, width, count), rng.integers(0, height, count)], axis=1)
+    v = np.concatenate([corners, pts]).astype(np.int64)
+    _, first = np.unique(v[:, 1] * width + v[:, 0], return_index=True)
+    v = v[np.sort(first)]
+    return v, triangulate(v, np.zeros((0, 2), np.int64))
+
+
+def _images(rng: np.random.Generator, width: int, height: int):
+    """(structure plane, fit) pairs whose prefix sums are int32, int64 and float64."""
+    u8 = rng.integers(0, 256, (height, width)).astype(np.uint8)
+    u16 = rng.integers(0, 65536, (height, width)).astype(np.uint16)
+    rgb = rng.integers(0, 256, (height, width, 3)).astype(np.uint8)
+    gray = (rgb.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32))
+    return [(u8, "structure"), (u16, "structure"), (u8, None), (gray, rgb), (gray, None)]
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grid", [False, True])
+def test_triangle_statistics_are_those_of_the_spans(seed: int, grid: bool) -> None:
+    rng = np.random.default_rng(seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid)
+    kinds = set()
+    for structure, fit in _images(rng, width, height):
+        layout = Statistics(structure, fit)
+        kinds.add(layout.planes.table.dtype)
+        raster = triangle_raster(v, t, width, height)
+        expected = layout(raster)
+        got = layout.of_triangles(v, t, raster.origin)
+        assert got.shape == expected.shape
+        # the same float64 numbers, not just close ones: the encoder's bytes depend on them
+        assert np.array_equal(got, expected)
+        # any subset, in any order
+        pick = rng.permutation(len(t))[: len(t) // 2]
+        sub = triangle_raster(v, t[pick], width, height)
+        assert np.array_equal(layout.of_triangles(v, t[pick], sub.origin), layout(sub))
+    assert kinds == {np.dtype(np.int32), np.dtype(np.int64), np.dtype(np.float64)}
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grid", [False, True])
+def test_worst_pixels_are_those_of_the_spans(seed: int, grid: bool) -> None:
+    rng = np.random.default_rng(10 + seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid)
+    # plateaus: many pixels of a triangle tie for its largest error
+    plane = (rng.integers(0, 4, (height, width)) * 20).astype(np.float32)
+    for z in (plane[v[:, 1], v[:, 0]].astype(np.float64), rng.normal(30, 20, len(v))):
+        raster = triangle_raster(v, t, width, height)
+        e, x, y, err = raster.worst_pixels(plane, z, np.arange(len(t)))
+        got = worst_pixels(plane, v, t, z, width, height)
+        for a, b in zip(got, (e, x, y, err)):
+            assert np.array_equal(a, b)
+        # a float64 plane gives the same
+        got = worst_pixels(plane.astype(np.float64), v, t, z, width, height)
+        assert np.array_equal(got[3], err)
+
+
+def test_the_kernels_refuse_what_is_out_of_range() -> None:
+    rng = np.random.default_rng(3)
+    v, t = _mesh(rng, 20, 10, 30, False)
+    layout = Statistics(rng.integers(0, 256, (10, 20)).astype(np.uint8), "structure")
+    args = (layout.planes.table, layout._powers[1], layout._powers[2])
+    bad = t.copy()
+    bad[-1, 2] = len(v)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_sums(v, bad, 20, 10, *args)
+    far = v.copy()
+    far[-1] = [20, 0]  # one column past the image
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_sums(far, t, 20, 10, *args)
+    with pytest.raises(ValueError, match="do not match"):
+        native._elements.triangle_sums(v, t, 20, 11, *args)
+    plane = np.zeros((10, 20), np.float32)
+    f, origin = np.zeros((len(t), 3)), np.zeros((len(t), 2), np.int64)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.worst_pixels(v, bad, 20, 10, f, origin, plane)
+    with pytest.raises(ValueError, match="does not match"):
+        native._elements.worst_pixels(v, t, 20, 10, f, origin, plane[:9])
