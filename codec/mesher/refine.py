@@ -15,7 +15,9 @@ import math
 
 import numpy as np
 
-from ..triangulate import split_at_vertices, triangulate
+from ..errors import ATMError
+from ..native import _renumber
+from ..triangulate import Triangulation, split_at_vertices, triangulate
 from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
@@ -101,6 +103,35 @@ class _Cache:
         return stats, sse
 
 
+class _Growing:
+    """The triangulation of refinement's vertices and walls, kept between rounds
+    (codec.triangulate.Triangulation): a round's new vertices, which merge() appends,
+    are inserted instead of triangulating all the vertices again. The triangles are
+    triangulate()'s, in the same canonical order (ATM.md §4.2.5's triangulation is
+    unique). Where the kernel refuses the start (all vertices on one line, crossing
+    walls), it gives None and triangulate() decides."""
+
+    def __init__(self) -> None:
+        self._tri: Triangulation | None = None
+        self._count = 0
+        self._failed = False
+
+    def __call__(self, vertices: np.ndarray, segments: np.ndarray) -> np.ndarray | None:
+        if self._failed:
+            return None
+        try:
+            if self._tri is None:
+                self._tri = Triangulation(vertices)
+                self._tri.constrain(segments)
+            elif len(vertices) > self._count:
+                self._tri.insert(vertices[self._count:])
+        except ATMError:
+            self._failed = True
+            return None
+        self._count = len(vertices)
+        return self._tri.triangles()
+
+
 def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_walls: bool = False):
     """(vertices in raster order, the segments renumbered and cut at the vertices on
     them, the new position of every old vertex): the vertex order and wall steps a
@@ -151,17 +182,28 @@ def refine_to_budget(
     """
     height, width = gray.shape
     cache = _Cache(layout)
+    growing = _Growing()
     ordered = False
     measured = None
     for r in itertools.count():
+        tris = None
         if r == rounds or target <= len(vertices):
             if finish is not None:
                 vertices, segments = finish(vertices, segments, measured)
+                growing = None  # the caller changed the mesh: it is triangulated anew
+            else:
+                tris = growing(vertices, segments)
             # the last triangulation: made as the MESH chunk's check will make it
-            vertices, segments, _ = _raster_order(vertices, segments, width, sort_walls=True)
+            vertices, segments, renumber = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
+            if tris is not None:
+                # the same triangles numbered as the vertices now are, in canonical order
+                tris = _renumber.canonical_renumbered(tris, renumber)
+        elif growing is not None:
+            tris = growing(vertices, segments)
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        tris = triangulate(vertices, segments)
+        if tris is None:
+            tris = triangulate(vertices, segments)
         tri_stats, tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
