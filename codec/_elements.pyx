@@ -199,3 +199,64 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     if bad:
         raise ValueError("worst_pixels: a corner index or coordinate out of range")
     return xs_out, ys_out, err_out
+
+
+def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                    int64_t height):
+    """(triangle, x, y) of every pixel the triangles own, triangle by triangle, row by
+    row, left to right (Raster.pixels of their triangle_raster). ValueError on an
+    index or coordinate out of range."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0], total = 0, t, dy, y, x0, n, x, up, j = 0
+    cdef int64_t ys[3]
+    cdef int64_t xs[3]
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+                bad = True
+                break
+            for dy in range(ys[2] - ys[0]):
+                _span(ys, xs, dy, up, &x0, &n)
+                total += n
+    if bad:
+        raise ValueError("triangle_pixels: a corner index or coordinate out of range")
+    e_out = np.empty(total, dtype=np.int64)
+    x_out = np.empty(total, dtype=np.int64)
+    y_out = np.empty(total, dtype=np.int64)
+    cdef int64_t[::1] pe = e_out, px = x_out, py = y_out
+    with nogil:
+        for t in range(m):
+            _start(vertices, triangles, t, width, height, ys, xs, &up)
+            for dy in range(ys[2] - ys[0]):
+                _span(ys, xs, dy, up, &x0, &n)
+                y = ys[0] + dy
+                for x in range(x0, x0 + n):
+                    pe[j] = t
+                    px[j] = x
+                    py[j] = y
+                    j += 1
+    return e_out, x_out, y_out
+
+
+def evaluate(const double[:, ::1] affine, const int64_t[:, ::1] origin, const int64_t[::1] elem,
+             const int64_t[::1] x, const int64_t[::1] y):
+    """f = a (x - ox) + b (y - oy) + c at each pixel (x, y) of element elem (affine's
+    and origin's rows), summed in that order as Raster.evaluate sums it. ValueError on
+    an element out of range."""
+    cdef int64_t k = elem.shape[0], e = affine.shape[0], i
+    if x.shape[0] != k or y.shape[0] != k or origin.shape[0] != e or affine.shape[1] != 3 or origin.shape[1] != 2:
+        raise ValueError("evaluate: an element, x and y per pixel; an affine and an origin per element")
+    out_a = np.empty(k, dtype=np.float64)
+    cdef double[::1] out = out_a
+    cdef bint bad = False
+    with nogil:
+        for i in range(k):
+            if elem[i] < 0 or elem[i] >= e:
+                bad = True
+                break
+            out[i] = (affine[elem[i], 0] * <double>(x[i] - origin[elem[i], 0])
+                      + affine[elem[i], 1] * <double>(y[i] - origin[elem[i], 1]) + affine[elem[i], 2])
+    if bad:
+        raise ValueError("evaluate: an element index out of range")
+    return out_a

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from codec import native
-from codec.mesher.elements import Statistics, triangle_raster, worst_pixels
+from codec.mesher.elements import Statistics, triangle_pixels, triangle_raster, worst_pixels
 from codec.triangulate import triangulate
 
 
@@ -78,6 +78,25 @@ def test_worst_pixels_are_those_of_the_spans(seed: int, grid: bool) -> None:
         assert np.array_equal(got[3], err)
 
 
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grid", [False, True])
+def test_pixels_and_plane_values_are_those_of_the_spans(seed: int, grid: bool) -> None:
+    rng = np.random.default_rng(20 + seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid)
+    raster = triangle_raster(v, t, width, height)
+    e, x, y = raster.pixels()
+    got = triangle_pixels(v, t, width, height)
+    for a, b in zip(got, (e, x, y)):
+        assert np.array_equal(a, b)
+    # every pixel of [0, W-1) x [0, H-1) exactly once
+    assert np.array_equal(np.sort(y * width + x), np.sort((np.arange(height - 1)[:, None] * width + np.arange(width - 1)).ravel()))
+    affine = raster.affine(rng.normal(100, 50, len(v)))
+    f = affine[e]
+    want = f[:, 0] * (x - raster.origin[e, 0]) + f[:, 1] * (y - raster.origin[e, 1]) + f[:, 2]
+    assert np.array_equal(raster.evaluate(affine, e, x, y), want)
+
+
 def test_the_kernels_refuse_what_is_out_of_range() -> None:
     rng = np.random.default_rng(3)
     v, t = _mesh(rng, 20, 10, 30, False)
@@ -99,3 +118,8 @@ def test_the_kernels_refuse_what_is_out_of_range() -> None:
         native._elements.worst_pixels(v, bad, 20, 10, f, origin, plane)
     with pytest.raises(ValueError, match="does not match"):
         native._elements.worst_pixels(v, t, 20, 10, f, origin, plane[:9])
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_pixels(far, t, 20, 10)
+    one = np.zeros(1, np.int64)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.evaluate(f, origin, np.array([len(t)]), one, one)

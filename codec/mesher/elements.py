@@ -111,9 +111,14 @@ class Raster:
         return out.T
 
     def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """The mesh value (unrounded) at pixels (x, y) of their elements."""
-        f = affine[elem]
-        return f[:, 0] * (x - self.origin[elem, 0]) + f[:, 1] * (y - self.origin[elem, 1]) + f[:, 2]
+        """The mesh value (unrounded) at pixels (x, y) of their elements (a compiled
+        pass: no E x 3 gather per pixel)."""
+        from .. import native
+
+        return native._elements.evaluate(
+            np.ascontiguousarray(affine, dtype=np.float64), np.ascontiguousarray(self.origin, dtype=np.int64),
+            *(np.ascontiguousarray(a, dtype=np.int64) for a in (elem, x, y)),
+        )
 
     def worst_pixels(self, plane: np.ndarray, vertex_values: np.ndarray, elements: np.ndarray):
         """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
@@ -417,6 +422,18 @@ def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
     )
     owns = np.flatnonzero(err >= 0)
     return owns, x[owns], y[owns], err[owns]
+
+
+def triangle_pixels(vertices: np.ndarray, triangles: np.ndarray, width: int,
+                    height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(triangle, x, y) of every pixel the triangles own, as triangle_raster(...).pixels()
+    lists them, from a compiled walk over their rows (no span arrays)."""
+    from .. import native
+
+    return native._elements.triangle_pixels(
+        np.ascontiguousarray(vertices, dtype=np.int64),
+        np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), width, height,
+    )
 
 
 def line_raster(vertices: np.ndarray, width: int, height: int) -> Raster:
