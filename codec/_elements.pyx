@@ -260,3 +260,51 @@ def evaluate(const double[:, ::1] affine, const int64_t[:, ::1] origin, const in
     if bad:
         raise ValueError("evaluate: an element index out of range")
     return out_a
+
+
+cdef enum:
+    # most planes prefix_table sums: the structure's three and two per fitted channel
+    MAX_PLANES = 32
+
+
+def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] channels):
+    """(H (W + 1)) x K prefix sums along the rows of the planes b, x b, b b of the
+    structure b (H x W) and b_c, x b_c of each of the C channels (C x H x W), in the
+    structure's type and interleaved (elements.Planes: row y, columns [x, x + n) of
+    plane k is table[y (W + 1) + x + n, k] - table[y (W + 1) + x, k]); each sum taken
+    left to right, as numpy's cumsum takes it."""
+    cdef int64_t h = structure.shape[0], w = structure.shape[1], c = channels.shape[0]
+    cdef int64_t kk = 3 + 2 * c, y, x, k, base
+    if kk > MAX_PLANES or (c and (channels.shape[1] != h or channels.shape[2] != w)):
+        raise ValueError("prefix_table: the channels must match the structure, at most 14 of them")
+    if table_t is int32_t:
+        kind = np.int32
+    elif table_t is int64_t:
+        kind = np.int64
+    else:
+        kind = np.float64
+    out = np.zeros((h * (w + 1), kk), dtype=kind)
+    cdef table_t[:, ::1] o = out
+    cdef table_t acc[MAX_PLANES]
+    cdef table_t b, xv
+    with nogil:
+        for y in range(h):
+            base = y * (w + 1)
+            for k in range(kk):
+                acc[k] = 0
+            for x in range(w):
+                xv = <table_t>x
+                b = structure[y, x]
+                acc[0] += b
+                acc[1] += b * xv
+                acc[2] += b * b
+                o[base + x + 1, 0] = acc[0]
+                o[base + x + 1, 1] = acc[1]
+                o[base + x + 1, 2] = acc[2]
+                for k in range(c):
+                    b = channels[k, y, x]
+                    acc[3 + 2 * k] += b
+                    acc[4 + 2 * k] += b * xv
+                    o[base + x + 1, 3 + 2 * k] = acc[3 + 2 * k]
+                    o[base + x + 1, 4 + 2 * k] = acc[4 + 2 * k]
+    return out

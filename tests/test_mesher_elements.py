@@ -97,6 +97,24 @@ def test_pixels_and_plane_values_are_those_of_the_spans(seed: int, grid: bool) -
     assert np.array_equal(raster.evaluate(affine, e, x, y), want)
 
 
+@pytest.mark.parametrize("kind", [np.int32, np.int64, np.float64])
+@pytest.mark.parametrize("channels", [0, 1, 3])
+def test_prefix_sums_are_numpys(kind, channels: int) -> None:
+    rng = np.random.default_rng(channels)
+    h, w = 7, 33
+    b = rng.integers(0, 256, (h, w)).astype(kind)
+    if kind is np.float64:
+        b = b + rng.random((h, w)).astype(np.float32)  # a luma plane: float32 values
+    cs = [rng.integers(0, 65536, (h, w)).astype(kind) for _ in range(channels)]
+    xs = np.arange(w, dtype=kind)
+    planes = [b, b * xs, b * b] + [p for c in cs for p in (c, c * xs)]
+    want = np.zeros((h, w + 1, len(planes)), kind)
+    for k, plane in enumerate(planes):
+        np.cumsum(plane, axis=1, out=want[:, 1:, k])
+    got = native._elements.prefix_table(b, np.stack(cs) if cs else np.zeros((0, h, w), kind))
+    assert got.dtype == kind and np.array_equal(got, want.reshape(-1, len(planes)))
+
+
 def test_the_kernels_refuse_what_is_out_of_range() -> None:
     rng = np.random.default_rng(3)
     v, t = _mesh(rng, 20, 10, 30, False)

@@ -151,16 +151,18 @@ class Raster:
 
 class Planes:
     """Prefix sums along the rows of K planes, interleaved, so that the sums of all of
-    them over any row span cost two look-ups of K neighbouring numbers."""
+    them over any row span cost two look-ups of K neighbouring numbers: the planes b,
+    x b, b b of a structure b and b_c, x b_c of each channel c (H x W each, one
+    integer or float type), summed in one compiled pass (codec._elements.prefix_table)."""
 
-    def __init__(self, planes: list[np.ndarray]):
-        h, w = planes[0].shape
+    def __init__(self, structure: np.ndarray, channels: list[np.ndarray]):
+        from .. import native
+
+        h, w = structure.shape
         self.stride = w + 1
+        stack = np.stack(channels) if channels else np.zeros((0, h, w), structure.dtype)
         # row y, columns [x, x+n) of plane k: table[y*stride + x + n, k] - table[y*stride + x, k]
-        table = np.zeros((h, w + 1, len(planes)), dtype=planes[0].dtype)
-        for k, plane in enumerate(planes):
-            np.cumsum(plane, axis=1, out=table[:, 1:, k])
-        self.table = table.reshape(-1, len(planes))
+        self.table = native._elements.prefix_table(np.ascontiguousarray(structure), np.ascontiguousarray(stack))
 
 
 class Statistics:
@@ -189,21 +191,16 @@ class Statistics:
             top = max(np.iinfo(a.dtype).max for a in [structure] + channels)
             if max(top * (w - 1), top * top) * w < 2**31:
                 kind = np.int32
-        xs = np.arange(w, dtype=kind)
-        b = structure.astype(kind)
-        planes = [b, b * xs, b * b]
-        for c in channels:
-            bc = c.astype(kind)
-            planes += [bc, bc * xs]
+        planes = Planes(structure.astype(kind), [c.astype(kind) for c in channels])
         self.channels = 0 if fit is None else max(1, len(channels))
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
         self.shape = (h, w)
-        self.planes = Planes(planes)
+        self.planes = planes
         # the columns of the kernel's sums (codec._elements.triangle_sums) in the order of
         # __call__'s: the moments, b, xb, y b, bb, then per channel b_c, x b_c, y b_c
-        k = len(planes)
+        k = planes.table.shape[1]
         self._from_kernel = np.array(
             [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
         )
