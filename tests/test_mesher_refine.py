@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from codec.mesh import segments
-from codec.mesher import adaptive
+from codec.mesher import adaptive, refine
 from codec.triangulate import triangulate
 from tests.synthetic import range_scene
 
@@ -21,3 +21,14 @@ def test_the_refined_mesh_is_the_triangulation_of_its_vertices_and_walls(seed: i
     assert meshed.delaunay and len(mesh.constraints)
     assert np.array_equal(mesh.triangles, triangulate(mesh.vertices, segments(mesh.constraints)))
     assert len(mesh.vertices) > 0.9 * points
+
+
+def test_the_cache_of_triangle_statistics_changes_nothing(monkeypatch) -> None:
+    # a triangle kept from one round to the next reuses its sums; without the cache
+    # (what happens where the keys would overflow) every triangle is measured anew
+    image = range_scene(160, 120, seed=5)
+    cached = adaptive.build(image, 900).mesh
+    monkeypatch.setattr(refine, "_keys", lambda *args: None)
+    fresh = adaptive.build(image, 900).mesh
+    for a, b in ((cached.vertices, fresh.vertices), (cached.triangles, fresh.triangles), (cached.values, fresh.values)):
+        assert np.array_equal(a, b)

@@ -56,51 +56,64 @@ def _keys(pixel: np.ndarray, triangles: np.ndarray, base: int) -> np.ndarray | N
 
 class _Cache:
     """Statistics and squared errors (against the mesh through the sampled values) of
-    the triangles of the last triangulation, by triangle, so that a triangle that
-    survives a round is not measured again."""
+    the triangles of the last triangulation, kept in the order of their keys, so that
+    a triangle that survives a round is not measured again."""
 
     def __init__(self, layout: Statistics):
         self.layout = layout
         self.keys = np.zeros(0, np.int64)  # sorted
         self.stats = np.zeros((0, layout.width))
         self.sse = np.zeros(0)
+        # the last measured triangulation's statistics, in key order, and that order
+        self._order = np.zeros(0, np.int64)
+        self._stats = self.stats
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
-                last: bool = False):
-        """(statistics and squared error of every triangle). last: no round follows,
-        so the squared errors are not needed (None) and the cache is not updated."""
+                last: bool = False) -> np.ndarray | None:
+        """The squared error of every triangle (statistics() gives their statistics).
+        last: no round follows, so the squared errors are not needed (None) and the
+        cache is not updated."""
+        m = len(triangles)
         keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
-        known = np.zeros(len(triangles), bool)
-        pos = np.zeros(len(triangles), np.int64)
-        if keys is not None:
-            # looked up in key order: sorted queries make the binary searches cheap
-            by_key = np.argsort(keys)
-            sorted_keys = keys[by_key]
+        known = np.zeros(m, bool)
+        found = None
+        if keys is None:
+            order, sorted_keys = np.arange(m), None  # keys would overflow: nothing is kept
+        else:
+            # worked in key order: sorted queries make the binary searches cheap, and
+            # the cache for the next round comes out in its order
+            order = np.argsort(keys)
+            sorted_keys = keys[order]
             if len(self.keys):
                 found = np.minimum(np.searchsorted(self.keys, sorted_keys), len(self.keys) - 1)
-                pos[by_key] = found
-                known[by_key] = self.keys[found] == sorted_keys
-        fresh = np.flatnonzero(~known)
+                known = self.keys[found] == sorted_keys
+        kept, fresh = np.flatnonzero(known), np.flatnonzero(~known)
+        new = triangles[order[fresh]]
         # the new triangles' weights (no spans: the kernel walks their pixels itself)
-        raster = triangle_raster(vertices, triangles[fresh], width, height, spans=False)
-        stats = np.empty((len(triangles), self.layout.width))
-        sse = np.empty(len(triangles))
-        measured = self.layout.of_triangles(vertices, triangles[fresh], raster.origin)
+        raster = triangle_raster(vertices, new, width, height, spans=False)
+        measured = self.layout.of_triangles(vertices, new, raster.origin)
+        stats = np.empty((m, self.layout.width))
         stats[fresh] = measured
-        if known.any():
-            stats[known] = np.take(self.stats, pos[known], axis=0)
+        if len(kept):
+            stats[kept] = np.take(self.stats, found[kept], axis=0)
+        self._order, self._stats = order, stats
         if last:
-            return stats, None
+            return None
+        sse = np.empty(m)
         sse[fresh] = element_sse(raster, measured, z)
-        if known.any():
-            sse[known] = self.sse[pos[known]]
-        if keys is not None:
-            # the cache for the next round: this triangulation's triangles (the
-            # surviving entries and the new ones), in key order
-            self.keys = sorted_keys
-            self.stats = np.take(stats, by_key, axis=0)
-            self.sse = sse[by_key]
-        return stats, sse
+        if len(kept):
+            sse[kept] = self.sse[found[kept]]
+        if sorted_keys is not None:
+            self.keys, self.stats, self.sse = sorted_keys, stats, sse
+        out = np.empty(m)
+        out[order] = sse
+        return out
+
+    def statistics(self) -> np.ndarray:
+        """The statistics of the triangles last measured, in their order."""
+        out = np.empty_like(self._stats)
+        out[self._order] = self._stats
+        return out
 
 
 class _Growing:
@@ -204,7 +217,7 @@ def refine_to_budget(
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         if tris is None:
             tris = triangulate(vertices, segments)
-        tri_stats, tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
+        tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
             break
@@ -242,4 +255,4 @@ def refine_to_budget(
         vertices = merge(width, vertices, np.stack([x[big], y[big]], axis=1))
     lines = line_raster(vertices, width, height)
     elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, segments, tris, elements, np.concatenate([tri_stats, layout(lines)]), ordered
+    return vertices, segments, tris, elements, np.concatenate([cache.statistics(), layout(lines)]), ordered
