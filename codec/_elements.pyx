@@ -308,3 +308,23 @@ def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] chann
                     o[base + x + 1, 3 + 2 * k] = acc[3 + 2 * k]
                     o[base + x + 1, 4 + 2 * k] = acc[4 + 2 * k]
     return out
+
+
+def span_totals(const double[:, ::1] per_span, const int64_t[::1] bounds):
+    """E x K: for each element e, the sum of the columns bounds[e] .. bounds[e+1]-1 of
+    per_span (K x S), taken column after column from 0.0 (as a sparse row-sum of ones
+    takes it). ValueError unless bounds run from 0 to S without decreasing."""
+    cdef int64_t kk = per_span.shape[0], s = per_span.shape[1], e = bounds.shape[0] - 1, i, j, k
+    if e < 0 or bounds[0] != 0 or bounds[e] != s:
+        raise ValueError("span_totals: bounds must run from 0 to the number of spans")
+    for i in range(e):
+        if bounds[i + 1] < bounds[i]:
+            raise ValueError("span_totals: bounds must not decrease")
+    out = np.zeros((e, kk), dtype=np.float64)
+    cdef double[:, ::1] o = out
+    with nogil:
+        for i in range(e):
+            for j in range(bounds[i], bounds[i + 1]):
+                for k in range(kk):
+                    o[i, k] += per_span[k, j]
+    return out

@@ -115,6 +115,22 @@ def test_prefix_sums_are_numpys(kind, channels: int) -> None:
     assert got.dtype == kind and np.array_equal(got, want.reshape(-1, len(planes)))
 
 
+def test_span_totals_are_a_sparse_row_sums() -> None:
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(7)
+    counts = rng.integers(0, 6, 300)  # elements with no span too
+    bounds = np.r_[0, np.cumsum(counts)]
+    per_span = rng.normal(0, 1e6, (10, int(bounds[-1]))) * rng.random((10, int(bounds[-1]))) ** 9
+    n = per_span.shape[1]
+    summing = sp.csr_matrix((np.ones(n), np.arange(n), bounds), shape=(len(counts), n))
+    assert np.array_equal(native._elements.span_totals(per_span, bounds), np.asarray(summing @ per_span.T))
+    with pytest.raises(ValueError, match="run from 0"):
+        native._elements.span_totals(per_span, bounds[:-1])
+    with pytest.raises(ValueError, match="not decrease"):
+        native._elements.span_totals(per_span, np.r_[0, bounds[2], bounds[1], bounds[3:]])
+
+
 def test_the_kernels_refuse_what_is_out_of_range() -> None:
     rng = np.random.default_rng(3)
     v, t = _mesh(rng, 20, 10, 30, False)

@@ -77,12 +77,13 @@ class Raster:
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
 
     def reduce(self, per_span: np.ndarray) -> np.ndarray:
-        """Sum the columns of a K x S array over each element's spans (E x K)."""
-        import scipy.sparse as sp
+        """Sum the columns of a K x S array over each element's spans (E x K), span
+        after span (a compiled pass, codec._elements.span_totals)."""
+        from .. import native
 
-        m, n = len(self.den), len(self.span_elem)
-        summing = sp.csr_matrix((np.ones(n), np.arange(n), self.bounds), shape=(m, n))
-        return np.asarray(summing @ per_span.T)
+        return native._elements.span_totals(
+            np.ascontiguousarray(per_span, dtype=np.float64), np.ascontiguousarray(self.bounds, dtype=np.int64)
+        )
 
     def span_sums(self, planes: "Planes") -> np.ndarray:
         """K x S sums over each span's pixels of the K planes of `planes`."""
