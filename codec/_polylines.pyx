@@ -186,3 +186,88 @@ def control_points(const double[:, ::1] xy, const int64_t[::1] first, const int6
                 else:
                     ref = ref + k if ref + k < end else end
     return out_a[:count].copy()
+
+
+cdef inline int64_t _abs(int64_t v) noexcept nogil:
+    return -v if v < 0 else v
+
+
+cdef inline int _orient(int64_t ax, int64_t ay, int64_t bx, int64_t by, int64_t cx, int64_t cy) noexcept nogil:
+    cdef int64_t d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+    return (d > 0) - (d < 0)
+
+
+cdef bint _conflict(const int64_t[:, ::1] p, const int64_t[:, ::1] s, int64_t i, int64_t j) noexcept nogil:
+    """Do segments i and j meet anywhere but at a shared end point (unfold.conflicts)?"""
+    cdef int64_t a = s[i, 0], b = s[i, 1], c = s[j, 0], d = s[j, 1], k, lo1, hi1, lo2, hi2, overlap
+    cdef int o1 = _orient(p[a, 0], p[a, 1], p[b, 0], p[b, 1], p[c, 0], p[c, 1])
+    cdef int o2 = _orient(p[a, 0], p[a, 1], p[b, 0], p[b, 1], p[d, 0], p[d, 1])
+    cdef int o3 = _orient(p[c, 0], p[c, 1], p[d, 0], p[d, 1], p[a, 0], p[a, 1])
+    cdef int o4 = _orient(p[c, 0], p[c, 1], p[d, 0], p[d, 1], p[b, 0], p[b, 1])
+    cdef bint collinear = o1 == 0 and o2 == 0
+    # collinear: compare the extents along the axis a-b runs along most
+    k = 1 if _abs(p[b, 0] - p[a, 0]) < _abs(p[b, 1] - p[a, 1]) else 0
+    lo1 = min(p[a, k], p[b, k]); hi1 = max(p[a, k], p[b, k])
+    lo2 = min(p[c, k], p[d, k]); hi2 = max(p[c, k], p[d, k])
+    overlap = min(hi1, hi2) - max(lo1, lo2)
+    if a == c or a == d or b == c or b == d:
+        # sharing an end point, two segments conflict only by running along each other
+        return collinear and overlap > 0
+    return (not collinear and o1 * o2 <= 0 and o3 * o4 <= 0) or (collinear and overlap >= 0)
+
+
+def later_conflicts(const int64_t[:, ::1] points, const int64_t[:, ::1] segments, int64_t cell):
+    """Mask over segments: True where an earlier segment meets it anywhere but at a
+    shared end point (unfold.drop_conflicts drops those). Pairs are tested where their
+    bounding boxes share a cell of a `cell`-pixel grid (two segments that meet always
+    do), exactly. ValueError on an index out of range or coordinates below 0."""
+    cdef int64_t n = segments.shape[0], m = points.shape[0], i, j, a, b, x, y, gx = 0, gy = 0, c, u, v
+    if cell < 1 or (n and segments.shape[1] != 2) or (m and points.shape[1] != 2):
+        raise ValueError("later_conflicts: N x 2 points, S x 2 segments, a cell of 1 or more")
+    for i in range(n):
+        for j in range(2):
+            if segments[i, j] < 0 or segments[i, j] >= m:
+                raise ValueError("later_conflicts: a segment names a point out of range")
+    for i in range(m):
+        if points[i, 0] < 0 or points[i, 1] < 0:
+            raise ValueError("later_conflicts: a point has a negative coordinate")
+        gx = max(gx, points[i, 0] // cell + 1)
+        gy = max(gy, points[i, 1] // cell + 1)
+    lo_a = np.zeros((n, 2), np.int64)
+    hi_a = np.zeros((n, 2), np.int64)
+    start_a = np.zeros(gx * gy + 1, np.int64)
+    bad_a = np.zeros(n, bool)
+    cdef int64_t[:, ::1] lo = lo_a, hi = hi_a
+    cdef int64_t[::1] start = start_a
+    cdef uint8_t[::1] bad = bad_a.view(np.uint8)
+    cdef int64_t total = 0
+    with nogil:
+        # each segment in every cell its box covers: counted, then listed cell by cell
+        for i in range(n):
+            a = segments[i, 0]
+            b = segments[i, 1]
+            for j in range(2):
+                lo[i, j] = min(points[a, j], points[b, j]) // cell
+                hi[i, j] = max(points[a, j], points[b, j]) // cell
+            for y in range(lo[i, 1], hi[i, 1] + 1):
+                for x in range(lo[i, 0], hi[i, 0] + 1):
+                    start[y * gx + x + 1] += 1
+        for c in range(gx * gy):
+            start[c + 1] += start[c]
+        total = start[gx * gy]
+    members_a = np.empty(total, np.int64)
+    fill_a = start_a[:-1].copy()
+    cdef int64_t[::1] members = members_a, fill = fill_a
+    with nogil:
+        for i in range(n):  # in order: each cell lists its segments in increasing order
+            for y in range(lo[i, 1], hi[i, 1] + 1):
+                for x in range(lo[i, 0], hi[i, 0] + 1):
+                    members[fill[y * gx + x]] = i
+                    fill[y * gx + x] += 1
+        for c in range(gx * gy):
+            for u in range(start[c], start[c + 1]):
+                for v in range(u + 1, start[c + 1]):
+                    j = members[v]
+                    if not bad[j] and _conflict(points, segments, members[u], j):
+                        bad[j] = 1
+    return bad_a

@@ -136,3 +136,42 @@ def test_the_kernels_refuse_what_they_cannot_walk() -> None:
         native._polylines.control_points(xy, np.array([0]), np.array([5]), 2, 1.0)
     with pytest.raises(ValueError, match="k >= 1"):
         native._polylines.control_points(xy, np.array([0]), np.array([4]), 0, 1.0)
+
+
+def _meet_by_hand(p: np.ndarray, s: np.ndarray, i: int, j: int) -> bool:
+    """Do segments i and j meet anywhere but at a shared end point?"""
+    def orient(a, b, c) -> int:
+        return int(np.sign((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])))
+
+    a, b, c, d = p[s[i, 0]], p[s[i, 1]], p[s[j, 0]], p[s[j, 1]]
+    o1, o2, o3, o4 = orient(a, b, c), orient(a, b, d), orient(c, d, a), orient(c, d, b)
+    collinear = o1 == 0 and o2 == 0
+    k = 1 if abs(b[0] - a[0]) < abs(b[1] - a[1]) else 0
+    overlap = min(max(a[k], b[k]), max(c[k], d[k])) - max(min(a[k], b[k]), min(c[k], d[k]))
+    if set(s[i]) & set(s[j]):
+        return collinear and overlap > 0
+    return (not collinear and o1 * o2 <= 0 and o3 * o4 <= 0) or (collinear and overlap >= 0)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_a_wall_segment_goes_when_an_earlier_one_meets_it(seed: int) -> None:
+    rng = np.random.default_rng(200 + seed)
+    size = int(rng.integers(3, 40))
+    p = np.unique(rng.integers(0, size, (int(rng.integers(2, 40)), 2)), axis=0).astype(np.int64)
+    s = rng.integers(0, len(p), (int(rng.integers(1, 60)), 2))
+    # runs of consecutive points too, as walls are: shared ends, collinear pieces
+    s = np.concatenate([s, np.stack([np.arange(len(p) - 1), np.arange(1, len(p))], 1)])
+    s = s[s[:, 0] != s[:, 1]].astype(np.int64)
+    want = [any(_meet_by_hand(p, s, i, j) for i in range(j)) for j in range(len(s))]
+    for cell in (1, 4, 8, 64):
+        assert native._polylines.later_conflicts(p, s, cell).tolist() == want
+
+
+def test_wall_conflicts_refuse_bad_input() -> None:
+    p = np.array([[0, 0], [3, 3], [0, 3]], np.int64)
+    with pytest.raises(ValueError, match="out of range"):
+        native._polylines.later_conflicts(p, np.array([[0, 3]], np.int64), 8)
+    with pytest.raises(ValueError, match="negative"):
+        native._polylines.later_conflicts(-p, np.array([[0, 1]], np.int64), 8)
+    with pytest.raises(ValueError, match="cell"):
+        native._polylines.later_conflicts(p, np.array([[0, 1]], np.int64), 0)
