@@ -2,10 +2,12 @@
 
     python benchmarks/profile_encode.py [--hash] [--profile N] [--repeat 3]
 
-* calls: how many times codec's own `codec.triangulate.triangulate` runs while
-  `codec.encode` encodes camera as one band, as 16 bands, and at an error bound
-  (quality=50), counted by wrapping it in every codec module that holds it (so the
-  count does not depend on the library behind it).
+* calls: how many triangulations `codec.encode` makes while it encodes camera as one
+  band, as 16 bands, and at an error bound (quality=50): calls of codec's own
+  `codec.triangulate.triangulate`, counted by wrapping it in every codec module that
+  holds it (so the count does not depend on the library behind it), and the rounds of
+  an incremental `codec.triangulate.Triangulation` (each `triangles()` it gives out;
+  the time of all its calls counts as triangulating).
 * time: each encode as a ratio to its peer in the same round, a JPEG encode of
   camera (cv2.imencode, quality 90), and the share of it spent triangulating; the
   medians over `--repeat` interleaved rounds.
@@ -43,13 +45,17 @@ DENSITIES = (0.01, 0.028)
 
 class TriangleCounter:
     """Counts (and times) the calls of codec.triangulate.triangulate while installed,
-    wherever codec imported it by name."""
+    wherever codec imported it by name, and the rounds of codec.triangulate.Triangulation
+    (its triangles() calls; all its methods timed)."""
+
+    TIMED = ("__init__", "insert", "constrain", "triangles")
 
     def __init__(self) -> None:
         self.calls = 0
         self.seconds = 0.0
         self._real = codec.triangulate.triangulate
         self._holders: list = []
+        self._methods: dict = {}
 
     def __enter__(self) -> "TriangleCounter":
         def counted(*args, **kwargs):
@@ -68,11 +74,28 @@ class TriangleCounter:
         ]
         for m in self._holders:
             m.triangulate = counted
+        incremental = codec.triangulate.Triangulation
+        self._methods = {name: getattr(incremental, name) for name in self.TIMED}
+        for name, method in self._methods.items():
+            setattr(incremental, name, self._timed(method, name == "triangles"))
         return self
+
+    def _timed(self, method, counts: bool):
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return method(*args, **kwargs)
+            finally:
+                self.calls += counts
+                self.seconds += time.perf_counter() - t0
+
+        return timed
 
     def __exit__(self, *exc) -> None:
         for m in self._holders:
             m.triangulate = self._real
+        for name, method in self._methods.items():
+            setattr(codec.triangulate.Triangulation, name, method)
 
 
 def cases(images: dict[str, np.ndarray]):

@@ -17,7 +17,8 @@ the median over the rounds of each round's own ratio, a time the median time.
 2. Threads: two threads decoding different files (the corpus files, each several
    times) against one thread decoding them in turn: throughput ratio.
 3. Encode at equal vertex count: codec.encode(image, points=N) against pydelatin's
-   Delatin(image, max_points=N) (bench extra; left out without it).
+   Delatin(image, max_points=N) (bench extra; left out without it), by wall time and
+   by process CPU time (steadier where others load the machine).
 4. Encode at equal max error: codec.encode(dem, max_error=E, residual=False) (the mesh) of a float DEM against
    Delatin(dem, max_error=E), for each E (a synthetic DEM, or --dem-file's GeoTIFF as
    float32), with the .atm bytes and both vertex counts.
@@ -213,6 +214,22 @@ def quality_table(corpus: dict[str, np.ndarray], names: list[str], quality: int,
     print_table(["image", "size", f"atm quality={quality} ms", f"{peer} encode ms", f"atm / {peer}"], rows)
 
 
+def _cpu_timed(into: list[float], fn: Callable[[], object]) -> Callable[[], None]:
+    """fn, appending the process CPU time of each call after the first (interleaved's
+    warm-up) to `into`, in ms: on a machine others share, CPU time varies far less
+    than wall time (all threads count; pydelatin runs on one)."""
+    calls = []
+
+    def timed() -> None:
+        t0 = time.process_time()
+        fn()
+        if calls:
+            into.append(1e3 * (time.process_time() - t0))
+        calls.append(1)
+
+    return timed
+
+
 def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int,
                   errors: list[float], repeat: int, sides: list[int] = (), dem_file: str | None = None) -> None:
     """Tables 3 and 4 (pydelatin, bench extra); table 3 also for the images resized to
@@ -233,13 +250,17 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
     for name, img in zip(labels, work):
         n = max(4, round(DENSITY * img.size))
         heights = img.astype(np.float32)
-        times = interleaved({"atm": lambda: codec.encode(img, points=n),
-                             "delatin": lambda: Delatin(heights, max_points=n)}, repeat)
+        cpu: dict[str, list[float]] = {"atm": [], "delatin": []}
+        times = interleaved({"atm": _cpu_timed(cpu["atm"], lambda: codec.encode(img, points=n)),
+                             "delatin": _cpu_timed(cpu["delatin"], lambda: Delatin(heights, max_points=n))}, repeat)
         h, w = img.shape
         rows.append([name, f"{w}x{h}", f"{n:,}", f"{statistics.median(times['atm']):.0f}",
-                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}"])
+                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}",
+                     f"{statistics.median(cpu['atm']):.0f}", f"{statistics.median(cpu['delatin']):.0f}",
+                     f"{ratio(cpu, 'atm', 'delatin'):.1f}"])
     print()
-    print_table(["image", "size", "vertices", "atm encode ms", "delatin ms", "atm / delatin"], rows)
+    print_table(["image", "size", "vertices", "atm encode ms", "delatin ms", "atm / delatin",
+                 "atm CPU ms", "delatin CPU ms", "CPU atm / delatin"], rows)
     if dem_file is None:
         terrain = dem(dem_size)
     else:

@@ -41,8 +41,11 @@ def counting(module, name: str):
 @contextlib.contextmanager
 def triangulations():
     """Count the calls of codec's own triangulate (whatever library is behind it), in
-    every codec module that holds it."""
+    every codec module that holds it, and the triangulations an incremental
+    codec.triangulate.Triangulation gives out (one a refinement round)."""
     real = codec.triangulate.triangulate
+    incremental = codec.triangulate.Triangulation
+    real_triangles = incremental.triangles
     for name in ("codec.pipeline", "codec.meshcode", "codec.holes", "codec.mesher.adaptive", "codec.mesher.uniform"):
         importlib.import_module(name)
     holders = [m for n, m in list(sys.modules.items()) if n.startswith("codec") and getattr(m, "triangulate", None) is real]
@@ -52,13 +55,19 @@ def triangulations():
         calls.append(1)
         return real(*args, **kwargs)
 
+    def triangles(self):
+        calls.append(1)
+        return real_triangles(self)
+
     for m in holders:
         m.triangulate = counted
+    incremental.triangles = triangles
     try:
         yield calls
     finally:
         for m in holders:
             m.triangulate = real
+        incremental.triangles = real_triangles
 
 
 @contextlib.contextmanager

@@ -30,7 +30,7 @@ from ..image import structure
 from ..mesh import Mesh
 from ..mesh import segments as segment_pairs
 from . import Finish, Meshed
-from .elements import Statistics, element_sse, line_raster, triangle_raster
+from .elements import Statistics, element_sse, line_raster, triangle_pixels
 from .refine import FOCUSED_ROUNDS, ROUNDS, merge, refine_to_budget, run_breaks
 from .unfold import Walls, unfold
 
@@ -110,7 +110,7 @@ def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, i
 def _pixels(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int):
     """(element, x, y) of every pixel, elements numbered as the triangles then the
     border lines (line_raster)."""
-    e, x, y = triangle_raster(vertices, triangles, width, height).pixels()
+    e, x, y = triangle_pixels(vertices, triangles, width, height)
     le, lx, ly = line_raster(vertices, width, height).pixels()
     return np.r_[e, le + len(triangles)], np.r_[x, lx], np.r_[y, ly]
 

@@ -77,12 +77,13 @@ class Raster:
         return np.repeat(e, n), _segments(x, n), np.repeat(y, n)
 
     def reduce(self, per_span: np.ndarray) -> np.ndarray:
-        """Sum the columns of a K x S array over each element's spans (E x K)."""
-        import scipy.sparse as sp
+        """Sum the columns of a K x S array over each element's spans (E x K), span
+        after span (a compiled pass, codec._elements.span_totals)."""
+        from .. import native
 
-        m, n = len(self.den), len(self.span_elem)
-        summing = sp.csr_matrix((np.ones(n), np.arange(n), self.bounds), shape=(m, n))
-        return np.asarray(summing @ per_span.T)
+        return native._elements.span_totals(
+            np.ascontiguousarray(per_span, dtype=np.float64), np.ascontiguousarray(self.bounds, dtype=np.int64)
+        )
 
     def span_sums(self, planes: "Planes") -> np.ndarray:
         """K x S sums over each span's pixels of the K planes of `planes`."""
@@ -111,9 +112,14 @@ class Raster:
         return out.T
 
     def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """The mesh value (unrounded) at pixels (x, y) of their elements."""
-        f = affine[elem]
-        return f[:, 0] * (x - self.origin[elem, 0]) + f[:, 1] * (y - self.origin[elem, 1]) + f[:, 2]
+        """The mesh value (unrounded) at pixels (x, y) of their elements (a compiled
+        pass: no E x 3 gather per pixel)."""
+        from .. import native
+
+        return native._elements.evaluate(
+            np.ascontiguousarray(affine, dtype=np.float64), np.ascontiguousarray(self.origin, dtype=np.int64),
+            *(np.ascontiguousarray(a, dtype=np.int64) for a in (elem, x, y)),
+        )
 
     def worst_pixels(self, plane: np.ndarray, vertex_values: np.ndarray, elements: np.ndarray):
         """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
@@ -146,16 +152,18 @@ class Raster:
 
 class Planes:
     """Prefix sums along the rows of K planes, interleaved, so that the sums of all of
-    them over any row span cost two look-ups of K neighbouring numbers."""
+    them over any row span cost two look-ups of K neighbouring numbers: the planes b,
+    x b, b b of a structure b and b_c, x b_c of each channel c (H x W each, one
+    integer or float type), summed in one compiled pass (codec._elements.prefix_table)."""
 
-    def __init__(self, planes: list[np.ndarray]):
-        h, w = planes[0].shape
+    def __init__(self, structure: np.ndarray, channels: list[np.ndarray]):
+        from .. import native
+
+        h, w = structure.shape
         self.stride = w + 1
+        stack = np.stack(channels) if channels else np.zeros((0, h, w), structure.dtype)
         # row y, columns [x, x+n) of plane k: table[y*stride + x + n, k] - table[y*stride + x, k]
-        table = np.zeros((h, w + 1, len(planes)), dtype=planes[0].dtype)
-        for k, plane in enumerate(planes):
-            np.cumsum(plane, axis=1, out=table[:, 1:, k])
-        self.table = table.reshape(-1, len(planes))
+        self.table = native._elements.prefix_table(np.ascontiguousarray(structure), np.ascontiguousarray(stack))
 
 
 class Statistics:
@@ -184,17 +192,19 @@ class Statistics:
             top = max(np.iinfo(a.dtype).max for a in [structure] + channels)
             if max(top * (w - 1), top * top) * w < 2**31:
                 kind = np.int32
-        xs = np.arange(w, dtype=kind)
-        b = structure.astype(kind)
-        planes = [b, b * xs, b * b]
-        for c in channels:
-            bc = c.astype(kind)
-            planes += [bc, bc * xs]
+        planes = Planes(structure.astype(kind), [c.astype(kind) for c in channels])
         self.channels = 0 if fit is None else max(1, len(channels))
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
-        self.planes = Planes(planes)
+        self.shape = (h, w)
+        self.planes = planes
+        # the columns of the kernel's sums (codec._elements.triangle_sums) in the order of
+        # __call__'s: the moments, b, xb, y b, bb, then per channel b_c, x b_c, y b_c
+        k = planes.table.shape[1]
+        self._from_kernel = np.array(
+            [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
+        )
         # sums of x^k over columns [0, x): a span's sums of x and xx in two look-ups
         # each (exact integers in float64 for widths up to about 180,000)
         cols = np.arange(w, dtype=np.float64)
@@ -220,9 +230,26 @@ class Statistics:
         for c in range(fit):
             cols[10 + 3 * c : 12 + 3 * c] = d[3 + 2 * c : 5 + 2 * c]
             np.multiply(y, d[3 + 2 * c], out=cols[12 + 3 * c])
-        out = raster.reduce(cols)
-        # to coordinates relative to each element's origin: u = x - ox, v = y - oy
-        ox, oy = (raster.origin[:, k].astype(np.float64) for k in (0, 1))
+        return self._to_origin(raster.reduce(cols), raster.origin)
+
+    def of_triangles(self, vertices: np.ndarray, triangles: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """M x width: the statistics of `triangles` (their origins `origin`, as
+        triangle_raster gives them), the numbers __call__ gives for their raster, from
+        one compiled walk over their pixels (codec._elements) instead of span arrays."""
+        from .. import native
+
+        h, w = self.shape
+        sums = native._elements.triangle_sums(
+            np.ascontiguousarray(vertices, dtype=np.int64), np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
+            w, h, self.planes.table, self._powers[1], self._powers[2],
+        )
+        return self._to_origin(sums[:, self._from_kernel], origin)
+
+    def _to_origin(self, out: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """Sums in image coordinates (E x width) to coordinates relative to each
+        element's origin: u = x - ox, v = y - oy (in place)."""
+        fit = len(self._fit) if self.own else 0
+        ox, oy = (origin[:, k].astype(np.float64) for k in (0, 1))
         sn, sx, sy, sxx, sxy, syy = out[:, :6].T.copy()
         out[:, 1] = sx - ox * sn
         out[:, 2] = sy - oy * sn
@@ -372,6 +399,39 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
         return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
     empty = np.zeros(0, np.int64)
     return Raster(width, height, t, origin, coef, den, empty, empty, empty, empty)
+
+
+def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, vertex_values: np.ndarray,
+                 width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For each of `triangles` that owns pixels: its pixel farthest from the mesh
+    through `vertex_values`, the first in raster order of those tied, as
+    Raster.worst_pixels finds it, from one compiled walk over the triangles' pixels.
+    Returns (index into `triangles`, x, y, |error|)."""
+    from .. import native
+
+    v = np.ascontiguousarray(vertices, dtype=np.int64)
+    t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    weights = triangle_raster(v, t, width, height, spans=False)
+    if plane.dtype != np.float32:
+        plane = plane.astype(np.float64)
+    x, y, err = native._elements.worst_pixels(
+        v, t, width, height, np.ascontiguousarray(weights.affine(vertex_values)),
+        np.ascontiguousarray(weights.origin), np.ascontiguousarray(plane),
+    )
+    owns = np.flatnonzero(err >= 0)
+    return owns, x[owns], y[owns], err[owns]
+
+
+def triangle_pixels(vertices: np.ndarray, triangles: np.ndarray, width: int,
+                    height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(triangle, x, y) of every pixel the triangles own, as triangle_raster(...).pixels()
+    lists them, from a compiled walk over their rows (no span arrays)."""
+    from .. import native
+
+    return native._elements.triangle_pixels(
+        np.ascontiguousarray(vertices, dtype=np.int64),
+        np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), width, height,
+    )
 
 
 def line_raster(vertices: np.ndarray, width: int, height: int) -> Raster:

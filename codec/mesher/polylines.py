@@ -13,8 +13,8 @@ A chain ends at its extreme or at the bifurcation pixel, which closes the polyli
 Chains are taken in the scan-line order of their start points and share no pixels but
 bifurcations, so the result depends on the image alone.
 
-Everything is vectorised: chain ordering by pointer doubling over the chains'
-directed steps, and the segment rule runs in lockstep over all chains at once.
+Chain ordering and the segment rule walk the chains pixel by pixel in a compiled
+kernel (codec._polylines); the rest is vectorised.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import OptionError
-from .elements import _segments
 
 # 8-neighbour offsets (dy, dx) in a fixed order; bit k of a pixel's code is neighbour k
 _OFFSETS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1)])
@@ -140,74 +139,18 @@ class Polylines:
         )
 
 
-def _order_chains(simple: np.ndarray, shape: tuple[int, int], offsets: np.ndarray):
-    """Order the pixels of the simple chains (max degree 2) of a padded flat mask.
+def _order_chains(simple: np.ndarray, offsets: np.ndarray):
+    """Order the pixels of the simple chains (max degree 2) of a padded flat mask, each
+    chain walked from its start (codec._polylines.order_chains).
 
     Returns (flat, chain, closed): padded pixel indices in chain order, the chain of
     each, and for each chain whether it is a closed loop.
     """
-    import cv2
+    from .. import native
 
-    flat = np.flatnonzero(simple)
-    n = len(flat)
-    if n == 0:
-        return flat, flat, np.zeros(0, bool)
-    index = np.full(len(simple), -1, dtype=np.int64)
-    index[flat] = np.arange(n)
-    nbr = index[flat[:, None] + offsets[None, :]]
-    # a simple pixel's (at most two) neighbours, in offset order: its first and its
-    # last, -1 where it has fewer
-    on = nbr >= 0
-    deg = on.sum(axis=1)
-    rows = np.arange(n)
-    nb = np.stack([
-        np.where(deg >= 1, nbr[rows, on.argmax(axis=1)], -1),
-        np.where(deg >= 2, nbr[rows, 7 - on[:, ::-1].argmax(axis=1)], -1),
-    ], axis=1)
-    _, labels = cv2.connectedComponents(simple.reshape(shape).astype(np.uint8), connectivity=8)
-    comp = labels.ravel()[flat] - 1  # label 0 is the background
-    ncomp = comp.max() + 1
-    big = np.int64(n + 1)
-    # start: the first end (degree <= 1) in scan-line order, else the first pixel
-    first_end = np.full(ncomp, big)
-    np.minimum.at(first_end, comp, np.where(deg <= 1, np.arange(n), big))
-    first_any = np.full(ncomp, big)
-    np.minimum.at(first_any, comp, np.arange(n))
-    closed_c = first_end == big
-    start = np.where(closed_c, first_any, first_end)
-    # open each loop between its start and the start's later neighbour
-    s = start[closed_c]
-    cut = np.maximum(nb[s, 0], nb[s, 1])
-    for a, b in ((s, cut), (cut, s)):
-        nb[a, np.argmax(nb[a] == b[:, None], axis=1)] = -1
-    # directed steps (p -> q): state 2p + slot; the next step leaves q by its other slot
-    state_q = nb.ravel()
-    valid = state_q >= 0
-    p_of = np.repeat(np.arange(n), 2)
-    qs = np.where(valid, state_q, 0)
-    back_slot = np.argmax(nb[qs] == p_of[:, None], axis=1)
-    other = nb[qs, 1 - back_slot]
-    ident = np.arange(2 * n)
-    nxt = np.where(valid & (other >= 0), 2 * qs + (1 - back_slot), ident)
-    dist = (nxt != ident).astype(np.int64)
-    # pointer doubling: the distance to, and the last step of, every walk
-    while True:
-        nxt_new = nxt[nxt]
-        if np.array_equal(nxt_new, nxt):
-            break
-        dist = dist + dist[nxt]
-        nxt = nxt_new
-    end_pixel = np.where(valid[nxt], state_q[nxt], p_of)
-    # a pixel's rank is the length of its walk back to the chain's start
-    towards_start = valid & (end_pixel == start[comp[p_of]])
-    rank = np.zeros(n, dtype=np.int64)
-    rank[p_of[towards_start]] = dist[towards_start] + 1
-    # chains in the scan-line order of their start points
-    comp_order = np.argsort(start, kind="stable")
-    comp_rank = np.empty_like(comp_order)
-    comp_rank[comp_order] = np.arange(ncomp)
-    order = np.lexsort((rank, comp_rank[comp]))
-    return flat[order], comp_rank[comp][order], closed_c[comp_order]
+    return native._polylines.order_chains(
+        np.ascontiguousarray(simple, dtype=bool).view(np.uint8), np.ascontiguousarray(offsets, dtype=np.int64)
+    )
 
 
 def _attach(flat_order, chain, closed, junction: np.ndarray, offsets: np.ndarray):
@@ -231,61 +174,16 @@ def _attach(flat_order, chain, closed, junction: np.ndarray, offsets: np.ndarray
     return pix[order], ch[order]
 
 
-def _starts_of_runs(labels: np.ndarray) -> np.ndarray:
-    """Mask of the first element of every run of equal labels."""
-    out = np.ones(len(labels), dtype=bool)
-    out[1:] = labels[1:] != labels[:-1]
-    return out
-
-
-#: Reference points tried at once per chain in each lockstep round of the segment rule.
-_LOOKAHEAD = 6
-
-
 def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int, d: float):
-    """The paper's segment rule (section 3.3.2.1) on all chains at once: indices into xy of the control
-    points, in chain order.
+    """The paper's segment rule (section 3.3.2.1) on every chain, one after another
+    (codec._polylines.control_points): indices into xy of the control points, in chain
+    order."""
+    from .. import native
 
-    Each round tries the next _LOOKAHEAD reference points C, C + k, ... of every chain
-    together; the outcome is the one the one-at-a-time rule reaches (the first C whose
-    segment has an offending pixel decides), in fewer rounds.
-    """
-    xs, ys = xy[:, 0].copy(), xy[:, 1].copy()
-    d2 = d * d
-    emitted = [first]
-    active = last > first
-    a, c, end = first[active], np.minimum(first[active] + k, last[active]), last[active]
-    while len(a):
-        # the reference points tried: c, c + k, ... up to the end, at most _LOOKAHEAD
-        tried = np.minimum((end - c + k - 1) // k + 1, _LOOKAHEAD)
-        slot_of = np.repeat(np.arange(len(a)), tried)
-        slot_c = np.minimum(np.repeat(c, tried) + k * _segments(np.zeros(len(a), np.int64), tried), np.repeat(end, tried))
-        slot_a = np.repeat(a, tried)
-        # every pixel strictly between a slot's start and its reference point
-        counts = np.maximum(slot_c - slot_a - 1, 0)
-        idx = _segments(slot_a + 1, counts)
-        ax, ay = np.repeat(xs[slot_a], counts), np.repeat(ys[slot_a], counts)
-        sx, sy = np.repeat(xs[slot_c], counts) - ax, np.repeat(ys[slot_c], counts) - ay
-        rx, ry = xs[idx] - ax, ys[idx] - ay
-        t = np.clip((rx * sx + ry * sy) / np.maximum(sx * sx + sy * sy, 1e-12), 0.0, 1.0)
-        ox, oy = rx - t * sx, ry - t * sy
-        bad = np.flatnonzero(ox * ox + oy * oy > d2)
-        # pixels are in (chain, slot, pixel) order: a chain's first offending pixel
-        # belongs to its first failing reference point
-        chain_of_bad = np.repeat(slot_of, counts)[bad]
-        lead = _starts_of_runs(chain_of_bad)
-        offender = np.full(len(a), -1, dtype=np.int64)
-        offender[chain_of_bad[lead]] = idx[bad[lead]]
-        restart = offender >= 0
-        last_c = np.minimum(c + k * (tried - 1), end)
-        done = ~restart & (last_c == end)
-        emitted.append(offender[restart])
-        emitted.append(end[done])
-        c = np.where(restart, np.minimum(offender + k, end), np.minimum(last_c + k, end))
-        a = np.where(restart, offender, a)
-        keep = ~done
-        a, c, end = a[keep], c[keep], end[keep]
-    return np.sort(np.concatenate(emitted))
+    return native._polylines.control_points(
+        np.ascontiguousarray(xy, dtype=np.float64), np.ascontiguousarray(first, dtype=np.int64),
+        np.ascontiguousarray(last, dtype=np.int64), k, d,
+    )
 
 
 def trace(
@@ -306,12 +204,11 @@ def trace(
         raise OptionError(f"segment_length must be a whole number >= 1, not {segment_length!r}")
     if not isinstance(segment_error, (int, float, np.number)) or not segment_error >= 0:
         raise OptionError(f"segment_error must be a number >= 0, not {segment_error!r}")
-    h, w = edges.shape
     grid = _Grid(edges.astype(bool))
     thin(grid)
     junction = grid.on & (_filtered(grid, _COUNT).ravel() >= 3)
     simple = grid.on & ~junction
-    flat_order, chain, closed = _order_chains(simple, (h + 2, w + 2), grid.offsets)
+    flat_order, chain, closed = _order_chains(simple, grid.offsets)
     pix, ch = _attach(flat_order, chain, closed, junction, grid.offsets)
     if len(pix):
         sizes = np.bincount(ch)

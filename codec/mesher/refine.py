@@ -15,8 +15,10 @@ import math
 
 import numpy as np
 
-from ..triangulate import split_at_vertices, triangulate
-from .elements import Statistics, concat, element_sse, line_raster, triangle_raster
+from ..errors import ATMError
+from ..native import _renumber
+from ..triangulate import Triangulation, split_at_vertices, triangulate
+from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
 #: from round to round (later rounds see the effect of the earlier ones).
@@ -54,62 +56,93 @@ def _keys(pixel: np.ndarray, triangles: np.ndarray, base: int) -> np.ndarray | N
 
 class _Cache:
     """Statistics and squared errors (against the mesh through the sampled values) of
-    the triangles of the last triangulation, by triangle, so that a triangle that
-    survives a round is not measured again."""
+    the triangles of the last triangulation, kept in the order of their keys, so that
+    a triangle that survives a round is not measured again."""
 
     def __init__(self, layout: Statistics):
         self.layout = layout
         self.keys = np.zeros(0, np.int64)  # sorted
         self.stats = np.zeros((0, layout.width))
         self.sse = np.zeros(0)
+        # the last measured triangulation's statistics, in key order, and that order
+        self._order = np.zeros(0, np.int64)
+        self._stats = self.stats
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
-                last: bool = False):
-        """(statistics and squared error of every triangle, indices of the new ones, a
-        raster of the new ones). last: no round follows, so the squared errors are not
-        needed (None) and the cache is not updated."""
+                last: bool = False) -> np.ndarray | None:
+        """The squared error of every triangle (statistics() gives their statistics).
+        last: no round follows, so the squared errors are not needed (None) and the
+        cache is not updated."""
+        m = len(triangles)
         keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
-        known = np.zeros(len(triangles), bool)
-        pos = np.zeros(len(triangles), np.int64)
-        if keys is not None:
-            # looked up in key order: sorted queries make the binary searches cheap
-            by_key = np.argsort(keys)
-            sorted_keys = keys[by_key]
+        known = np.zeros(m, bool)
+        found = None
+        if keys is None:
+            order, sorted_keys = np.arange(m), None  # keys would overflow: nothing is kept
+        else:
+            # worked in key order: sorted queries make the binary searches cheap, and
+            # the cache for the next round comes out in its order
+            order = np.argsort(keys)
+            sorted_keys = keys[order]
             if len(self.keys):
                 found = np.minimum(np.searchsorted(self.keys, sorted_keys), len(self.keys) - 1)
-                pos[by_key] = found
-                known[by_key] = self.keys[found] == sorted_keys
-        fresh = np.flatnonzero(~known)
-        raster = triangle_raster(vertices, triangles[fresh], width, height)
-        stats = np.empty((len(triangles), self.layout.width))
-        sse = np.empty(len(triangles))
-        measured = self.layout(raster)
+                known = self.keys[found] == sorted_keys
+        kept, fresh = np.flatnonzero(known), np.flatnonzero(~known)
+        new = triangles[order[fresh]]
+        # the new triangles' weights (no spans: the kernel walks their pixels itself)
+        raster = triangle_raster(vertices, new, width, height, spans=False)
+        measured = self.layout.of_triangles(vertices, new, raster.origin)
+        stats = np.empty((m, self.layout.width))
         stats[fresh] = measured
-        if known.any():
-            stats[known] = np.take(self.stats, pos[known], axis=0)
+        if len(kept):
+            stats[kept] = np.take(self.stats, found[kept], axis=0)
+        self._order, self._stats = order, stats
         if last:
-            return stats, None, fresh, raster
+            return None
+        sse = np.empty(m)
         sse[fresh] = element_sse(raster, measured, z)
-        if known.any():
-            sse[known] = self.sse[pos[known]]
-        if keys is not None:
-            # the cache for the next round: this triangulation's triangles (the
-            # surviving entries and the new ones), in key order
-            self.keys = sorted_keys
-            self.stats = np.take(stats, by_key, axis=0)
-            self.sse = sse[by_key]
-        return stats, sse, fresh, raster
+        if len(kept):
+            sse[kept] = self.sse[found[kept]]
+        if sorted_keys is not None:
+            self.keys, self.stats, self.sse = sorted_keys, stats, sse
+        out = np.empty(m)
+        out[order] = sse
+        return out
+
+    def statistics(self) -> np.ndarray:
+        """The statistics of the triangles last measured, in their order."""
+        out = np.empty_like(self._stats)
+        out[self._order] = self._stats
+        return out
 
 
-def _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, cand, width, height):
-    """(triangle, x, y, |error|) of the worst pixel of each candidate triangle (sorted),
-    from the raster of the new triangles where the candidate is one of them."""
-    where = np.searchsorted(fresh, cand)
-    is_new = (where < len(fresh)) & (fresh[np.minimum(where, len(fresh) - 1)] == cand) if len(fresh) else np.zeros(len(cand), bool)
-    e1, x1, y1, err1 = fresh_raster.worst_pixels(gray, z, where[is_new])
-    old = cand[~is_new]
-    e2, x2, y2, err2 = triangle_raster(vertices, tris[old], width, height).worst_pixels(gray, z, np.arange(len(old)))
-    return np.r_[fresh[e1], old[e2]], np.r_[x1, x2], np.r_[y1, y2], np.r_[err1, err2]
+class _Growing:
+    """The triangulation of refinement's vertices and walls, kept between rounds
+    (codec.triangulate.Triangulation): a round's new vertices, which merge() appends,
+    are inserted instead of triangulating all the vertices again. The triangles are
+    triangulate()'s, in the same canonical order (ATM.md §4.2.5's triangulation is
+    unique). Where the kernel refuses the start (all vertices on one line, crossing
+    walls), it gives None and triangulate() decides."""
+
+    def __init__(self) -> None:
+        self._tri: Triangulation | None = None
+        self._count = 0
+        self._failed = False
+
+    def __call__(self, vertices: np.ndarray, segments: np.ndarray) -> np.ndarray | None:
+        if self._failed:
+            return None
+        try:
+            if self._tri is None:
+                self._tri = Triangulation(vertices)
+                self._tri.constrain(segments)
+            elif len(vertices) > self._count:
+                self._tri.insert(vertices[self._count:])
+        except ATMError:
+            self._failed = True
+            return None
+        self._count = len(vertices)
+        return self._tri.triangles()
 
 
 def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_walls: bool = False):
@@ -162,18 +195,29 @@ def refine_to_budget(
     """
     height, width = gray.shape
     cache = _Cache(layout)
+    growing = _Growing()
     ordered = False
     measured = None
     for r in itertools.count():
+        tris = None
         if r == rounds or target <= len(vertices):
             if finish is not None:
                 vertices, segments = finish(vertices, segments, measured)
+                growing = None  # the caller changed the mesh: it is triangulated anew
+            else:
+                tris = growing(vertices, segments)
             # the last triangulation: made as the MESH chunk's check will make it
-            vertices, segments, _ = _raster_order(vertices, segments, width, sort_walls=True)
+            vertices, segments, renumber = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
+            if tris is not None:
+                # the same triangles numbered as the vertices now are, in canonical order
+                tris = _renumber.canonical_renumbered(tris, renumber)
+        elif growing is not None:
+            tris = growing(vertices, segments)
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        tris = triangulate(vertices, segments)
-        tri_stats, tri_sse, fresh, fresh_raster = cache.measure(vertices, tris, z, width, height, ordered)
+        if tris is None:
+            tris = triangulate(vertices, segments)
+        tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
         missing = target - len(vertices)
         if ordered:
             break
@@ -195,10 +239,10 @@ def refine_to_budget(
             cand = np.arange(len(sse))
         cand = np.sort(cand[sse[cand] > 0])
         on_tri = cand[cand < len(tris)]
-        t, x, y, err = _worst_pixels(gray, z, vertices, tris, fresh, fresh_raster, on_tri, width, height)
+        # each candidate triangle's worst pixel (candidates sorted: in triangle order)
+        _, x, y, err = worst_pixels(gray, vertices, tris[on_tri], z, width, height)
         _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
-        order = np.argsort(t, kind="stable")
-        x, y, err = np.r_[x[order], lx], np.r_[y[order], ly], np.r_[err[order], lerr]
+        x, y, err = np.r_[x, lx], np.r_[y, ly], np.r_[err, lerr]
         big = err > 0.5
         if not big.any() and finish is not None:
             rounds = r + 1  # nothing worth a vertex, but the caller's still go in
@@ -211,4 +255,4 @@ def refine_to_budget(
         vertices = merge(width, vertices, np.stack([x[big], y[big]], axis=1))
     lines = line_raster(vertices, width, height)
     elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, segments, tris, elements, np.concatenate([tri_stats, layout(lines)]), ordered
+    return vertices, segments, tris, elements, np.concatenate([cache.statistics(), layout(lines)]), ordered

@@ -99,58 +99,19 @@ def opposite_points(
     return left, right
 
 
-def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-
-
-def conflicts(points: np.ndarray, segments: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """For segment pairs (i, j): do they meet anywhere but at a shared end point?"""
-    a, b = points[segments[i, 0]], points[segments[i, 1]]
-    c, d = points[segments[j, 0]], points[segments[j, 1]]
-    o1, o2 = _orient(a, b, c), _orient(a, b, d)
-    o3, o4 = _orient(c, d, a), _orient(c, d, b)
-    collinear = (o1 == 0) & (o2 == 0)
-    # collinear: compare the extents along the axis a-b runs along most
-    k = (np.abs(b[:, 0] - a[:, 0]) < np.abs(b[:, 1] - a[:, 1])).astype(np.int64)
-    r = np.arange(len(i))
-    lo1, hi1 = np.minimum(a[r, k], b[r, k]), np.maximum(a[r, k], b[r, k])
-    lo2, hi2 = np.minimum(c[r, k], d[r, k]), np.maximum(c[r, k], d[r, k])
-    overlap = np.minimum(hi1, hi2) - np.maximum(lo1, lo2)
-    si, sj = segments[i], segments[j]
-    shared = (si[:, :1] == sj).any(axis=1) | (si[:, 1:] == sj).any(axis=1)
-    general = ~collinear & (o1 * o2 <= 0) & (o3 * o4 <= 0)
-    # sharing an end point, two segments conflict only by running along each other
-    return np.where(shared, collinear & (overlap > 0), general | (collinear & (overlap >= 0)))
-
-
 def drop_conflicts(points: np.ndarray, segments: np.ndarray, cell: int = 8) -> np.ndarray:
     """Keep-mask over segments such that no two kept ones meet anywhere but at a shared
     end point: of two that do, the later goes. Candidates are the pairs whose bounding
-    boxes share a cell of a `cell`-pixel grid; the test is exact."""
-    keep = np.ones(len(segments), dtype=bool)
+    boxes share a cell of a `cell`-pixel grid; the test is exact (integer orientations;
+    collinear segments by their overlap), in a compiled pass
+    (codec._polylines.later_conflicts)."""
+    from .. import native
+
     if len(segments) < 2:
-        return keep
-    a, b = points[segments[:, 0]], points[segments[:, 1]]
-    lo, hi = np.minimum(a, b) // cell, np.maximum(a, b) // cell
-    nx, ny = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
-    count = nx * ny
-    seg = np.repeat(np.arange(len(segments)), count)
-    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-    stride = int(hi[:, 0].max()) + 2
-    key = (lo[seg, 1] + k // nx[seg]) * stride + lo[seg, 0] + k % nx[seg]
-    order = np.lexsort((seg, key))
-    key, seg = key[order], seg[order]
-    after = np.searchsorted(key, key, side="right") - np.arange(len(key)) - 1
-    first = np.repeat(np.arange(len(key)), after)
-    second = first + 1 + np.arange(int(after.sum())) - np.repeat(np.cumsum(after) - after, after)
-    i, j = seg[first], seg[second]
-    # a pair sharing several cells is kept in one: the first cell of the boxes' overlap
-    corner = np.maximum(lo[i], lo[j])
-    once = key[first] == corner[:, 1] * stride + corner[:, 0]
-    i, j = i[once], j[once]
-    bad = conflicts(points, segments, i, j)
-    keep[np.maximum(i[bad], j[bad])] = False
-    return keep
+        return np.ones(len(segments), dtype=bool)
+    return ~native._polylines.later_conflicts(
+        np.ascontiguousarray(points, dtype=np.int64), np.ascontiguousarray(segments, dtype=np.int64), cell
+    )
 
 
 def unfold(lines: Polylines, gray: np.ndarray, *, min_step: float = 4.0) -> Walls:

@@ -1,0 +1,330 @@
+"""Encoder kernel: what the adaptive mesher measures of each triangle, in one walk over
+the pixels it owns (codec.mesher.elements: the half-open rule, left and top edges
+inclusive), row by row as the rasteriser walks them, with no span arrays in between.
+
+triangle_sums: per triangle, the sums over its row spans of the geometric moments and
+of K prefix-summed planes (and of y times each), for codec.mesher.elements.Statistics;
+worst_pixels: per triangle, its pixel farthest from a plane through its corners.
+
+Both give the very numbers of the numpy code they replace: the spans' edge crossings
+are the same float64 quotients of exact integers, and the sums are taken span by span
+in row order, as a sparse row-sum adds them. The GIL is released while they work.
+"""
+
+from libc.math cimport ceil, fabs
+from libc.stdint cimport int32_t, int64_t
+
+import numpy as np
+
+ctypedef fused table_t:
+    int32_t
+    int64_t
+    double
+
+ctypedef fused plane_t:
+    float
+    double
+
+
+cdef inline void _sort3(int64_t* ys, int64_t* xs) noexcept nogil:
+    # the compare-and-swap network of elements._sort3: stable for equal rows
+    cdef int64_t t
+    cdef int i, j, k
+    for k in range(3):
+        i = 0 if k != 1 else 1
+        j = i + 1
+        if ys[j] < ys[i]:
+            t = ys[i]; ys[i] = ys[j]; ys[j] = t
+            t = xs[i]; xs[i] = xs[j]; xs[j] = t
+
+
+cdef inline void _span(const int64_t* ys, const int64_t* xs, int64_t dy, int64_t up,
+                       int64_t* left, int64_t* count) noexcept nogil:
+    """Columns [left, left + count) of row ya + dy of the triangle with corners sorted
+    by row (elements._triangle_spans: the long edge against the upper or lower short
+    edge, each crossing the ceiling of a float64 quotient of exact integers)."""
+    cdef int64_t tall = ys[2] - ys[0], upper = ys[1] - ys[0], lower = ys[2] - ys[1], den
+    cdef double c_long, c_short
+    c_long = ceil(<double>(xs[0] * tall + (xs[2] - xs[0]) * dy) / <double>tall)
+    if dy < up:
+        if upper == 0:
+            c_short = <double>xs[1]
+        else:
+            c_short = ceil(<double>(xs[0] * upper + (xs[1] - xs[0]) * dy) / <double>upper)
+    else:
+        den = lower if lower > 1 else 1
+        c_short = ceil(<double>(xs[1] * den - (xs[2] - xs[1]) * upper + (xs[2] - xs[1]) * dy) / <double>den)
+    if c_long < c_short:
+        left[0] = <int64_t>c_long
+        count[0] = <int64_t>(c_short - c_long)
+    else:
+        left[0] = <int64_t>c_short
+        count[0] = <int64_t>(c_long - c_short)
+
+
+cdef bint _corners(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
+                   int64_t width, int64_t height, int64_t* ys, int64_t* xs) noexcept nogil:
+    """The triangle's corners (False if an index or a coordinate is out of range)."""
+    cdef int64_t i, v
+    for i in range(3):
+        v = triangles[t, i]
+        if v < 0 or v >= vertices.shape[0]:
+            return False
+        xs[i] = vertices[v, 0]
+        ys[i] = vertices[v, 1]
+        if xs[i] < 0 or xs[i] >= width or ys[i] < 0 or ys[i] >= height:
+            return False
+    return True
+
+
+cdef bint _start(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
+                 int64_t width, int64_t height, int64_t* ys, int64_t* xs, int64_t* up) noexcept nogil:
+    """The triangle's corners sorted by row and the rows of its upper piece (down to the
+    middle corner's row, the last of all rows excluded); False if out of range."""
+    if not _corners(vertices, triangles, t, width, height, ys, xs):
+        return False
+    _sort3(ys, xs)
+    up[0] = ys[1] - ys[0] + 1
+    if up[0] > ys[2] - ys[0]:
+        up[0] = ys[2] - ys[0]
+    return True
+
+
+def _check(vertices, triangles, width, height):
+    if vertices.shape[1] != 2 or triangles.shape[1] != 3:
+        raise ValueError("vertices must be N x 2 and triangles M x 3")
+    if not 0 < width < 2**20 or not 0 < height < 2**20:
+        raise ValueError(f"image size {width} x {height} out of range")
+
+
+def triangle_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                  int64_t height, const table_t[:, ::1] table, const double[::1] power1,
+                  const double[::1] power2):
+    """M x (6 + 2K) float64: per triangle, summed over its spans (row y, columns
+    [x0, x1), n pixels) in row order: n, X1, y n, X2, y X1, y (y n) with Xk =
+    power_k[x1] - power_k[x0], then d_k = table[y s + x1, k] - table[y s + x0, k] for
+    each of the K planes (s = width + 1: a row's prefix sums, elements.Planes), then
+    y d_k. ValueError on an index or coordinate out of range."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0], kk = table.shape[1], stride = width + 1
+    if table.shape[0] != height * stride or power1.shape[0] <= width or power2.shape[0] <= width:
+        raise ValueError("triangle_sums: tables do not match the image size")
+    out = np.zeros((m, 6 + 2 * kk), dtype=np.float64)
+    cdef double[:, ::1] o = out
+    cdef int64_t t, dy, y, x0, n, lo, hi, k, up
+    cdef int64_t ys[3]
+    cdef int64_t xs[3]
+    cdef double yf, nf, x1s, x2s, yn, d
+    cdef table_t dk
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+                bad = True
+                break
+            for dy in range(ys[2] - ys[0]):
+                _span(ys, xs, dy, up, &x0, &n)
+                if n <= 0:
+                    continue  # an empty span adds nothing to any sum
+                y = ys[0] + dy
+                yf = <double>y
+                nf = <double>n
+                x1s = power1[x0 + n] - power1[x0]
+                x2s = power2[x0 + n] - power2[x0]
+                yn = yf * nf
+                o[t, 0] += nf
+                o[t, 1] += x1s
+                o[t, 2] += yn
+                o[t, 3] += x2s
+                o[t, 4] += yf * x1s
+                o[t, 5] += yf * yn
+                lo = y * stride + x0
+                hi = lo + n
+                for k in range(kk):
+                    dk = table[hi, k] - table[lo, k]
+                    d = <double>dk
+                    o[t, 6 + k] += d
+                    o[t, 6 + kk + k] += yf * d
+    if bad:
+        raise ValueError("triangle_sums: a corner index or coordinate out of range")
+    return out
+
+
+def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                 int64_t height, const double[:, ::1] affine, const int64_t[:, ::1] origin,
+                 const plane_t[:, ::1] plane):
+    """Per triangle, its owned pixel farthest from the plane f = a u + b v + c (affine's
+    row, u and v relative to origin's row) against `plane` (H x W), the first in raster
+    order of those tied: (x, y, |error| (-1 where the triangle owns no pixel)).
+    ValueError on an index or coordinate out of range."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0]
+    if affine.shape[0] != m or affine.shape[1] != 3 or origin.shape[0] != m or origin.shape[1] != 2:
+        raise ValueError("worst_pixels: affine and origin need a row per triangle")
+    if plane.shape[0] != height or plane.shape[1] != width:
+        raise ValueError("worst_pixels: the plane does not match the image size")
+    xs_out = np.zeros(m, dtype=np.int64)
+    ys_out = np.zeros(m, dtype=np.int64)
+    err_out = np.full(m, -1.0)
+    cdef int64_t[::1] bx = xs_out, by = ys_out
+    cdef double[::1] be = err_out
+    cdef int64_t t, dy, y, x0, n, x, up
+    cdef int64_t ys[3]
+    cdef int64_t xs[3]
+    cdef double a, row, c, mesh, e, best
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+                bad = True
+                break
+            a = affine[t, 0]
+            c = affine[t, 2]
+            best = -1.0
+            for dy in range(ys[2] - ys[0]):
+                _span(ys, xs, dy, up, &x0, &n)
+                y = ys[0] + dy
+                # as elements.Raster.worst_pixels sums it: a u, then + b v, then + c
+                row = affine[t, 1] * <double>(y - origin[t, 1])
+                for x in range(x0, x0 + n):
+                    mesh = a * <double>(x - origin[t, 0])
+                    mesh += row
+                    mesh += c
+                    e = fabs(<double>plane[y, x] - mesh)
+                    if e > best:
+                        best = e
+                        bx[t] = x
+                        by[t] = y
+            be[t] = best
+    if bad:
+        raise ValueError("worst_pixels: a corner index or coordinate out of range")
+    return xs_out, ys_out, err_out
+
+
+def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                    int64_t height):
+    """(triangle, x, y) of every pixel the triangles own, triangle by triangle, row by
+    row, left to right (Raster.pixels of their triangle_raster). ValueError on an
+    index or coordinate out of range."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0], total = 0, t, dy, y, x0, n, x, up, j = 0
+    cdef int64_t ys[3]
+    cdef int64_t xs[3]
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+                bad = True
+                break
+            for dy in range(ys[2] - ys[0]):
+                _span(ys, xs, dy, up, &x0, &n)
+                total += n
+    if bad:
+        raise ValueError("triangle_pixels: a corner index or coordinate out of range")
+    e_out = np.empty(total, dtype=np.int64)
+    x_out = np.empty(total, dtype=np.int64)
+    y_out = np.empty(total, dtype=np.int64)
+    cdef int64_t[::1] pe = e_out, px = x_out, py = y_out
+    with nogil:
+        for t in range(m):
+            _start(vertices, triangles, t, width, height, ys, xs, &up)
+            for dy in range(ys[2] - ys[0]):
+                _span(ys, xs, dy, up, &x0, &n)
+                y = ys[0] + dy
+                for x in range(x0, x0 + n):
+                    pe[j] = t
+                    px[j] = x
+                    py[j] = y
+                    j += 1
+    return e_out, x_out, y_out
+
+
+def evaluate(const double[:, ::1] affine, const int64_t[:, ::1] origin, const int64_t[::1] elem,
+             const int64_t[::1] x, const int64_t[::1] y):
+    """f = a (x - ox) + b (y - oy) + c at each pixel (x, y) of element elem (affine's
+    and origin's rows), summed in that order as Raster.evaluate sums it. ValueError on
+    an element out of range."""
+    cdef int64_t k = elem.shape[0], e = affine.shape[0], i
+    if x.shape[0] != k or y.shape[0] != k or origin.shape[0] != e or affine.shape[1] != 3 or origin.shape[1] != 2:
+        raise ValueError("evaluate: an element, x and y per pixel; an affine and an origin per element")
+    out_a = np.empty(k, dtype=np.float64)
+    cdef double[::1] out = out_a
+    cdef bint bad = False
+    with nogil:
+        for i in range(k):
+            if elem[i] < 0 or elem[i] >= e:
+                bad = True
+                break
+            out[i] = (affine[elem[i], 0] * <double>(x[i] - origin[elem[i], 0])
+                      + affine[elem[i], 1] * <double>(y[i] - origin[elem[i], 1]) + affine[elem[i], 2])
+    if bad:
+        raise ValueError("evaluate: an element index out of range")
+    return out_a
+
+
+cdef enum:
+    # most planes prefix_table sums: the structure's three and two per fitted channel
+    MAX_PLANES = 32
+
+
+def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] channels):
+    """(H (W + 1)) x K prefix sums along the rows of the planes b, x b, b b of the
+    structure b (H x W) and b_c, x b_c of each of the C channels (C x H x W), in the
+    structure's type and interleaved (elements.Planes: row y, columns [x, x + n) of
+    plane k is table[y (W + 1) + x + n, k] - table[y (W + 1) + x, k]); each sum taken
+    left to right, as numpy's cumsum takes it."""
+    cdef int64_t h = structure.shape[0], w = structure.shape[1], c = channels.shape[0]
+    cdef int64_t kk = 3 + 2 * c, y, x, k, base
+    if kk > MAX_PLANES or (c and (channels.shape[1] != h or channels.shape[2] != w)):
+        raise ValueError("prefix_table: the channels must match the structure, at most 14 of them")
+    if table_t is int32_t:
+        kind = np.int32
+    elif table_t is int64_t:
+        kind = np.int64
+    else:
+        kind = np.float64
+    out = np.zeros((h * (w + 1), kk), dtype=kind)
+    cdef table_t[:, ::1] o = out
+    cdef table_t acc[MAX_PLANES]
+    cdef table_t b, xv
+    with nogil:
+        for y in range(h):
+            base = y * (w + 1)
+            for k in range(kk):
+                acc[k] = 0
+            for x in range(w):
+                xv = <table_t>x
+                b = structure[y, x]
+                acc[0] += b
+                acc[1] += b * xv
+                acc[2] += b * b
+                o[base + x + 1, 0] = acc[0]
+                o[base + x + 1, 1] = acc[1]
+                o[base + x + 1, 2] = acc[2]
+                for k in range(c):
+                    b = channels[k, y, x]
+                    acc[3 + 2 * k] += b
+                    acc[4 + 2 * k] += b * xv
+                    o[base + x + 1, 3 + 2 * k] = acc[3 + 2 * k]
+                    o[base + x + 1, 4 + 2 * k] = acc[4 + 2 * k]
+    return out
+
+
+def span_totals(const double[:, ::1] per_span, const int64_t[::1] bounds):
+    """E x K: for each element e, the sum of the columns bounds[e] .. bounds[e+1]-1 of
+    per_span (K x S), taken column after column from 0.0 (as a sparse row-sum of ones
+    takes it). ValueError unless bounds run from 0 to S without decreasing."""
+    cdef int64_t kk = per_span.shape[0], s = per_span.shape[1], e = bounds.shape[0] - 1, i, j, k
+    if e < 0 or bounds[0] != 0 or bounds[e] != s:
+        raise ValueError("span_totals: bounds must run from 0 to the number of spans")
+    for i in range(e):
+        if bounds[i + 1] < bounds[i]:
+            raise ValueError("span_totals: bounds must not decrease")
+    out = np.zeros((e, kk), dtype=np.float64)
+    cdef double[:, ::1] o = out
+    with nogil:
+        for i in range(e):
+            for j in range(bounds[i], bounds[i + 1]):
+                for k in range(kk):
+                    o[i, k] += per_span[k, j]
+    return out

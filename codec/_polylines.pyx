@@ -1,0 +1,273 @@
+"""Encoder kernel: the sequential parts of the edge polyline stage
+(codec.mesher.polylines), walked one pixel after another instead of in vectorised
+rounds: ordering the pixels of the simple chains, and the segment rule of section
+3.3.2.1 of "Approximation of Digital Images with Discontinuity-Preserving Adaptive
+Triangular Meshes" that picks each chain's control points. The results are those of
+the numpy code they replace. The GIL is released while they work.
+"""
+
+from libc.stdint cimport int64_t, uint8_t
+
+import numpy as np
+
+
+def order_chains(const uint8_t[::1] simple, const int64_t[::1] offsets):
+    """The pixels of the simple chains (every pixel with at most two 8-neighbours) of a
+    flat mask padded by one pixel (offsets: the 8 neighbours' index offsets), chain by
+    chain, each from its start: its first end in scan-line order, or for a loop its
+    first pixel, the loop then opened between the start and its later neighbour (so the
+    walk leaves the start towards its earlier one); chains in the scan-line order of
+    their starts. Returns (flat indices in chain order, chain of each, closed per
+    chain). ValueError if a neighbour offset leaves the mask or a pixel has more than
+    two neighbours."""
+    cdef int64_t size = simple.shape[0], n = 0, i, j, k, p, q, a, b, top, count, chains = 0
+    if offsets.shape[0] != 8:
+        raise ValueError("order_chains: 8 neighbour offsets")
+    for k in range(8):
+        if abs(offsets[k]) >= size:
+            raise ValueError("order_chains: a neighbour offset beyond the mask")
+    flat_a = np.flatnonzero(np.asarray(simple))
+    n = len(flat_a)
+    if n == 0:
+        return flat_a, flat_a.copy(), np.zeros(0, bool)
+    index_a = np.full(size, -1, dtype=np.int64)
+    nb_a = np.full((n, 2), -1, dtype=np.int64)
+    comp_start_a = np.full(n, -1, dtype=np.int64)
+    is_start_a = np.zeros(n, dtype=np.uint8)
+    closed_start_a = np.zeros(n, dtype=np.uint8)
+    stack_a = np.empty(n, dtype=np.int64)
+    order_a = np.empty(n, dtype=np.int64)
+    chain_a = np.empty(n, dtype=np.int64)
+    closed_a = np.zeros(n, dtype=bool)
+    cdef const int64_t[::1] flat = flat_a
+    cdef int64_t[::1] index = index_a, comp_start = comp_start_a, stack = stack_a
+    cdef int64_t[::1] order = order_a, chain = chain_a
+    cdef int64_t[:, ::1] nb = nb_a
+    cdef uint8_t[::1] is_start = is_start_a, closed_start = closed_start_a
+    cdef uint8_t[::1] closed = closed_a.view(np.uint8)
+    cdef bint bad = False, border = False
+    with nogil:
+        for i in range(n):
+            index[flat[i]] = i
+        # each pixel's neighbours in offset order: its first and its last
+        for i in range(n):
+            p = flat[i]
+            count = 0
+            for k in range(8):
+                q = p + offsets[k]
+                if q < 0 or q >= size:
+                    border = True
+                    break
+                if simple[q]:
+                    if count == 0:
+                        nb[i, 0] = index[q]
+                    else:
+                        nb[i, 1] = index[q]
+                    count += 1
+            if border:
+                break
+            if count > 2:
+                bad = True
+                break
+        if not bad and not border:
+            # components, found from their first pixel in scan-line order (the loop's
+            # start), each pixel labelled with its component's first pixel
+            for i in range(n):
+                if comp_start[i] >= 0:
+                    continue
+                comp_start[i] = i
+                stack[0] = i
+                top = 1
+                a = -1  # the first end (at most one neighbour) in scan-line order
+                while top:
+                    top -= 1
+                    p = stack[top]
+                    if nb[p, 1] < 0 and (a < 0 or p < a):
+                        a = p
+                    for k in range(2):
+                        q = nb[p, k]
+                        if q >= 0 and comp_start[q] < 0:
+                            comp_start[q] = i
+                            stack[top] = q
+                            top += 1
+                if a >= 0:
+                    is_start[a] = 1
+                else:
+                    is_start[i] = 1
+                    closed_start[i] = 1
+                    # open the loop between its start and the start's later neighbour
+                    b = nb[i, 0] if nb[i, 0] > nb[i, 1] else nb[i, 1]
+                    if nb[i, 0] == b:
+                        nb[i, 0] = nb[i, 1]
+                    nb[i, 1] = -1
+                    if nb[b, 0] == i:
+                        nb[b, 0] = nb[b, 1]
+                    nb[b, 1] = -1
+            # chains in the scan-line order of their starts, each walked from its start
+            j = 0
+            for i in range(n):
+                if not is_start[i]:
+                    continue
+                closed[chains] = closed_start[i]
+                a = -1
+                p = i
+                while p >= 0:
+                    order[j] = flat[p]
+                    chain[j] = chains
+                    j += 1
+                    q = nb[p, 0] if nb[p, 0] != a else nb[p, 1]
+                    a = p
+                    p = q
+                chains += 1
+    if border:
+        raise ValueError("order_chains: a pixel's neighbour lies beyond the mask (it needs a border)")
+    if bad:
+        raise ValueError("order_chains: a pixel has more than two neighbours")
+    return order_a, chain_a, closed_a[:chains].copy()
+
+
+def control_points(const double[:, ::1] xy, const int64_t[::1] first, const int64_t[::1] last,
+                   int64_t k, double d):
+    """The paper's segment rule on every chain (pixels xy[first[c]] .. xy[last[c]]):
+    from the start A a reference point C k pixels ahead; while every pixel strictly
+    between A and C lies within d of segment AC, C advances by k (to the chain's end at
+    most); otherwise the first offending pixel becomes the next start. Returns the
+    indices into xy of the control points (each chain's first, every start, its last),
+    in order. ValueError on a chain outside xy or k < 1."""
+    cdef int64_t chains = first.shape[0], p = xy.shape[0], c, a, ref, end, i, bad, count = 0
+    cdef double d2 = d * d, ax, ay, sx, sy, rx, ry, t, ox, oy, den
+    if last.shape[0] != chains or k < 1 or xy.shape[1] != 2:
+        raise ValueError("control_points: a last per first, k >= 1 and N x 2 points")
+    for c in range(chains):
+        if first[c] < 0 or last[c] >= p or (c and first[c] <= last[c - 1]) or last[c] < first[c]:
+            raise ValueError("control_points: chains must be ordered ranges of the points")
+    out_a = np.empty(p, dtype=np.int64)
+    cdef int64_t[::1] out = out_a
+    with nogil:
+        for c in range(chains):
+            a = first[c]
+            end = last[c]
+            out[count] = a
+            count += 1
+            if end == a:
+                continue
+            ref = a + k if a + k < end else end
+            while True:
+                ax = xy[a, 0]
+                ay = xy[a, 1]
+                sx = xy[ref, 0] - ax
+                sy = xy[ref, 1] - ay
+                den = sx * sx + sy * sy
+                if den < 1e-12:
+                    den = 1e-12
+                bad = -1
+                for i in range(a + 1, ref):
+                    rx = xy[i, 0] - ax
+                    ry = xy[i, 1] - ay
+                    t = (rx * sx + ry * sy) / den
+                    if t < 0.0:
+                        t = 0.0
+                    elif t > 1.0:
+                        t = 1.0
+                    ox = rx - t * sx
+                    oy = ry - t * sy
+                    if ox * ox + oy * oy > d2:
+                        bad = i
+                        break
+                if bad >= 0:
+                    out[count] = bad
+                    count += 1
+                    a = bad
+                    ref = a + k if a + k < end else end
+                elif ref == end:
+                    out[count] = end
+                    count += 1
+                    break
+                else:
+                    ref = ref + k if ref + k < end else end
+    return out_a[:count].copy()
+
+
+cdef inline int64_t _abs(int64_t v) noexcept nogil:
+    return -v if v < 0 else v
+
+
+cdef inline int _orient(int64_t ax, int64_t ay, int64_t bx, int64_t by, int64_t cx, int64_t cy) noexcept nogil:
+    cdef int64_t d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+    return (d > 0) - (d < 0)
+
+
+cdef bint _conflict(const int64_t[:, ::1] p, const int64_t[:, ::1] s, int64_t i, int64_t j) noexcept nogil:
+    """Do segments i and j meet anywhere but at a shared end point (unfold.conflicts)?"""
+    cdef int64_t a = s[i, 0], b = s[i, 1], c = s[j, 0], d = s[j, 1], k, lo1, hi1, lo2, hi2, overlap
+    cdef int o1 = _orient(p[a, 0], p[a, 1], p[b, 0], p[b, 1], p[c, 0], p[c, 1])
+    cdef int o2 = _orient(p[a, 0], p[a, 1], p[b, 0], p[b, 1], p[d, 0], p[d, 1])
+    cdef int o3 = _orient(p[c, 0], p[c, 1], p[d, 0], p[d, 1], p[a, 0], p[a, 1])
+    cdef int o4 = _orient(p[c, 0], p[c, 1], p[d, 0], p[d, 1], p[b, 0], p[b, 1])
+    cdef bint collinear = o1 == 0 and o2 == 0
+    # collinear: compare the extents along the axis a-b runs along most
+    k = 1 if _abs(p[b, 0] - p[a, 0]) < _abs(p[b, 1] - p[a, 1]) else 0
+    lo1 = min(p[a, k], p[b, k]); hi1 = max(p[a, k], p[b, k])
+    lo2 = min(p[c, k], p[d, k]); hi2 = max(p[c, k], p[d, k])
+    overlap = min(hi1, hi2) - max(lo1, lo2)
+    if a == c or a == d or b == c or b == d:
+        # sharing an end point, two segments conflict only by running along each other
+        return collinear and overlap > 0
+    return (not collinear and o1 * o2 <= 0 and o3 * o4 <= 0) or (collinear and overlap >= 0)
+
+
+def later_conflicts(const int64_t[:, ::1] points, const int64_t[:, ::1] segments, int64_t cell):
+    """Mask over segments: True where an earlier segment meets it anywhere but at a
+    shared end point (unfold.drop_conflicts drops those). Pairs are tested where their
+    bounding boxes share a cell of a `cell`-pixel grid (two segments that meet always
+    do), exactly. ValueError on an index out of range or coordinates below 0."""
+    cdef int64_t n = segments.shape[0], m = points.shape[0], i, j, a, b, x, y, gx = 0, gy = 0, c, u, v
+    if cell < 1 or (n and segments.shape[1] != 2) or (m and points.shape[1] != 2):
+        raise ValueError("later_conflicts: N x 2 points, S x 2 segments, a cell of 1 or more")
+    for i in range(n):
+        for j in range(2):
+            if segments[i, j] < 0 or segments[i, j] >= m:
+                raise ValueError("later_conflicts: a segment names a point out of range")
+    for i in range(m):
+        if points[i, 0] < 0 or points[i, 1] < 0:
+            raise ValueError("later_conflicts: a point has a negative coordinate")
+        gx = max(gx, points[i, 0] // cell + 1)
+        gy = max(gy, points[i, 1] // cell + 1)
+    lo_a = np.zeros((n, 2), np.int64)
+    hi_a = np.zeros((n, 2), np.int64)
+    start_a = np.zeros(gx * gy + 1, np.int64)
+    bad_a = np.zeros(n, bool)
+    cdef int64_t[:, ::1] lo = lo_a, hi = hi_a
+    cdef int64_t[::1] start = start_a
+    cdef uint8_t[::1] bad = bad_a.view(np.uint8)
+    cdef int64_t total = 0
+    with nogil:
+        # each segment in every cell its box covers: counted, then listed cell by cell
+        for i in range(n):
+            a = segments[i, 0]
+            b = segments[i, 1]
+            for j in range(2):
+                lo[i, j] = min(points[a, j], points[b, j]) // cell
+                hi[i, j] = max(points[a, j], points[b, j]) // cell
+            for y in range(lo[i, 1], hi[i, 1] + 1):
+                for x in range(lo[i, 0], hi[i, 0] + 1):
+                    start[y * gx + x + 1] += 1
+        for c in range(gx * gy):
+            start[c + 1] += start[c]
+        total = start[gx * gy]
+    members_a = np.empty(total, np.int64)
+    fill_a = start_a[:-1].copy()
+    cdef int64_t[::1] members = members_a, fill = fill_a
+    with nogil:
+        for i in range(n):  # in order: each cell lists its segments in increasing order
+            for y in range(lo[i, 1], hi[i, 1] + 1):
+                for x in range(lo[i, 0], hi[i, 0] + 1):
+                    members[fill[y * gx + x]] = i
+                    fill[y * gx + x] += 1
+        for c in range(gx * gy):
+            for u in range(start[c], start[c + 1]):
+                for v in range(u + 1, start[c + 1]):
+                    j = members[v]
+                    if not bad[j] and _conflict(points, segments, members[u], j):
+                        bad[j] = 1
+    return bad_a

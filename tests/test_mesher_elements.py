@@ -1,0 +1,159 @@
+"""The compiled walk over each triangle's pixels (codec._elements) gives exactly the
+numbers of the span arrays it replaced (codec.mesher.elements.Raster, Statistics), on
+meshes with flat tops and bottoms, slivers and ties, for every prefix-sum type."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from codec import native
+from codec.mesher.elements import Statistics, triangle_pixels, triangle_raster, worst_pixels
+from codec.triangulate import triangulate
+
+
+def _mesh(rng: np.random.Generator, width: int, height: int, count: int, grid: bool):
+    """Vertices (the corners, then random or lattice pixels) and their triangulation."""
+    corners = [[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]]
+    if grid:
+        # a lattice: many flat-topped and flat-bottomed triangles, cocircular ties
+        xs, ys = np.meshgrid(np.arange(0, width, 3), np.arange(0, height, 4))
+        pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    else:
+        pts = np.stack([rng.integers(0, width, count), rng.integers(0, height, count)], axis=1)
+    v = np.concatenate([corners, pts]).astype(np.int64)
+    _, first = np.unique(v[:, 1] * width + v[:, 0], return_index=True)
+    v = v[np.sort(first)]
+    return v, triangulate(v, np.zeros((0, 2), np.int64))
+
+
+def _images(rng: np.random.Generator, width: int, height: int):
+    """(structure plane, fit) pairs whose prefix sums are int32, int64 and float64."""
+    u8 = rng.integers(0, 256, (height, width)).astype(np.uint8)
+    u16 = rng.integers(0, 65536, (height, width)).astype(np.uint16)
+    rgb = rng.integers(0, 256, (height, width, 3)).astype(np.uint8)
+    gray = (rgb.astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32))
+    return [(u8, "structure"), (u16, "structure"), (u8, None), (gray, rgb), (gray, None)]
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grid", [False, True])
+def test_triangle_statistics_are_those_of_the_spans(seed: int, grid: bool) -> None:
+    rng = np.random.default_rng(seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid)
+    kinds = set()
+    for structure, fit in _images(rng, width, height):
+        layout = Statistics(structure, fit)
+        kinds.add(layout.planes.table.dtype)
+        raster = triangle_raster(v, t, width, height)
+        expected = layout(raster)
+        got = layout.of_triangles(v, t, raster.origin)
+        assert got.shape == expected.shape
+        # the same float64 numbers, not just close ones: the encoder's bytes depend on them
+        assert np.array_equal(got, expected)
+        # any subset, in any order
+        pick = rng.permutation(len(t))[: len(t) // 2]
+        sub = triangle_raster(v, t[pick], width, height)
+        assert np.array_equal(layout.of_triangles(v, t[pick], sub.origin), layout(sub))
+    assert kinds == {np.dtype(np.int32), np.dtype(np.int64), np.dtype(np.float64)}
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grid", [False, True])
+def test_worst_pixels_are_those_of_the_spans(seed: int, grid: bool) -> None:
+    rng = np.random.default_rng(10 + seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid)
+    # plateaus: many pixels of a triangle tie for its largest error
+    plane = (rng.integers(0, 4, (height, width)) * 20).astype(np.float32)
+    for z in (plane[v[:, 1], v[:, 0]].astype(np.float64), rng.normal(30, 20, len(v))):
+        raster = triangle_raster(v, t, width, height)
+        e, x, y, err = raster.worst_pixels(plane, z, np.arange(len(t)))
+        got = worst_pixels(plane, v, t, z, width, height)
+        for a, b in zip(got, (e, x, y, err)):
+            assert np.array_equal(a, b)
+        # a float64 plane gives the same
+        got = worst_pixels(plane.astype(np.float64), v, t, z, width, height)
+        assert np.array_equal(got[3], err)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("grid", [False, True])
+def test_pixels_and_plane_values_are_those_of_the_spans(seed: int, grid: bool) -> None:
+    rng = np.random.default_rng(20 + seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid)
+    raster = triangle_raster(v, t, width, height)
+    e, x, y = raster.pixels()
+    got = triangle_pixels(v, t, width, height)
+    for a, b in zip(got, (e, x, y)):
+        assert np.array_equal(a, b)
+    # every pixel of [0, W-1) x [0, H-1) exactly once
+    assert np.array_equal(np.sort(y * width + x), np.sort((np.arange(height - 1)[:, None] * width + np.arange(width - 1)).ravel()))
+    affine = raster.affine(rng.normal(100, 50, len(v)))
+    f = affine[e]
+    want = f[:, 0] * (x - raster.origin[e, 0]) + f[:, 1] * (y - raster.origin[e, 1]) + f[:, 2]
+    assert np.array_equal(raster.evaluate(affine, e, x, y), want)
+
+
+@pytest.mark.parametrize("kind", [np.int32, np.int64, np.float64])
+@pytest.mark.parametrize("channels", [0, 1, 3])
+def test_prefix_sums_are_numpys(kind, channels: int) -> None:
+    rng = np.random.default_rng(channels)
+    h, w = 7, 33
+    b = rng.integers(0, 256, (h, w)).astype(kind)
+    if kind is np.float64:
+        b = b + rng.random((h, w)).astype(np.float32)  # a luma plane: float32 values
+    cs = [rng.integers(0, 65536, (h, w)).astype(kind) for _ in range(channels)]
+    xs = np.arange(w, dtype=kind)
+    planes = [b, b * xs, b * b] + [p for c in cs for p in (c, c * xs)]
+    want = np.zeros((h, w + 1, len(planes)), kind)
+    for k, plane in enumerate(planes):
+        np.cumsum(plane, axis=1, out=want[:, 1:, k])
+    got = native._elements.prefix_table(b, np.stack(cs) if cs else np.zeros((0, h, w), kind))
+    assert got.dtype == kind and np.array_equal(got, want.reshape(-1, len(planes)))
+
+
+def test_span_totals_are_a_sparse_row_sums() -> None:
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(7)
+    counts = rng.integers(0, 6, 300)  # elements with no span too
+    bounds = np.r_[0, np.cumsum(counts)]
+    per_span = rng.normal(0, 1e6, (10, int(bounds[-1]))) * rng.random((10, int(bounds[-1]))) ** 9
+    n = per_span.shape[1]
+    summing = sp.csr_matrix((np.ones(n), np.arange(n), bounds), shape=(len(counts), n))
+    assert np.array_equal(native._elements.span_totals(per_span, bounds), np.asarray(summing @ per_span.T))
+    with pytest.raises(ValueError, match="run from 0"):
+        native._elements.span_totals(per_span, bounds[:-1])
+    with pytest.raises(ValueError, match="not decrease"):
+        native._elements.span_totals(per_span, np.r_[0, bounds[2], bounds[1], bounds[3:]])
+
+
+def test_the_kernels_refuse_what_is_out_of_range() -> None:
+    rng = np.random.default_rng(3)
+    v, t = _mesh(rng, 20, 10, 30, False)
+    layout = Statistics(rng.integers(0, 256, (10, 20)).astype(np.uint8), "structure")
+    args = (layout.planes.table, layout._powers[1], layout._powers[2])
+    bad = t.copy()
+    bad[-1, 2] = len(v)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_sums(v, bad, 20, 10, *args)
+    far = v.copy()
+    far[-1] = [20, 0]  # one column past the image
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_sums(far, t, 20, 10, *args)
+    with pytest.raises(ValueError, match="do not match"):
+        native._elements.triangle_sums(v, t, 20, 11, *args)
+    plane = np.zeros((10, 20), np.float32)
+    f, origin = np.zeros((len(t), 3)), np.zeros((len(t), 2), np.int64)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.worst_pixels(v, bad, 20, 10, f, origin, plane)
+    with pytest.raises(ValueError, match="does not match"):
+        native._elements.worst_pixels(v, t, 20, 10, f, origin, plane[:9])
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_pixels(far, t, 20, 10)
+    one = np.zeros(1, np.int64)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.evaluate(f, origin, np.array([len(t)]), one, one)
