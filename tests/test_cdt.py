@@ -83,6 +83,23 @@ def test_the_kernel_gives_triangles_and_the_canonical_pass_the_same(case):
         assert ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) > 0).all()
 
 
+@settings(max_examples=150, deadline=None)
+@given(point_sets())
+def test_raster_ordered_vertices_give_the_same_triangles(case):
+    """Vertices already in raster order (a decoder's, ATM.md §4.2.2: the kernel neither
+    sorts nor renumbers them) give the triangles of the same vertices shuffled, renumbered,
+    and Triangle's after the canonical pass."""
+    pts, walls = case
+    rank = np.lexsort((pts[:, 0], pts[:, 1]))  # raster position -> shuffled index
+    where = np.empty_like(rank)
+    where[rank] = np.arange(len(rank))  # shuffled index -> raster position
+    ordered = pts[rank]
+    ordered_walls = None if walls is None else where[walls]
+    out = delaunay(ordered, ordered_walls)
+    np.testing.assert_array_equal(out, canonical_triangles(where[delaunay(pts, walls)]))
+    np.testing.assert_array_equal(out, by_triangle(ordered, ordered_walls))
+
+
 @pytest.mark.parametrize("r2", [25, 325, 1105])
 def test_rings_match_the_definition(r2):
     """All lattice points of a circle tie at once: the kernel gives exactly the
