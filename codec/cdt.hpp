@@ -88,10 +88,10 @@ class CDT {
   std::vector<i32> T;     // the twin half-edge, -1 on the hull
   std::vector<uint8_t> C; // whether the edge is a segment
   std::vector<i32> vinc;  // one outgoing half-edge of each vertex (-1 before it has one)
-  std::vector<i32> hedge;  // a hull half-edge from each hull vertex (kept by link)
   std::vector<i32> stack;
   i64 flips = 0;
-  bool narrow = false;  // every coordinate difference below 2^14 (set by the caller)
+  bool narrow = false;  // every coordinate difference below 2^14 (set by the caller;
+                        // incircle then skips its per-call check)
   bool strict = false;  // refuse a segment over a vertex instead of cutting it there
 
   i64 orient(i32 a, i32 b, i32 c) const {
@@ -105,9 +105,13 @@ class CDT {
     i64 adx = A.x - D.x, ady = A.y - D.y;
     i64 bdx = B.x - D.x, bdy = B.y - D.y;
     i64 cdx = C_.x - D.x, cdy = C_.y - D.y;
-    if (narrow) {
-      // differences below 2^14: lifts and minors below 2^29, products below 2^58,
-      // their sum below 2^60: exact in int64
+    // x ^ (x >> 63) is |x| for x >= 0 and |x| - 1 below: the OR of them is below 2^14
+    // only if every |difference| is at most 2^14
+    if (narrow || ((adx ^ (adx >> 63)) | (ady ^ (ady >> 63)) | (bdx ^ (bdx >> 63)) |
+                   (bdy ^ (bdy >> 63)) | (cdx ^ (cdx >> 63)) | (cdy ^ (cdy >> 63))) < (i64(1) << 14)) {
+      // differences at most 2^14 (all of them when narrow; in a wide band, most: the
+      // four corners of a quadrilateral are neighbours): lifts and minors at most 2^29,
+      // products at most 2^58, their sum below 2^60: exact in int64
       i64 det = (adx * adx + ady * ady) * (bdx * cdy - bdy * cdx) +
                 (bdx * bdx + bdy * bdy) * (cdx * ady - cdy * adx) +
                 (cdx * cdx + cdy * cdy) * (adx * bdy - ady * bdx);
@@ -167,7 +171,6 @@ class CDT {
     T[s] = t;
     C[s] = c;
     if (t >= 0) T[t] = s;
-    else hedge[V[s]] = s;  // a hull edge moved to another slot
   }
 
   // Replace edge ab of (a, b, c) and (b, a, d) by cd: (d, c, a) in e's triangle and
@@ -317,7 +320,6 @@ class CDT {
     if ((i64)pt.size() > MAX_VERTICES) return CDT_MEMORY;
     i32 n = (i32)pt.size();
     vinc.assign(n, -1);
-    hedge.assign(n, -1);
     V.reserve(6 * (size_t)n); T.reserve(6 * (size_t)n); C.reserve(6 * (size_t)n);
     if (n < 3) return CDT_OK;
     // Andrew's monotone chain in raster order, corners only (collinear points dropped);
@@ -592,13 +594,13 @@ class CDT {
     if (px < 0 || px > MAX_EXTENT || py < 0 || py > MAX_EXTENT) return CDT_EXTENT;
     if ((i64)pt.size() >= MAX_VERTICES) return CDT_MEMORY;
     i32 p = (i32)pt.size();
-    pt.push_back(Pt{(i32)px, (i32)py}); vinc.push_back(-1); hedge.push_back(-1);
+    pt.push_back(Pt{(i32)px, (i32)py}); vinc.push_back(-1);
     i32 on = -1, t = locate(vinc[last], p, &on);
     bool dup = false;
     if (t >= 0)
       for (int j = 0; j < 3; ++j) dup |= pt[V[3 * t + j]].x == px && pt[V[3 * t + j]].y == py;
     if (t < 0 || dup) {
-      pt.pop_back(); vinc.pop_back(); hedge.pop_back();
+      pt.pop_back(); vinc.pop_back();
       return t < 0 ? CDT_OUTSIDE : CDT_DUPLICATE;
     }
     if (on >= 0) split_edge(on, p);

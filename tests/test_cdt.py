@@ -111,6 +111,24 @@ def test_rings_match_the_definition(r2):
         assert local_rule_holds(v, out, None)
 
 
+@pytest.mark.parametrize("scale", [1638, 1639, 3276, 3277, 26214, 1 << 16])
+def test_ties_at_the_edge_of_the_narrow_incircle_in_a_wide_band(scale):
+    """A wide band (extent over 2^14) takes the 64-bit incircle for each quadrilateral
+    whose differences are all at most 2^14 and the 128-bit one otherwise: cocircular
+    rings scaled so that their differences fall just below and just above 2^14, with a
+    copy moved by one pixel (near ties) and random points among them (whose incircle
+    overflows 64 bits when differences near 2^18 take the narrow path), and far
+    vertices making the band wide, give the exact triangulation on both sides."""
+    ring = ring_points(25) * scale  # differences up to 10 * scale
+    ring = ring - ring.min(axis=0) + 3
+    far = np.array([[0, 0], [1 << 20, 0], [0, 1 << 20], [1 << 20, 1 << 20]])
+    scattered = np.random.default_rng(scale).integers(0, 10 * scale, (40, 2)) + 3
+    v = np.unique(np.concatenate([ring, ring + [1, 0], scattered, far]), axis=0)
+    out = delaunay(v)
+    np.testing.assert_array_equal(out, by_triangle(v, None))
+    np.testing.assert_array_equal(delaunay(ring), by_triangle(ring, None))
+
+
 def test_every_conformance_band_is_the_kernels():
     """Each Delaunay band of every conformance file: the kernel equals Triangle and the
     canonical pass, and the file decodes to its stored image."""
