@@ -27,9 +27,9 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         bint narrow, track
         vector[int] dirty, old
         vector[unsigned char] dirty_mark
-        Status build() nogil
-        Status insert(int64_t px, int64_t py) nogil
-        Status constrain(int a, int b) nogil
+        Status build() except + nogil
+        Status insert(const int64_t* xy, int64_t k, int64_t* done) except + nogil
+        Status constrain(int a, int b) except + nogil
         void legalise() nogil
     void cdt_canonical "atmcdt::canonical" (const CDT& cdt, const int64_t* order,
                                            int64_t* out) nogil
@@ -118,24 +118,15 @@ cdef class Triangulation:
 
     def insert(self, const int64_t[:, ::1] points):
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
-        indices continue the vertices' numbering. Stops at the first point refused."""
-        cdef int64_t k = points.shape[0], i, done = 0
-        cdef Status status = CDT_OK
-        for i in range(k):
-            if not (0 <= points[i, 0] <= MAX_EXTENT and 0 <= points[i, 1] <= MAX_EXTENT):
-                k = i  # insert those before it, then report it
-                status = CDT_EXTENT
-                break
-        cdef Status refused = status
-        status = CDT_OK
-        with nogil:
-            for i in range(k):
-                status = self.cdt.insert(points[i, 0], points[i, 1])
-                if status != CDT_OK:
-                    break
-                done += 1
-        if status == CDT_OK:
-            status = refused
+        indices continue the vertices' numbering in the points' order. All are checked
+        first: if one is refused, only those before it go in (status: its refusal)."""
+        cdef int64_t k = points.shape[0], done = 0
+        cdef const int64_t* xy = &points[0, 0] if k else NULL
+        cdef Status status
+        if points.shape[1] != 2:
+            raise ValueError("points are K x 2")
+        with nogil:  # every point checked in the kernel, then inserted in a spatial order
+            status = self.cdt.insert(xy, k, &done)
         first = self.cdt.pt.size() - done
         return int(status), np.arange(first, first + done, dtype=np.int64)
 

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <new>
+#include <utility>
 #include <vector>
 
 namespace atmcdt {
@@ -355,34 +356,14 @@ class CDT {
     for (i32 h : hull) done[h] = 1;
     push_all();
     legalise();
-    // insertion order (any order gives the same triangles; this one keeps walks short):
-    // round r holds about half the points of round r + 1, each round along a Hilbert
-    // curve over a grid of about two cells per point (points sharing a cell go in index
-    // order), packed with the index into one integer and radix sorted
-    i64 span = 1;
-    for (i32 i = 0; i < n; ++i) span = std::max(span, (i64)std::max(pt[i].x, pt[i].y) + 1);
-    int order = 1, grid = 1;
-    while ((i64(1) << order) < span) ++order;
-    while (grid < 15 && (i64(1) << (2 * grid)) < 2 * (i64)n) ++grid;
-    int shift = order > grid ? order - grid : 0;
-    grid = order - shift;
-    const int index_bits = 29;  // n < 2^31 / 6 (half-edge indices are i32) < 2^29
-    const int key_bits = 4 + 2 * grid;  // round, then Hilbert distance: at most 34 bits
-    std::vector<uint64_t> keys, spare;
-    keys.reserve(n);
-    for (i32 i = 0; i < n; ++i) {
-      if (done[i]) continue;
-      uint64_t h = (uint64_t)i * 0x9E3779B97F4A7C15ull;  // a fixed hash: same order every run
-      h ^= h >> 31; h *= 0xBF58476D1CE4E5B9ull; h ^= h >> 29;
-      uint64_t round = 0;
-      while (round < 12 && (h & 1)) { ++round; h >>= 1; }
-      uint64_t key = (12 - round) << (2 * grid) | hilbert(grid, pt[i].x >> shift, pt[i].y >> shift);
-      keys.push_back(key << index_bits | (uint64_t)i);
-    }
-    radix_sort(&keys, &spare, index_bits, key_bits);
+    std::vector<i32> rest;
+    rest.reserve(n);
+    for (i32 i = 0; i < n; ++i)
+      if (!done[i]) rest.push_back(i);
+    std::vector<uint64_t> keys = insertion_order(rest);
     last = hull[0];
     for (uint64_t k : keys) {
-      i32 p = (i32)(k & ((uint64_t(1) << index_bits) - 1)), on = -1;
+      i32 p = (i32)(k & INDEX_MASK), on = -1;
       i32 t = locate(vinc[last], p, &on);
       if (t < 0) return CDT_INTERNAL;
       if (on >= 0) split_edge(on, p);
@@ -391,6 +372,39 @@ class CDT {
       last = p;
     }
     return CDT_OK;
+  }
+
+  // Vertex indices are below MAX_VERTICES < 2^29: an insertion key keeps one in its low
+  // bits.
+  static const int INDEX_BITS = 29;
+  static const uint64_t INDEX_MASK = (uint64_t(1) << INDEX_BITS) - 1;
+
+  // The vertices `which` in insertion order (any order gives the same triangles; this
+  // one keeps walks short), each as a key whose low INDEX_BITS are its index: round r
+  // holds about half the points of round r + 1 (a biased randomised insertion order),
+  // each round along a Hilbert curve over a grid of about two cells per point (points
+  // sharing a cell go in index order); radix sorted.
+  std::vector<uint64_t> insertion_order(const std::vector<i32>& which) const {
+    i64 span = 1, n = (i64)which.size();
+    for (i32 i : which) span = std::max(span, (i64)std::max(pt[i].x, pt[i].y) + 1);
+    int order = 1, grid = 1;
+    while ((i64(1) << order) < span) ++order;
+    while (grid < 15 && (i64(1) << (2 * grid)) < 2 * n) ++grid;
+    int shift = order > grid ? order - grid : 0;
+    grid = order - shift;
+    const int key_bits = 4 + 2 * grid;  // round, then Hilbert distance: at most 34 bits
+    std::vector<uint64_t> keys, spare;
+    keys.reserve(n);
+    for (i32 i : which) {
+      uint64_t h = (uint64_t)i * 0x9E3779B97F4A7C15ull;  // a fixed hash: same order every run
+      h ^= h >> 31; h *= 0xBF58476D1CE4E5B9ull; h ^= h >> 29;
+      uint64_t round = 0;
+      while (round < 12 && (h & 1)) { ++round; h >>= 1; }
+      uint64_t key = (12 - round) << (2 * grid) | hilbert(grid, pt[i].x >> shift, pt[i].y >> shift);
+      keys.push_back(key << INDEX_BITS | (uint64_t)i);
+    }
+    radix_sort(&keys, &spare, INDEX_BITS, key_bits);
+    return keys;
   }
 
   // Sort *a by bits low .. low + bits of each value, stably (LSD, 11 bits a pass);
@@ -586,28 +600,62 @@ class CDT {
   // next point location walk starts.
   i32 last = 0;
 
-  // Insert point (px, py) (0 .. MAX_EXTENT, checked by the caller) inside the hull as
-  // vertex pt.size(), with Lawson flips (no
-  // segment is flipped): the constrained triangulation of §4.2.5 of all the points.
-  Status insert(i64 px, i64 py) {
-    if (V.empty()) return CDT_OUTSIDE;
-    if (px < 0 || px > MAX_EXTENT || py < 0 || py > MAX_EXTENT) return CDT_EXTENT;
-    if ((i64)pt.size() >= MAX_VERTICES) return CDT_MEMORY;
-    i32 p = (i32)pt.size();
-    pt.push_back(Pt{(i32)px, (i32)py}); vinc.push_back(-1);
-    i32 on = -1, t = locate(vinc[last], p, &on);
-    bool dup = false;
-    if (t >= 0)
-      for (int j = 0; j < 3; ++j) dup |= pt[V[3 * t + j]].x == px && pt[V[3 * t + j]].y == py;
-    if (t < 0 || dup) {
-      pt.pop_back(); vinc.pop_back();
-      return t < 0 ? CDT_OUTSIDE : CDT_DUPLICATE;
+  // Insert k points (xy, k x 2) inside the hull as vertices pt.size(), pt.size() + 1,
+  // ... in their order, with Lawson flips (no segment is flipped): the constrained
+  // triangulation of §4.2.5 of all the points. All are checked first (coordinates,
+  // inside the hull, no position twice), so that *done counts those before the first
+  // refused one (whose status is returned), and only those go in; they go in the order
+  // of insertion_order, so that the walks are short whatever order they come in.
+  Status insert(const i64* xy, i64 k, i64* done) {
+    *done = 0;
+    if (V.empty()) return k ? CDT_OUTSIDE : CDT_OK;
+    i64 first = (i64)pt.size(), limit = k;
+    Status status = CDT_OK;
+    auto refuse = [&](i64 j, Status why) {
+      if (j < limit) { limit = j; status = why; }
+    };
+    for (i64 j = 0; j < k; ++j)
+      if (xy[2 * j] < 0 || xy[2 * j] > MAX_EXTENT || xy[2 * j + 1] < 0 || xy[2 * j + 1] > MAX_EXTENT) {
+        refuse(j, CDT_EXTENT);
+        break;
+      }
+    if (first + limit > MAX_VERTICES) refuse(MAX_VERTICES - first, CDT_MEMORY);
+    // the same position twice among them: the later one is refused
+    std::vector<std::pair<i64, i64>> where((size_t)limit);  // (position, j)
+    for (i64 j = 0; j < limit; ++j) where[j] = {xy[2 * j + 1] << 28 | xy[2 * j], j};
+    std::sort(where.begin(), where.end());
+    for (size_t j = 1; j < where.size(); ++j)
+      if (where[j].first == where[j - 1].first) refuse(where[j].second, CDT_DUPLICATE);
+    for (i64 j = 0; j < limit; ++j) {
+      pt.push_back(Pt{(i32)xy[2 * j], (i32)xy[2 * j + 1]});
+      vinc.push_back(-1);
     }
-    if (on >= 0) split_edge(on, p);
-    else split_triangle(t, p);
-    legalise(true);
-    last = p;
-    return CDT_OK;
+    std::vector<i32> batch((size_t)limit);
+    for (i64 j = 0; j < limit; ++j) batch[j] = (i32)(first + j);
+    std::vector<uint64_t> keys = insertion_order(batch);
+    // outside the hull or on a vertex already there (neither changes as the others go in)
+    i32 from = vinc[last];
+    for (uint64_t key : keys) {
+      i32 p = (i32)(key & INDEX_MASK), on = -1, t = locate(from, p, &on);
+      if (t < 0) { refuse(p - first, CDT_OUTSIDE); continue; }
+      for (int j = 0; j < 3; ++j)
+        if (pt[V[3 * t + j]].x == pt[p].x && pt[V[3 * t + j]].y == pt[p].y) refuse(p - first, CDT_DUPLICATE);
+      from = 3 * t;
+    }
+    pt.resize(first + limit);
+    vinc.resize(first + limit);
+    for (uint64_t key : keys) {
+      i32 p = (i32)(key & INDEX_MASK), on = -1;
+      if (p >= first + limit) continue;
+      i32 t = locate(vinc[last], p, &on);
+      if (t < 0) return CDT_INTERNAL;
+      if (on >= 0) split_edge(on, p);
+      else split_triangle(t, p);
+      legalise(true);
+      last = p;
+    }
+    *done = limit;
+    return status;
   }
 };
 

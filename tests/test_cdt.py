@@ -272,6 +272,27 @@ def test_the_incremental_triangulation_refuses_bad_points():
         tri.changes()  # not kept unless asked for
 
 
+@pytest.mark.parametrize("bad, message", [("again", "share a position"), ("vertex", "share a position"),
+                                          ("outside", "outside"), ("negative", "2\\^28")])
+def test_a_batch_stops_at_its_first_refused_point(bad, message):
+    """Triangulation.insert checks a whole batch first and puts it in in a spatial
+    order: a refused point in the middle of a scattered batch (a position twice in the
+    batch, a vertex already there, outside the hull, a negative coordinate) lets exactly
+    the points before it in, numbered in the batch's order; the rest can follow."""
+    from codec.triangulate import Triangulation
+
+    corners = np.array([[0, 0], [99, 0], [0, 99], [99, 99]])
+    pts = np.random.default_rng(7).permutation(np.stack(np.meshgrid(np.arange(3, 97, 7), np.arange(2, 98, 5)), -1).reshape(-1, 2))
+    refused = {"again": pts[3], "vertex": corners[2], "outside": [120, 40], "negative": [-1, 5]}[bad]
+    batch = np.concatenate([pts[:40], [refused], pts[40:]])
+    tri = Triangulation(corners)
+    with pytest.raises(ATMError, match=message):
+        tri.insert(batch)
+    np.testing.assert_array_equal(tri.triangles(), delaunay(np.concatenate([corners, pts[:40]])))
+    np.testing.assert_array_equal(tri.insert(pts[40:]), 44 + np.arange(len(pts) - 40))
+    np.testing.assert_array_equal(tri.triangles(), delaunay(np.concatenate([corners, pts])))
+
+
 def test_a_point_inserted_on_a_wall_cuts_it_into_two_walls():
     """Incremental: a point on a constrained edge splits it into two constrained
     halves; points on both sides of the far half then cannot flip it away."""
