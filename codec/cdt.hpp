@@ -360,10 +360,16 @@ class CDT {
     rest.reserve(n);
     for (i32 i = 0; i < n; ++i)
       if (!done[i]) rest.push_back(i);
-    std::vector<uint64_t> keys = insertion_order(rest);
     last = hull[0];
-    for (uint64_t k : keys) {
-      i32 p = (i32)(k & INDEX_MASK), on = -1;
+    return insert_in_order(insertion_order(rest), n);
+  }
+
+  // Insert the vertices of `keys` (insertion_order's) below `end`, one by one with
+  // Lawson flips, each walk starting from the last one's triangle.
+  Status insert_in_order(const std::vector<uint64_t>& keys, i64 end) {
+    for (uint64_t key : keys) {
+      i32 p = (i32)(key & INDEX_MASK), on = -1;
+      if (p >= end) continue;
       i32 t = locate(vinc[last], p, &on);
       if (t < 0) return CDT_INTERNAL;
       if (on >= 0) split_edge(on, p);
@@ -644,16 +650,8 @@ class CDT {
     }
     pt.resize(first + limit);
     vinc.resize(first + limit);
-    for (uint64_t key : keys) {
-      i32 p = (i32)(key & INDEX_MASK), on = -1;
-      if (p >= first + limit) continue;
-      i32 t = locate(vinc[last], p, &on);
-      if (t < 0) return CDT_INTERNAL;
-      if (on >= 0) split_edge(on, p);
-      else split_triangle(t, p);
-      legalise(true);
-      last = p;
-    }
+    Status st = insert_in_order(keys, first + limit);
+    if (st != CDT_OK) return st;
     *done = limit;
     return status;
   }
