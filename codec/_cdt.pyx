@@ -4,7 +4,6 @@ the canonical triangles straight from integer vertices and segments, with the GI
 released while they are built. codec.triangulate turns the status codes into ATMError."""
 
 from libc.stdint cimport int64_t
-from libc.string cimport memcpy
 from libcpp.vector cimport vector
 
 import numpy as np
@@ -20,22 +19,24 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         CDT_INTERNAL
         CDT_OVER
         CDT_OUTSIDE
+    cdef struct Pt:
+        int x, y
     cdef cppclass CDT:
-        vector[int64_t] x, y
+        vector[Pt] pt
         vector[int] V
         bint narrow, track
         vector[int] dirty, old
         vector[unsigned char] dirty_mark
-        Status build() nogil
-        Status insert(int64_t px, int64_t py) nogil
-        Status constrain(int a, int b) nogil
+        Status build() except + nogil
+        Status insert(const int64_t* xy, int64_t k, int64_t* done) except + nogil
+        Status constrain(int a, int b) except + nogil
         void legalise() nogil
     void cdt_canonical "atmcdt::canonical" (const CDT& cdt, const int64_t* order,
-                                           vector[int64_t]* out) nogil
+                                           int64_t* out) nogil
     int64_t MAX_EXTENT
     Status cdt_triangulate "atmcdt::triangulate" (
         int64_t n, const int64_t* xy, int64_t s, const int64_t* seg, bint strict,
-        vector[int64_t]* out, int64_t* flips) nogil
+        CDT* cdt, vector[int64_t]* order, int64_t* flips) nogil
 
 OK = CDT_OK
 CROSSING = CDT_CROSSING
@@ -56,29 +57,25 @@ def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, 
     if vertices.shape[1] != 2 or segments.shape[1] != 2:
         raise ValueError("vertices and segments are N x 2")
     cdef int64_t n = vertices.shape[0], s = segments.shape[0], flips = 0
-    cdef vector[int64_t] out
+    cdef CDT cdt
+    cdef vector[int64_t] order
     cdef const int64_t* xy = &vertices[0, 0] if n else NULL
     cdef const int64_t* seg = &segments[0, 0] if s else NULL
     cdef Status status
     with nogil:
-        status = cdt_triangulate(n, xy, s, seg, strict, &out, &flips)
+        status = cdt_triangulate(n, xy, s, seg, strict, &cdt, &order, &flips)
     if status != CDT_OK:
         return int(status), None, int(flips)
-    result = np.empty((out.size() // 3, 3), dtype=np.int64)
-    if out.size():
-        memcpy(&result_view(result)[0, 0], out.data(), out.size() * sizeof(int64_t))
-    return 0, result, int(flips)
+    return 0, triangle_array(cdt, order.data() if order.size() else NULL), int(flips)
 
 
-cdef int64_t[:, ::1] result_view(object array):
-    return array
-
-
-
-cdef object triangle_array(const vector[int64_t]& out):
-    result = np.empty((out.size() // 3, 3), dtype=np.int64)
-    if out.size():
-        memcpy(&result_view(result)[0, 0], out.data(), out.size() * sizeof(int64_t))
+cdef object triangle_array(const CDT& cdt, const int64_t* order):
+    """The canonical triangles of cdt, written straight into a new M x 3 array."""
+    result = np.empty((cdt.V.size() // 3, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] view = result
+    if cdt.V.size():
+        with nogil:
+            cdt_canonical(cdt, order, &view[0, 0])
     return result
 
 
@@ -95,13 +92,15 @@ cdef class Triangulation:
         distinct, not all on one line); their indices are their rows. track: keep
         what changes() reports (each changed triangle slot's old corners)."""
         cdef int64_t n = vertices.shape[0], i
-        if self.cdt.x.size():
+        cdef Pt p
+        if self.cdt.pt.size():
             raise ValueError("Triangulation.start: already started")
         for i in range(n):
             if not (0 <= vertices[i, 0] <= MAX_EXTENT and 0 <= vertices[i, 1] <= MAX_EXTENT):
                 return CDT_EXTENT
-            self.cdt.x.push_back(vertices[i, 0])
-            self.cdt.y.push_back(vertices[i, 1])
+            p.x = <int>vertices[i, 0]
+            p.y = <int>vertices[i, 1]
+            self.cdt.pt.push_back(p)
         keys = np.asarray(vertices[:, 1]) * (MAX_EXTENT + 1) + np.asarray(vertices[:, 0])
         if len(np.unique(keys)) != n:
             return CDT_DUPLICATE
@@ -119,30 +118,21 @@ cdef class Triangulation:
 
     def insert(self, const int64_t[:, ::1] points):
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
-        indices continue the vertices' numbering. Stops at the first point refused."""
-        cdef int64_t k = points.shape[0], i, done = 0
-        cdef Status status = CDT_OK
-        for i in range(k):
-            if not (0 <= points[i, 0] <= MAX_EXTENT and 0 <= points[i, 1] <= MAX_EXTENT):
-                k = i  # insert those before it, then report it
-                status = CDT_EXTENT
-                break
-        cdef Status refused = status
-        status = CDT_OK
-        with nogil:
-            for i in range(k):
-                status = self.cdt.insert(points[i, 0], points[i, 1])
-                if status != CDT_OK:
-                    break
-                done += 1
-        if status == CDT_OK:
-            status = refused
-        first = self.cdt.x.size() - done
+        indices continue the vertices' numbering in the points' order. All are checked
+        first: if one is refused, only those before it go in (status: its refusal)."""
+        cdef int64_t k = points.shape[0], done = 0
+        cdef const int64_t* xy = &points[0, 0] if k else NULL
+        cdef Status status
+        if points.shape[1] != 2:
+            raise ValueError("points are K x 2")
+        with nogil:  # every point checked in the kernel, then inserted in a spatial order
+            status = self.cdt.insert(xy, k, &done)
+        first = self.cdt.pt.size() - done
         return int(status), np.arange(first, first + done, dtype=np.int64)
 
     def constrain(self, const int64_t[:, ::1] segments):
         """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
-        cdef int64_t s = segments.shape[0], j, n = self.cdt.x.size()
+        cdef int64_t s = segments.shape[0], j, n = self.cdt.pt.size()
         cdef Status status = CDT_OK
         for j in range(s):
             if not (0 <= segments[j, 0] < n and 0 <= segments[j, 1] < n):
@@ -160,10 +150,7 @@ cdef class Triangulation:
 
     def triangles(self):
         """All triangles, M x 3, canonical order (ATM.md §4.2.3)."""
-        cdef vector[int64_t] out
-        with nogil:
-            cdt_canonical(self.cdt, NULL, &out)
-        return triangle_array(out)
+        return triangle_array(self.cdt, NULL)
 
     def changes(self):
         """(removed, added): the triangles (K x 3 each, corners in their stored

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <new>
+#include <utility>
 #include <vector>
 
 namespace atmcdt {
@@ -34,6 +35,10 @@ enum Status {
 //: Largest coordinate extent accepted: differences below 2^28 keep incircle's products
 //: below 2^114, exact in 128-bit integers (ATM.md §8 needs only 2^20).
 const i64 MAX_EXTENT = (i64(1) << 28) - 1;
+
+//: Most vertices: up to 6 half-edges each, numbered in int32 (ATM.md §8 allows a band
+//: 2^28 + 16).
+const i64 MAX_VERTICES = ((i64(1) << 31) - 1) / 6;
 
 // A 128-bit two's complement integer.
 struct Wide {
@@ -65,35 +70,49 @@ inline Wide product(i64 a, i64 b) {
   return r;
 }
 
-inline i32 nxt(i32 e) { return e % 3 == 2 ? e - 2 : e + 1; }
-inline i32 prv(i32 e) { return e % 3 == 0 ? e + 2 : e - 1; }
+// (unsigned: a half-edge index is never negative, and the unsigned remainder is a
+// multiply and a shift)
+inline i32 nxt(i32 e) { return (uint32_t)e % 3 == 2 ? e - 2 : e + 1; }
+inline i32 prv(i32 e) { return (uint32_t)e % 3 == 0 ? e + 2 : e - 1; }
+
+// A vertex: coordinates below MAX_EXTENT + 1 < 2^31, side by side so that a predicate
+// reads one cache line per corner.
+struct Pt {
+  i32 x, y;
+};
 
 class CDT {
  public:
   // vertices in raster order (y, then x): the index is the priority of §4.2.5
-  std::vector<i64> x, y;
+  std::vector<Pt> pt;
   std::vector<i32> V;     // start vertex of each half-edge; triangle t is 3t..3t+2
   std::vector<i32> T;     // the twin half-edge, -1 on the hull
   std::vector<uint8_t> C; // whether the edge is a segment
   std::vector<i32> vinc;  // one outgoing half-edge of each vertex (-1 before it has one)
-  std::vector<i32> hedge;  // a hull half-edge from each hull vertex (kept by link)
   std::vector<i32> stack;
   i64 flips = 0;
-  bool narrow = false;  // every coordinate difference below 2^14 (set by the caller)
+  bool narrow = false;  // every coordinate difference below 2^14 (set by the caller;
+                        // incircle then skips its per-call check)
   bool strict = false;  // refuse a segment over a vertex instead of cutting it there
 
   i64 orient(i32 a, i32 b, i32 c) const {
-    return (x[b] - x[a]) * (y[c] - y[a]) - (y[b] - y[a]) * (x[c] - x[a]);
+    const Pt &A = pt[a], &B = pt[b], &C_ = pt[c];
+    return (i64)(B.x - A.x) * (C_.y - A.y) - (i64)(B.y - A.y) * (C_.x - A.x);
   }
 
   // The exact sign of incircle(a, b, c, d) (ATM.md §4.2.5).
   int incircle(i32 a, i32 b, i32 c, i32 d) const {
-    i64 adx = x[a] - x[d], ady = y[a] - y[d];
-    i64 bdx = x[b] - x[d], bdy = y[b] - y[d];
-    i64 cdx = x[c] - x[d], cdy = y[c] - y[d];
-    if (narrow) {
-      // differences below 2^14: lifts and minors below 2^29, products below 2^58,
-      // their sum below 2^60: exact in int64
+    const Pt &A = pt[a], &B = pt[b], &C_ = pt[c], &D = pt[d];
+    i64 adx = A.x - D.x, ady = A.y - D.y;
+    i64 bdx = B.x - D.x, bdy = B.y - D.y;
+    i64 cdx = C_.x - D.x, cdy = C_.y - D.y;
+    // x ^ (x >> 63) is |x| for x >= 0 and |x| - 1 below: the OR of them is below 2^14
+    // only if every |difference| is at most 2^14
+    if (narrow || ((adx ^ (adx >> 63)) | (ady ^ (ady >> 63)) | (bdx ^ (bdx >> 63)) |
+                   (bdy ^ (bdy >> 63)) | (cdx ^ (cdx >> 63)) | (cdy ^ (cdy >> 63))) < (i64(1) << 14)) {
+      // differences at most 2^14 (all of them when narrow; in a wide band, most: the
+      // four corners of a quadrilateral are neighbours): lifts and minors at most 2^29,
+      // products at most 2^58, their sum below 2^60: exact in int64
       i64 det = (adx * adx + ady * ady) * (bdx * cdy - bdy * cdx) +
                 (bdx * bdx + bdy * bdy) * (cdx * ady - cdy * adx) +
                 (cdx * cdx + cdy * cdy) * (adx * bdy - ady * bdx);
@@ -119,7 +138,9 @@ class CDT {
   }
 
   // Raster order (ATM.md §4.2.5's priority): p before q.
-  bool before(i32 p, i32 q) const { return y[p] < y[q] || (y[p] == y[q] && x[p] < x[q]); }
+  bool before(i32 p, i32 q) const {
+    return pt[p].y < pt[q].y || (pt[p].y == pt[q].y && pt[p].x < pt[q].x);
+  }
 
   // Change tracking for Triangulation.changes(): the first time a triangle slot changes
   // after the last report, its old corners are kept (-1 for a slot that is new).
@@ -151,7 +172,6 @@ class CDT {
     T[s] = t;
     C[s] = c;
     if (t >= 0) T[t] = s;
-    else hedge[V[s]] = s;  // a hull edge moved to another slot
   }
 
   // Replace edge ab of (a, b, c) and (b, a, d) by cd: (d, c, a) in e's triangle and
@@ -175,15 +195,20 @@ class CDT {
   }
 
   // Lawson flips until no half-edge on the stack (or moved by a flip) is illegal.
-  void legalise() {
+  // star: after a point p went in (split_triangle or split_edge), every half-edge on the
+  // stack has p as its triangle's third corner, and only the edges opposite p need
+  // checking: the edges at p are locally Delaunay once the star of p is (the insertion
+  // lemma holds for the perturbed rule, a lifting like any other), so a flip leaves
+  // two new edges to check instead of four, half the incircle tests.
+  void legalise(bool star = false) {
     while (!stack.empty()) {
       i32 e = stack.back();
       stack.pop_back();
       if (T[e] < 0 || C[e] || !illegal(e)) continue;
       i32 f = T[e];
-      flip(e);
-      stack.push_back(nxt(e)); stack.push_back(prv(e));
-      stack.push_back(nxt(f)); stack.push_back(prv(f));
+      flip(e);  // (a, b, c) + (b, a, d) -> (d, c, a) in e's slot, (c, d, b) in f's
+      stack.push_back(prv(e)); stack.push_back(nxt(f));  // a-d and d-b: opposite c
+      if (!star) { stack.push_back(nxt(e)); stack.push_back(prv(f)); }
     }
   }
 
@@ -253,32 +278,35 @@ class CDT {
   // half-edge p lies on, or -1 when p is strictly inside. Falls back to a scan of
   // every triangle should the walk not arrive (it does on a Delaunay triangulation).
   i32 locate(i32 from, i32 p, i32* on) {
-    i32 t = from / 3;
+    static const int8_t first[3][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}};
+    i32 t = from / 3, entry = -1;  // entry: the half-edge of t the walk came in by
     i64 steps = 0, limit = 64 + 4 * (i64)V.size();
-    uint32_t turn = 0;
+    int turn = 0;
     for (;;) {
-      i32 moved = -1;
-      ++turn;
-      for (int k = 0; k < 3 && moved < 0; ++k) {
-        i32 e = 3 * t + (int)((turn + k) % 3);  // the first edge tried rotates
-        if (orient(V[e], V[nxt(e)], p) < 0) moved = e;
+      i32 moved = -1, zero = -1;
+      turn = turn == 2 ? 0 : turn + 1;  // the first edge tried rotates
+      for (int k = 0; k < 3; ++k) {
+        i32 e = 3 * t + first[turn][k];
+        if (e == entry) continue;  // p is strictly on its inner side: that is why we came
+        i64 o = orient(V[e], V[nxt(e)], p);
+        if (o < 0) { moved = e; break; }
+        if (o == 0) zero = e;
       }
-      if (moved < 0) break;
-      if (T[moved] < 0 || ++steps > limit) {
-        t = -1;
-        break;
+      if (moved < 0) {
+        *on = zero;
+        return t;
       }
-      t = T[moved] / 3;
+      if (T[moved] < 0 || ++steps > limit) break;
+      entry = T[moved];
+      t = entry / 3;
     }
-    if (t < 0) {
-      i32 m = (i32)(V.size() / 3);
-      for (t = 0; t < m; ++t) {
-        i32 e = 3 * t;
-        if (orient(V[e], V[e + 1], p) >= 0 && orient(V[e + 1], V[e + 2], p) >= 0 &&
-            orient(V[e + 2], V[e], p) >= 0) break;
-      }
-      if (t == m) return -1;
+    i32 m = (i32)(V.size() / 3);
+    for (t = 0; t < m; ++t) {
+      i32 e = 3 * t;
+      if (orient(V[e], V[e + 1], p) >= 0 && orient(V[e + 1], V[e + 2], p) >= 0 &&
+          orient(V[e + 2], V[e], p) >= 0) break;
     }
+    if (t == m) return -1;
     *on = -1;
     for (i32 e = 3 * t; e < 3 * t + 3; ++e)
       if (orient(V[e], V[nxt(e)], p) == 0) *on = e;
@@ -290,24 +318,27 @@ class CDT {
   // flips, in rounds of growing size (a biased randomised insertion order), each round
   // along a Hilbert curve, so that point location walks are short.
   Status build() {
-    i32 n = (i32)x.size();
+    if ((i64)pt.size() > MAX_VERTICES) return CDT_MEMORY;
+    i32 n = (i32)pt.size();
     vinc.assign(n, -1);
-    hedge.assign(n, -1);
     V.reserve(6 * (size_t)n); T.reserve(6 * (size_t)n); C.reserve(6 * (size_t)n);
     if (n < 3) return CDT_OK;
     // Andrew's monotone chain in raster order, corners only (collinear points dropped);
     // triangulate() passes the vertices in that order already
-    std::vector<i32> ranked(n);
-    for (i32 i = 0; i < n; ++i) ranked[i] = i;
     bool in_order = true;
     for (i32 i = 1; i < n && in_order; ++i) in_order = before(i - 1, i);
-    if (!in_order) std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+    std::vector<i32> ranked;
+    if (!in_order) {
+      ranked.resize(n);
+      for (i32 i = 0; i < n; ++i) ranked[i] = i;
+      std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+    }
     std::vector<i32> hull;
     hull.reserve(n + 1);
     for (int pass = 0; pass < 2; ++pass) {
       size_t base = hull.size();
       for (i32 k = 0; k < n; ++k) {
-        i32 i = ranked[pass ? n - 1 - k : k];
+        i32 r = pass ? n - 1 - k : k, i = in_order ? r : ranked[r];
         while (hull.size() >= base + 2 && orient(hull[hull.size() - 2], hull.back(), i) <= 0)
           hull.pop_back();
         hull.push_back(i);
@@ -325,41 +356,78 @@ class CDT {
     for (i32 h : hull) done[h] = 1;
     push_all();
     legalise();
-    // insertion order: round r holds about half the points of round r + 1
-    i64 span = 1;
-    for (i32 i = 0; i < n; ++i) span = std::max(span, std::max(x[i], y[i]) + 1);
-    int order = 1;
-    while ((i64(1) << order) < span) ++order;
-    std::vector<uint64_t> key;
-    key.reserve(n);
-    for (i32 i = 0; i < n; ++i) {
-      if (done[i]) continue;
-      uint64_t h = (uint64_t)i * 0x9E3779B97F4A7C15ull;  // a fixed hash: same order every run
-      h ^= h >> 31; h *= 0xBF58476D1CE4E5B9ull; h ^= h >> 29;
-      uint64_t round = 0;
-      while (round < 12 && (h & 1)) { ++round; h >>= 1; }
-      key.push_back((12 - round) << 58 | hilbert(order, x[i], y[i]));  // hilbert < 2^56
-    }
     std::vector<i32> rest;
     rest.reserve(n);
     for (i32 i = 0; i < n; ++i)
       if (!done[i]) rest.push_back(i);
-    std::vector<i32> idx(rest.size());
-    for (size_t j = 0; j < idx.size(); ++j) idx[j] = (i32)j;
-    std::sort(idx.begin(), idx.end(), [&](i32 p, i32 q) {
-      return key[p] != key[q] ? key[p] < key[q] : rest[p] < rest[q];
-    });
     last = hull[0];
-    for (i32 j : idx) {
-      i32 p = rest[j], on = -1;
+    return insert_in_order(insertion_order(rest), n);
+  }
+
+  // Insert the vertices of `keys` (insertion_order's) below `end`, one by one with
+  // Lawson flips, each walk starting from the last one's triangle.
+  Status insert_in_order(const std::vector<uint64_t>& keys, i64 end) {
+    for (uint64_t key : keys) {
+      i32 p = (i32)(key & INDEX_MASK), on = -1;
+      if (p >= end) continue;
       i32 t = locate(vinc[last], p, &on);
       if (t < 0) return CDT_INTERNAL;
       if (on >= 0) split_edge(on, p);
       else split_triangle(t, p);
-      legalise();
+      legalise(true);
       last = p;
     }
     return CDT_OK;
+  }
+
+  // Vertex indices are below MAX_VERTICES < 2^29: an insertion key keeps one in its low
+  // bits.
+  static const int INDEX_BITS = 29;
+  static const uint64_t INDEX_MASK = (uint64_t(1) << INDEX_BITS) - 1;
+
+  // The vertices `which` in insertion order (any order gives the same triangles; this
+  // one keeps walks short), each as a key whose low INDEX_BITS are its index: round r
+  // holds about half the points of round r + 1 (a biased randomised insertion order),
+  // each round along a Hilbert curve over a grid of about two cells per point (points
+  // sharing a cell go in index order); radix sorted.
+  std::vector<uint64_t> insertion_order(const std::vector<i32>& which) const {
+    i64 span = 1, n = (i64)which.size();
+    for (i32 i : which) span = std::max(span, (i64)std::max(pt[i].x, pt[i].y) + 1);
+    int order = 1, grid = 1;
+    while ((i64(1) << order) < span) ++order;
+    while (grid < 15 && (i64(1) << (2 * grid)) < 2 * n) ++grid;
+    int shift = order > grid ? order - grid : 0;
+    grid = order - shift;
+    const int key_bits = 4 + 2 * grid;  // round, then Hilbert distance: at most 34 bits
+    std::vector<uint64_t> keys, spare;
+    keys.reserve(n);
+    for (i32 i : which) {
+      uint64_t h = (uint64_t)i * 0x9E3779B97F4A7C15ull;  // a fixed hash: same order every run
+      h ^= h >> 31; h *= 0xBF58476D1CE4E5B9ull; h ^= h >> 29;
+      uint64_t round = 0;
+      while (round < 12 && (h & 1)) { ++round; h >>= 1; }
+      uint64_t key = (12 - round) << (2 * grid) | hilbert(grid, pt[i].x >> shift, pt[i].y >> shift);
+      keys.push_back(key << INDEX_BITS | (uint64_t)i);
+    }
+    radix_sort(&keys, &spare, INDEX_BITS, key_bits);
+    return keys;
+  }
+
+  // Sort *a by bits low .. low + bits of each value, stably (LSD, 11 bits a pass);
+  // *spare is scratch.
+  static void radix_sort(std::vector<uint64_t>* a, std::vector<uint64_t>* spare, int low, int bits) {
+    const int digit = 11;
+    spare->resize(a->size());
+    std::vector<size_t> count(size_t(1) << digit);
+    for (int at = low; at < low + bits; at += digit) {
+      std::fill(count.begin(), count.end(), 0);
+      const uint64_t mask = (uint64_t(1) << digit) - 1;
+      for (uint64_t v : *a) ++count[(v >> at) & mask];
+      size_t sum = 0;
+      for (size_t& c : count) { size_t k = c; c = sum; sum += k; }
+      for (uint64_t v : *a) (*spare)[count[(v >> at) & mask]++] = v;
+      a->swap(*spare);
+    }
   }
 
   // Distance along the Hilbert curve of order `order` (coordinates below 2^order).
@@ -420,7 +488,7 @@ class CDT {
   // as a half-edge, or -1), -1 if nothing fits.
   int first_step(i32 a, i32 b, i32* h, i32* on) const {
     i32 start = vinc[a], e = start;
-    i64 bx = x[b] - x[a], by = y[b] - y[a];
+    i64 bx = pt[b].x - pt[a].x, by = pt[b].y - pt[a].y;
     // every outgoing half-edge of a, counterclockwise then clockwise from vinc
     for (int pass = 0; pass < 2; ++pass) {
       e = start;
@@ -429,7 +497,7 @@ class CDT {
         for (int side = 0; side < 2; ++side) {
           i32 v = side ? w : u;
           i64 o = orient(a, b, v);
-          if (o == 0 && (x[v] - x[a]) * bx + (y[v] - y[a]) * by > 0) {
+          if (o == 0 && (pt[v].x - pt[a].x) * bx + (pt[v].y - pt[a].y) * by > 0) {
             *on = v;
             *h = side ? prv(e) : e;
             return 1;
@@ -456,11 +524,17 @@ class CDT {
     return -1;
   }
 
+  std::vector<i32> queue;  // constrain's crossed edges (kept: no allocation per segment)
+
   // Make the segment a-b an edge (cutting it at the vertices on it).
   Status constrain(i32 a, i32 b) {
-    std::vector<i32> queue;
     while (a != b) {
-      i32 h = -1, on = -1;
+      i32 h = find_edge(a, b);  // most segments are edges already: index compares only
+      if (h >= 0) {
+        mark(h);
+        return CDT_OK;
+      }
+      i32 on = -1;
       int r = first_step(a, b, &h, &on);
       if (r < 0) return CDT_INTERNAL;
       if (r == 1) {
@@ -532,71 +606,104 @@ class CDT {
   // next point location walk starts.
   i32 last = 0;
 
-  // Insert point (px, py) inside the hull as vertex x.size(), with Lawson flips (no
-  // segment is flipped): the constrained triangulation of §4.2.5 of all the points.
-  Status insert(i64 px, i64 py) {
-    if (V.empty()) return CDT_OUTSIDE;
-    i32 p = (i32)x.size();
-    x.push_back(px); y.push_back(py); vinc.push_back(-1); hedge.push_back(-1);
-    i32 on = -1, t = locate(vinc[last], p, &on);
-    bool dup = false;
-    if (t >= 0)
-      for (int j = 0; j < 3; ++j) dup |= x[V[3 * t + j]] == px && y[V[3 * t + j]] == py;
-    if (t < 0 || dup) {
-      x.pop_back(); y.pop_back(); vinc.pop_back(); hedge.pop_back();
-      return t < 0 ? CDT_OUTSIDE : CDT_DUPLICATE;
+  // Insert k points (xy, k x 2) inside the hull as vertices pt.size(), pt.size() + 1,
+  // ... in their order, with Lawson flips (no segment is flipped): the constrained
+  // triangulation of §4.2.5 of all the points. All are checked first (coordinates,
+  // inside the hull, no position twice), so that *done counts those before the first
+  // refused one (whose status is returned), and only those go in; they go in the order
+  // of insertion_order, so that the walks are short whatever order they come in.
+  Status insert(const i64* xy, i64 k, i64* done) {
+    *done = 0;
+    if (V.empty()) return k ? CDT_OUTSIDE : CDT_OK;
+    i64 first = (i64)pt.size(), limit = k;
+    Status status = CDT_OK;
+    auto refuse = [&](i64 j, Status why) {
+      if (j < limit) { limit = j; status = why; }
+    };
+    for (i64 j = 0; j < k; ++j)
+      if (xy[2 * j] < 0 || xy[2 * j] > MAX_EXTENT || xy[2 * j + 1] < 0 || xy[2 * j + 1] > MAX_EXTENT) {
+        refuse(j, CDT_EXTENT);
+        break;
+      }
+    if (first + limit > MAX_VERTICES) refuse(MAX_VERTICES - first, CDT_MEMORY);
+    // the same position twice among them: the later one is refused
+    std::vector<std::pair<i64, i64>> where((size_t)limit);  // (position, j)
+    for (i64 j = 0; j < limit; ++j) where[j] = {xy[2 * j + 1] << 28 | xy[2 * j], j};
+    std::sort(where.begin(), where.end());
+    for (size_t j = 1; j < where.size(); ++j)
+      if (where[j].first == where[j - 1].first) refuse(where[j].second, CDT_DUPLICATE);
+    for (i64 j = 0; j < limit; ++j) {
+      pt.push_back(Pt{(i32)xy[2 * j], (i32)xy[2 * j + 1]});
+      vinc.push_back(-1);
     }
-    if (on >= 0) split_edge(on, p);
-    else split_triangle(t, p);
-    legalise();
-    last = p;
-    return CDT_OK;
+    std::vector<i32> batch((size_t)limit);
+    for (i64 j = 0; j < limit; ++j) batch[j] = (i32)(first + j);
+    std::vector<uint64_t> keys = insertion_order(batch);
+    // outside the hull or on a vertex already there (neither changes as the others go in)
+    i32 from = vinc[last];
+    for (uint64_t key : keys) {
+      i32 p = (i32)(key & INDEX_MASK), on = -1, t = locate(from, p, &on);
+      if (t < 0) { refuse(p - first, CDT_OUTSIDE); continue; }
+      for (int j = 0; j < 3; ++j)
+        if (pt[V[3 * t + j]].x == pt[p].x && pt[V[3 * t + j]].y == pt[p].y) refuse(p - first, CDT_DUPLICATE);
+      from = 3 * t;
+    }
+    pt.resize(first + limit);
+    vinc.resize(first + limit);
+    Status st = insert_in_order(keys, first + limit);
+    if (st != CDT_OK) return st;
+    *done = limit;
+    return status;
   }
 };
 
-// The triangles of `cdt` in canonical order into *out (vertex i of cdt is order[i],
-// or i itself when order is null): each rotated to start at its smallest index, then
-// a counting sort by that index and, within one (a fan of a few), insertion by the
-// other two.
-inline void canonical(const CDT& cdt, const i64* order, std::vector<i64>* out) {
-  i64 n = (i64)cdt.x.size(), m = (i64)cdt.V.size() / 3;
+// The triangles of `cdt` in canonical order into out (3 per triangle, room for
+// cdt.V.size() values; vertex i of cdt is order[i], or i itself when order is null):
+// each rotated to start at its smallest index, placed by a counting sort on that index,
+// then each run of one first index (a fan of a few) sorted by insertion on the other two.
+inline void canonical(const CDT& cdt, const i64* order, i64* out) {
+  i64 n = (i64)cdt.pt.size(), m = (i64)cdt.V.size() / 3;
   std::vector<i64> start(n + 1, 0);
-  out->assign(3 * m, 0);
-  i64* o = out->data();
+  const i32* V = cdt.V.data();
   for (i64 t = 0; t < m; ++t) {
-    i64 a = cdt.V[3 * t], b = cdt.V[3 * t + 1], c = cdt.V[3 * t + 2];
+    i64 a = V[3 * t], b = V[3 * t + 1], c = V[3 * t + 2];
     if (order) { a = order[a]; b = order[b]; c = order[c]; }
     ++start[std::min(a, std::min(b, c)) + 1];
   }
   for (i64 i = 0; i < n; ++i) start[i + 1] += start[i];
   for (i64 t = 0; t < m; ++t) {
-    i64 a = cdt.V[3 * t], b = cdt.V[3 * t + 1], c = cdt.V[3 * t + 2];
+    i64 a = V[3 * t], b = V[3 * t + 1], c = V[3 * t + 2];
     if (order) { a = order[a]; b = order[b]; c = order[c]; }
     if (b < a && b < c) { i64 r = a; a = b; b = c; c = r; }
     else if (c < a && c < b) { i64 r = c; c = b; b = a; a = r; }
-    i64 j = start[a]++;
-    // within the fan of a (slots before j hold a's or, unfilled, zeros), keep (b, c)
-    // increasing
-    while (j > 0 && o[3 * (j - 1)] == a &&
-           (o[3 * (j - 1) + 1] > b || (o[3 * (j - 1) + 1] == b && o[3 * (j - 1) + 2] > c))) {
-      o[3 * j] = o[3 * (j - 1)]; o[3 * j + 1] = o[3 * (j - 1) + 1]; o[3 * j + 2] = o[3 * (j - 1) + 2];
-      --j;
+    i64* o = out + 3 * start[a]++;
+    o[0] = a; o[1] = b; o[2] = c;
+  }
+  // start[a] is now the end of a's run, which begins where a - 1's ends
+  for (i64 a = 0, begin = 0; a < n; begin = start[a++]) {
+    for (i64 j = begin + 1; j < start[a]; ++j) {
+      i64 b = out[3 * j + 1], c = out[3 * j + 2], k = j;
+      for (; k > begin && (out[3 * k - 2] > b || (out[3 * k - 2] == b && out[3 * k - 1] > c)); --k) {
+        out[3 * k + 1] = out[3 * k - 2];
+        out[3 * k + 2] = out[3 * k - 1];
+      }
+      out[3 * k + 1] = b; out[3 * k + 2] = c;
     }
-    o[3 * j] = a; o[3 * j + 1] = b; o[3 * j + 2] = c;
   }
 }
 
-// Triangulate n vertices (xy, n x 2) with s segments (seg, s x 2 vertex indices; with
-// `strict`, one passing over a vertex is refused, otherwise cut there):
-// the triangles of ATM.md §4.2.5 in canonical order (§4.2.3: each rotated to start at
-// its smallest index, rows sorted) into *out (3 per triangle).
+// The constrained Delaunay triangulation of ATM.md §4.2.5 of n vertices (xy, n x 2)
+// with s segments (seg, s x 2 vertex indices; with `strict`, one passing over a vertex
+// is refused, otherwise cut there), into *cdt (empty before). Its vertices are the
+// input's in raster order: vertex i of cdt is input vertex (*order)[i], or i itself when
+// *order is left empty (the input was in raster order). canonical(*cdt, order or null,
+// out) then writes the triangles of §4.2.3's canonical list.
 inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool strict,
-                          std::vector<i64>* out, i64* flips) {
+                          CDT* cdt, std::vector<i64>* order, i64* flips) {
   try {
-    out->clear();
-    std::vector<i64> order(n);
-    for (i64 i = 0; i < n; ++i) order[i] = i;
+    order->clear();
     if (n == 0) return CDT_OK;
+    if (n > MAX_VERTICES) return CDT_MEMORY;
     i64 xmin = xy[0], xmax = xy[0], ymin = xy[1], ymax = xy[1];
     for (i64 i = 1; i < n; ++i) {
       xmin = std::min(xmin, xy[2 * i]); xmax = std::max(xmax, xy[2 * i]);
@@ -605,48 +712,52 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool stri
     if (xmax - xmin > MAX_EXTENT || ymax - ymin > MAX_EXTENT) return CDT_EXTENT;
     for (i64 j = 0; j < 2 * s; ++j)
       if (seg[j] < 0 || seg[j] >= n) return CDT_INDEX;
-    // raster order: (y, x), relative to the minimum (predicates are unchanged by it)
-    i64 w = xmax - xmin + 1;
-    std::vector<i64> key(n);
-    for (i64 i = 0; i < n; ++i) key[i] = (xy[2 * i + 1] - ymin) * w + (xy[2 * i] - xmin);
+    // raster order: (y, x), relative to the minimum (predicates are unchanged by it);
+    // a decoder's vertices come in it already (ATM.md §4.2.2), so no sort and no map
+    auto key = [&](i64 i) { return (xy[2 * i + 1] - ymin) * (xmax - xmin + 1) + (xy[2 * i] - xmin); };
     bool sorted = true;
-    for (i64 i = 1; i < n && sorted; ++i) sorted = key[i - 1] < key[i];
+    for (i64 i = 1; i < n && sorted; ++i) sorted = key(i - 1) < key(i);
+    std::vector<i32> rank;
     if (!sorted) {
-      std::sort(order.begin(), order.end(), [&](i64 a, i64 b) { return key[a] < key[b]; });
+      std::vector<i64> keys(n);
+      for (i64 i = 0; i < n; ++i) keys[i] = key(i);
+      order->resize(n);
+      for (i64 i = 0; i < n; ++i) (*order)[i] = i;
+      std::sort(order->begin(), order->end(), [&](i64 a, i64 b) { return keys[a] < keys[b]; });
       for (i64 i = 1; i < n; ++i)
-        if (key[order[i - 1]] == key[order[i]]) return CDT_DUPLICATE;
+        if (keys[(*order)[i - 1]] == keys[(*order)[i]]) return CDT_DUPLICATE;
+      rank.resize(n);
+      for (i64 i = 0; i < n; ++i) rank[(*order)[i]] = (i32)i;
     }
-    CDT cdt;
-    cdt.strict = strict;
-    cdt.narrow = xmax - xmin < (i64(1) << 14) && ymax - ymin < (i64(1) << 14);
-    cdt.x.resize(n); cdt.y.resize(n);
-    std::vector<i32> rank(n);
+    auto at = [&](i64 i) { return sorted ? i : (*order)[i]; };    // cdt vertex -> input
+    auto index = [&](i64 i) { return sorted ? (i32)i : rank[i]; };  // input -> cdt vertex
+    cdt->strict = strict;
+    cdt->narrow = xmax - xmin < (i64(1) << 14) && ymax - ymin < (i64(1) << 14);
+    cdt->pt.resize(n);
     for (i64 i = 0; i < n; ++i) {
-      cdt.x[i] = xy[2 * order[i]] - xmin;
-      cdt.y[i] = xy[2 * order[i] + 1] - ymin;
-      rank[order[i]] = (i32)i;
+      cdt->pt[i].x = (i32)(xy[2 * at(i)] - xmin);
+      cdt->pt[i].y = (i32)(xy[2 * at(i) + 1] - ymin);
     }
-    Status st = cdt.build();
+    Status st = cdt->build();
     if (st != CDT_OK) return st;
-    if (cdt.V.empty() && strict) {
+    if (cdt->V.empty() && strict) {
       // all on one line, in raster order along it: a segment over no vertex joins
       // neighbours in that order
       for (i64 j = 0; j < s; ++j) {
-        i64 gap = (i64)rank[seg[2 * j]] - (i64)rank[seg[2 * j + 1]];
+        i64 gap = (i64)index(seg[2 * j]) - (i64)index(seg[2 * j + 1]);
         if (gap > 1 || gap < -1) return CDT_OVER;
       }
     }
-    if (!cdt.V.empty() && s > 0) {
+    if (!cdt->V.empty() && s > 0) {
       for (i64 j = 0; j < s; ++j) {
-        i32 a = rank[seg[2 * j]], b = rank[seg[2 * j + 1]];
+        i32 a = index(seg[2 * j]), b = index(seg[2 * j + 1]);
         if (a == b) continue;
-        st = cdt.constrain(a, b);
+        st = cdt->constrain(a, b);
         if (st != CDT_OK) return st;
       }
-      cdt.legalise();  // around the flips that forced the segments in
+      cdt->legalise();  // around the flips that forced the segments in
     }
-    *flips = cdt.flips;
-    canonical(cdt, order.data(), out);
+    *flips = cdt->flips;
     return CDT_OK;
   } catch (const std::bad_alloc&) {
     return CDT_MEMORY;

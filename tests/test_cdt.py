@@ -83,6 +83,23 @@ def test_the_kernel_gives_triangles_and_the_canonical_pass_the_same(case):
         assert ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]) > 0).all()
 
 
+@settings(max_examples=150, deadline=None)
+@given(point_sets())
+def test_raster_ordered_vertices_give_the_same_triangles(case):
+    """Vertices already in raster order (a decoder's, ATM.md §4.2.2: the kernel neither
+    sorts nor renumbers them) give the triangles of the same vertices shuffled, renumbered,
+    and Triangle's after the canonical pass."""
+    pts, walls = case
+    rank = np.lexsort((pts[:, 0], pts[:, 1]))  # raster position -> shuffled index
+    where = np.empty_like(rank)
+    where[rank] = np.arange(len(rank))  # shuffled index -> raster position
+    ordered = pts[rank]
+    ordered_walls = None if walls is None else where[walls]
+    out = delaunay(ordered, ordered_walls)
+    np.testing.assert_array_equal(out, canonical_triangles(where[delaunay(pts, walls)]))
+    np.testing.assert_array_equal(out, by_triangle(ordered, ordered_walls))
+
+
 @pytest.mark.parametrize("r2", [25, 325, 1105])
 def test_rings_match_the_definition(r2):
     """All lattice points of a circle tie at once: the kernel gives exactly the
@@ -92,6 +109,24 @@ def test_rings_match_the_definition(r2):
         out = delaunay(v)
         np.testing.assert_array_equal(out, perturbed_delaunay(v))
         assert local_rule_holds(v, out, None)
+
+
+@pytest.mark.parametrize("scale", [1638, 1639, 3276, 3277, 26214, 1 << 16])
+def test_ties_at_the_edge_of_the_narrow_incircle_in_a_wide_band(scale):
+    """A wide band (extent over 2^14) takes the 64-bit incircle for each quadrilateral
+    whose differences are all at most 2^14 and the 128-bit one otherwise: cocircular
+    rings scaled so that their differences fall just below and just above 2^14, with a
+    copy moved by one pixel (near ties) and random points among them (whose incircle
+    overflows 64 bits when differences near 2^18 take the narrow path), and far
+    vertices making the band wide, give the exact triangulation on both sides."""
+    ring = ring_points(25) * scale  # differences up to 10 * scale
+    ring = ring - ring.min(axis=0) + 3
+    far = np.array([[0, 0], [1 << 20, 0], [0, 1 << 20], [1 << 20, 1 << 20]])
+    scattered = np.random.default_rng(scale).integers(0, 10 * scale, (40, 2)) + 3
+    v = np.unique(np.concatenate([ring, ring + [1, 0], scattered, far]), axis=0)
+    out = delaunay(v)
+    np.testing.assert_array_equal(out, by_triangle(v, None))
+    np.testing.assert_array_equal(delaunay(ring), by_triangle(ring, None))
 
 
 def test_every_conformance_band_is_the_kernels():
@@ -235,6 +270,27 @@ def test_the_incremental_triangulation_refuses_bad_points():
         Triangulation(np.array([[0, 0], [1, 1], [2, 2]]))
     with pytest.raises(ValueError, match="track=True"):
         tri.changes()  # not kept unless asked for
+
+
+@pytest.mark.parametrize("bad, message", [("again", "share a position"), ("vertex", "share a position"),
+                                          ("outside", "outside"), ("negative", "2\\^28")])
+def test_a_batch_stops_at_its_first_refused_point(bad, message):
+    """Triangulation.insert checks a whole batch first and puts it in in a spatial
+    order: a refused point in the middle of a scattered batch (a position twice in the
+    batch, a vertex already there, outside the hull, a negative coordinate) lets exactly
+    the points before it in, numbered in the batch's order; the rest can follow."""
+    from codec.triangulate import Triangulation
+
+    corners = np.array([[0, 0], [99, 0], [0, 99], [99, 99]])
+    pts = np.random.default_rng(7).permutation(np.stack(np.meshgrid(np.arange(3, 97, 7), np.arange(2, 98, 5)), -1).reshape(-1, 2))
+    refused = {"again": pts[3], "vertex": corners[2], "outside": [120, 40], "negative": [-1, 5]}[bad]
+    batch = np.concatenate([pts[:40], [refused], pts[40:]])
+    tri = Triangulation(corners)
+    with pytest.raises(ATMError, match=message):
+        tri.insert(batch)
+    np.testing.assert_array_equal(tri.triangles(), delaunay(np.concatenate([corners, pts[:40]])))
+    np.testing.assert_array_equal(tri.insert(pts[40:]), 44 + np.arange(len(pts) - 40))
+    np.testing.assert_array_equal(tri.triangles(), delaunay(np.concatenate([corners, pts])))
 
 
 def test_a_point_inserted_on_a_wall_cuts_it_into_two_walls():
