@@ -450,3 +450,173 @@ def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     if status != MESH_OK:
         return status, increasing, 0, 0
     return status, increasing, total, rows
+
+
+cpdef enum Chains:
+    CHAINS_OK = 0
+    CHAINS_LENGTHS = 1    # the lengths do not add up to the points, or one is below 2
+    CHAINS_START = 2      # a polyline starts outside the band
+    CHAINS_EMPTY = 3      # a step is (0, 0)
+    CHAINS_LONG = 4       # a step is as long as the band or longer
+    CHAINS_LEAVES = 5     # a polyline point lies outside the band
+
+
+cdef inline int _quadrant(int64_t dx, int64_t dy) noexcept nogil:
+    """meshcode.quadrants of one non-zero step."""
+    if dx > 0:
+        return 0 if dy >= 0 else 3
+    if dy > 0:
+        return 1
+    return 2 if dx < 0 else 3
+
+
+def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[::1] steps,
+           int64_t total, int64_t width, int64_t rows):
+    """(status, chain keys): meshcode._polylines' passes over a band's polylines
+    (ATM.md §4.2.2) in one call: the lengths checked against `total` points, the
+    zigzag start gaps summed into pixel keys inside the band, the zigzag steps
+    decoded, each turned back by the quadrants of the steps before it on its polyline
+    and walked from the start; the key y * width + x of every polyline point. The
+    checks come in meshcode's order, each over all of its field first, so a file
+    wrong in two ways gets the same message; keys is None on an error. Every sum is
+    checked before it can overflow: the varints are below 2**35. steps None (their
+    varints were bad): only the lengths and starts are checked, keys None."""
+    cdef int64_t count = lengths.shape[0], i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
+    cdef int64_t pixels = width * rows, nsteps = total - count
+    cdef uint64_t u
+    cdef int turn, q
+    cdef bint given = steps is not None
+    if starts.shape[0] != count or width < 1 or rows < 1 or (given and steps.shape[0] != 2 * nsteps):
+        raise ValueError("chains: a start per polyline and two numbers per step")
+    keys = np.empty(total, dtype=np.int64)
+    turned = np.empty(2 * nsteps if nsteps > 0 else 0, dtype=np.int64)
+    cdef int64_t[::1] o = keys, st = turned
+    cdef int status = CHAINS_OK
+    with nogil:
+        for i in range(count):
+            if lengths[i] < 2:
+                status = CHAINS_LENGTHS
+            s += lengths[i]  # each below 2**35: no overflow
+        if status == CHAINS_OK and s != total:
+            status = CHAINS_LENGTHS
+        if status == CHAINS_OK:
+            for i in range(count):
+                u = <uint64_t>starts[i]
+                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+                if key < 0 or key >= pixels:
+                    status = CHAINS_START
+                    break
+        if status == CHAINS_OK and given:
+            for j in range(2 * nsteps):
+                u = <uint64_t>steps[j]
+                st[j] = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+            for j in range(nsteps):
+                if st[2 * j] == 0 and st[2 * j + 1] == 0:
+                    status = CHAINS_EMPTY
+                    break
+        if status == CHAINS_OK and given:
+            # a step's turn is the sum of the stored quadrants before it on its polyline
+            j = 0
+            for i in range(count):
+                turn = 0
+                for k in range(lengths[i] - 1):
+                    dx = st[2 * j]; dy = st[2 * j + 1]
+                    q = _quadrant(dx, dy)
+                    if turn == 1:
+                        t = dx; dx = -dy; dy = t
+                    elif turn == 2:
+                        dx = -dx; dy = -dy
+                    elif turn == 3:
+                        t = dx; dx = dy; dy = -t
+                    if dx >= width or -dx >= width or dy >= rows or -dy >= rows:
+                        status = CHAINS_LONG
+                    st[2 * j] = dx; st[2 * j + 1] = dy
+                    turn = (turn + q) & 3
+                    j += 1
+        if status == CHAINS_OK and given:
+            key = 0
+            j = 0
+            first = 0
+            for i in range(count):
+                u = <uint64_t>starts[i]
+                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+                x = key % width
+                y = key // width
+                o[first] = key
+                for k in range(1, lengths[i]):
+                    x += st[2 * j]; y += st[2 * j + 1]
+                    j += 1
+                    if x < 0 or x >= width or y < 0 or y >= rows:
+                        status = CHAINS_LEAVES
+                        break
+                    o[first + k] = y * width + x
+                if status != CHAINS_OK:
+                    break
+                first += lengths[i]
+    return status, (keys if status == CHAINS_OK and given else None)
+
+
+def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
+                  const int64_t[::1] chain_keys, const int64_t[::1] lengths, int64_t width):
+    """(ok, vertices, free places, flat, walls): a band's vertices in raster order from
+    its polyline pixels (line_keys, increasing and distinct) and the others
+    (free_keys, increasing), merged; each free vertex's place; each polyline point's
+    vertex (flat, chain after chain, as chain_keys); and the polylines' steps as
+    vertex pairs (walls). ok is False if a pixel is in both lists. Every chain key
+    must be among line_keys (meshcode takes them from there)."""
+    cdef int64_t nl = line_keys.shape[0], nf = free_keys.shape[0], n = nl + nf
+    cdef int64_t total = chain_keys.shape[0], count = lengths.shape[0]
+    cdef int64_t i = 0, j = 0, k, key, lo, hi, mid, a, b, w = 0, at = 0
+    cdef bint ok = True
+    if width < 1:
+        raise ValueError("band_vertices: a width of at least one pixel")
+    vertices = np.empty((n, 2), dtype=np.int64)
+    places = np.empty(nf, dtype=np.int64)
+    line_places = np.empty(nl, dtype=np.int64)
+    flat_arr = np.empty(total, dtype=np.int64)
+    walls_arr = np.empty((max(total - count, 0), 2), dtype=np.int64)
+    cdef int64_t[:, ::1] v = vertices, walls = walls_arr
+    cdef int64_t[::1] fp = places, lp = line_places, flat = flat_arr
+    with nogil:
+        for k in range(n):
+            if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
+                key = line_keys[i]
+                lp[i] = k
+                i += 1
+            else:
+                key = free_keys[j]
+                if i < nl and line_keys[i] == key:
+                    ok = False
+                    break
+                fp[j] = k
+                j += 1
+            v[k, 0] = key % width
+            v[k, 1] = key // width
+        if ok:
+            for k in range(total):
+                # the chain key's place among the line keys (it is one of them)
+                lo = 0
+                hi = nl - 1
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if line_keys[mid] < chain_keys[k]:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                if nl == 0 or line_keys[lo] != chain_keys[k]:
+                    ok = False
+                    break
+                flat[k] = lp[lo]
+        if ok:
+            for i in range(count):
+                for k in range(at, at + lengths[i] - 1):
+                    if k + 1 >= total or w >= walls.shape[0]:
+                        ok = False
+                        break
+                    walls[w, 0] = flat[k]
+                    walls[w, 1] = flat[k + 1]
+                    w += 1
+                at += lengths[i]
+    if not ok:
+        return False, None, None, None, None
+    return True, vertices, places, flat_arr, walls_arr

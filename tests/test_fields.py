@@ -237,3 +237,61 @@ def test_validate_checks_elements_in_one_pass_whatever_the_arrays() -> None:
         for message, (vv, tt) in cases.items():
             with pytest.raises(CorruptError, match=message):
                 validate(Mesh(cast(vv), values, cast(tt), 4, 3))
+
+
+def _fields_of_chains(width: int, rows: int, lines: list[np.ndarray]):
+    """A parsed MeshPayload's polyline fields for polylines given as (x, y) points,
+    coded as the encoder codes them (start gaps, turned steps, zigzag varints)."""
+    from types import SimpleNamespace
+
+    lengths = np.array([len(p) for p in lines], np.int64)
+    flat = np.concatenate(lines) if lines else np.zeros((0, 2), np.int64)
+    steps = meshcode.chain_steps(flat, lengths)
+    keys = flat[:, 1] * width + flat[:, 0]
+    start_keys = keys[np.cumsum(lengths) - lengths]
+    return SimpleNamespace(
+        polyline_count=len(lines), polyline_index_count=len(flat),
+        polyline_lengths=coding.varints(lengths),
+        polyline_starts=coding.varints(coding.zigzag(np.diff(start_keys, prepend=0))),
+        polyline_steps=coding.varints(coding.zigzag(meshcode.turned_steps(steps[:, 1] - steps[:, 0], lengths)).ravel()),
+    ), keys
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(1, 30))
+def test_chains_kernel_walks_the_turned_steps(seed: int, width: int, rows: int) -> None:
+    """_fields.chains (through meshcode._polylines) gives the keys of the points the
+    encoder coded: unturned_steps' turn and the walk from each start, in one pass."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for _ in range(rng.integers(0, 6)):
+        n = int(rng.integers(2, 9))
+        pts = np.stack([rng.integers(0, width, n), rng.integers(0, rows, n)], 1)
+        keep = np.r_[True, (np.diff(pts, axis=0) != 0).any(axis=1)]  # no empty step
+        if keep.sum() >= 2:
+            lines.append(pts[keep])
+    m, keys = _fields_of_chains(width, rows, lines)
+    lengths, chain_keys, line_keys, first = meshcode._polylines(m, width, rows, "band")
+    assert chain_keys.tolist() == keys.tolist()
+    assert line_keys.tolist() == sorted(set(keys.tolist()))
+
+
+def test_chains_kernel_refuses_in_the_fields_order() -> None:
+    """Each malformed polyline field gets its own message, and a band wrong in two
+    ways gets the one of the field that comes first (starts before steps)."""
+    line = [np.array([[1, 1], [4, 1], [4, 3]])]
+    m, _ = _fields_of_chains(6, 5, line)
+    cases = [
+        (dict(polyline_index_count=4), "lengths do not add up"),
+        (dict(polyline_starts=coding.varints(coding.zigzag(np.array([30])))), "starts outside the 6x5 band"),
+        (dict(polyline_starts=coding.varints(coding.zigzag(np.array([30]))), polyline_steps=b"\x80"),
+         "starts outside"),
+        (dict(polyline_steps=b"\x80"), "polyline steps: 1 bytes do not hold 4 numbers"),
+        (dict(polyline_steps=coding.varints(np.array([0, 0, 2, 2]))), "a polyline step is empty"),
+        (dict(polyline_steps=coding.varints(coding.zigzag(np.array([6, 0, 1, 0])))), "longer than the band"),
+        (dict(polyline_steps=coding.varints(coding.zigzag(np.array([5, 0, 1, 0])))), "leaves the 6x5 band"),
+    ]
+    for change, message in cases:
+        bad = type(m)(**{**vars(m), **change})
+        with pytest.raises(CorruptError, match=message):
+            meshcode._polylines(bad, 6, 5, "band")
