@@ -479,14 +479,15 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
     and walked from the start; the key y * width + x of every polyline point. The
     checks come in meshcode's order, each over all of its field first, so a file
     wrong in two ways gets the same message; keys is None on an error. Every sum is
-    checked before it can overflow: the varints are below 2**35. steps None (their
-    varints were bad): only the lengths and starts are checked, keys None."""
+    checked before it can overflow: the varints are below 2**35. starts or steps
+    None (their varints were bad): the checks stop before that field, keys None."""
     cdef int64_t count = lengths.shape[0], i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
     cdef int64_t pixels = width * rows, nsteps = total - count
     cdef uint64_t u
     cdef int turn, q
-    cdef bint given = steps is not None
-    if starts.shape[0] != count or width < 1 or rows < 1 or (given and steps.shape[0] != 2 * nsteps):
+    cdef bint given = steps is not None, started = starts is not None
+    given = given and started
+    if width < 1 or rows < 1 or (started and starts.shape[0] != count) or (given and steps.shape[0] != 2 * nsteps):
         raise ValueError("chains: a start per polyline and two numbers per step")
     keys = np.empty(total, dtype=np.int64)
     turned = np.empty(2 * nsteps if nsteps > 0 else 0, dtype=np.int64)
@@ -499,7 +500,7 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
             s += lengths[i]  # each below 2**35: no overflow
         if status == CHAINS_OK and s != total:
             status = CHAINS_LENGTHS
-        if status == CHAINS_OK:
+        if status == CHAINS_OK and started:
             for i in range(count):
                 u = <uint64_t>starts[i]
                 key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
@@ -566,7 +567,7 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     must be among line_keys (meshcode takes them from there)."""
     cdef int64_t nl = line_keys.shape[0], nf = free_keys.shape[0], n = nl + nf
     cdef int64_t total = chain_keys.shape[0], count = lengths.shape[0]
-    cdef int64_t i = 0, j = 0, k, key, lo, hi, mid, a, b, w = 0, at = 0
+    cdef int64_t i = 0, j = 0, k, key, lo, hi, mid, a, b, w = 0, at = 0, y = 0, row = 0
     cdef bint ok = True
     if width < 1:
         raise ValueError("band_vertices: a width of at least one pixel")
@@ -590,8 +591,12 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
                     break
                 fp[j] = k
                 j += 1
-            v[k, 0] = key % width
-            v[k, 1] = key // width
+            # the keys increase: the row advances instead of a 64-bit division each
+            while key - row >= width:
+                row += width
+                y += 1
+            v[k, 0] = key - row
+            v[k, 1] = y
         if ok:
             for k in range(total):
                 # the chain key's place among the line keys (it is one of them)

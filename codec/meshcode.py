@@ -421,16 +421,20 @@ def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
         # no polylines (most small bands): none of the arrays below has an element
         return _NO_LINES
     lengths = unvarints(m.polyline_lengths, count, f"{where} polyline lengths")
-    if lengths.sum() != total or (count and lengths.min() < 2):
+    if count > total:  # each polyline has two points or more
         raise CorruptError(f"{where}: polyline lengths do not add up")
-    starts = unvarints(m.polyline_starts, count, f"{where} polyline starts")
-    # the steps' varints are checked after the starts, as the fields come
-    ok, steps = _fields.unvarints(np.frombuffer(m.polyline_steps, np.uint8), 2 * (total - count), MAX_VARINT_BYTES)
-    status, chain_keys = _fields.chains(lengths, starts, steps if ok == _fields.Varints.VARINTS_OK else None,
-                                        total, width, rows)
+    # the other fields' varints are refused in the order the fields come, after the
+    # kernel's checks of the fields before them
+    ok_starts, starts = _fields.unvarints(np.frombuffer(m.polyline_starts, np.uint8), count, MAX_VARINT_BYTES)
+    ok_steps, steps = _fields.unvarints(np.frombuffer(m.polyline_steps, np.uint8), 2 * (total - count), MAX_VARINT_BYTES)
+    status, chain_keys = _fields.chains(lengths, starts, steps, total, width, rows)
+    if status == _fields.Chains.CHAINS_LENGTHS:
+        raise CorruptError(f"{where}: polyline lengths do not add up")
+    if ok_starts != _fields.Varints.VARINTS_OK:
+        unvarints(m.polyline_starts, count, f"{where} polyline starts")  # raises its error
     if status == _fields.Chains.CHAINS_START:
         raise CorruptError(f"{where}: a polyline starts outside the {width}x{rows} band")
-    if ok != _fields.Varints.VARINTS_OK:
+    if ok_steps != _fields.Varints.VARINTS_OK:
         unvarints(m.polyline_steps, 2 * (total - count), f"{where} polyline steps")  # raises its error
     if status == _fields.Chains.CHAINS_EMPTY:
         raise CorruptError(f"{where}: a polyline step is empty")
@@ -438,8 +442,6 @@ def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
         raise CorruptError(f"{where}: a polyline step is longer than the band")
     if status == _fields.Chains.CHAINS_LEAVES:
         raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
-    if status != _fields.Chains.CHAINS_OK:
-        raise CorruptError(f"{where}: polyline lengths do not add up")
     line_keys, first_seen = np.unique(chain_keys, return_index=True)
     return lengths, chain_keys, line_keys, first_seen
 

@@ -295,3 +295,26 @@ def test_chains_kernel_refuses_in_the_fields_order() -> None:
         bad = type(m)(**{**vars(m), **change})
         with pytest.raises(CorruptError, match=message):
             meshcode._polylines(bad, 6, 5, "band")
+
+
+def test_band_vertices_merges_the_key_lists() -> None:
+    """_fields.band_vertices: the vertices of both increasing key lists in raster
+    order, across many rows (its row walk stands in for a division per key)."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(5)
+    width = 37
+    keys = np.unique(rng.integers(0, width * 300, 2000))
+    on_line = rng.random(len(keys)) < 0.3
+    line_keys, free_keys = keys[on_line], keys[~on_line]
+    chain = rng.permutation(np.r_[line_keys, line_keys[:50]])
+    lengths = np.array([len(chain) - 2, 2])
+    ok, vertices, places, flat, walls = _fields.band_vertices(line_keys, free_keys, chain, lengths, width)
+    assert ok
+    assert vertices.tolist() == np.stack([keys % width, keys // width], 1).tolist()
+    assert keys[places].tolist() == free_keys.tolist()
+    assert keys[flat].tolist() == chain.tolist()
+    assert walls.tolist() == [[flat[i], flat[i + 1]] for i in range(len(chain) - 3)] + [[flat[-2], flat[-1]]]
+    shared = np.r_[free_keys, line_keys[:1]]
+    shared.sort()
+    assert not _fields.band_vertices(line_keys, shared, chain, lengths, width)[0]
