@@ -80,10 +80,20 @@ def sample_parents(const int64_t[:, ::1] triangles, const int64_t[::1] seq_order
     return None if bad else parent
 
 
+cdef bint _corners_beyond(const int64_t* corners, int64_t count, int64_t n) noexcept nogil:
+    """Whether any of `count` vertex indices lies outside 0..n-1 (one unsigned
+    comparison each, without a branch: a loop the compiler vectorises)."""
+    cdef uint64_t bad = 0
+    cdef int64_t i
+    for i in range(count):
+        bad |= <uint64_t>corners[i] >= <uint64_t>n
+    return bad != 0
+
+
 cdef void _parents(const int64_t[:, ::1] triangles, const int64_t[::1] pos, int64_t[::1] p) noexcept nogil:
     """sample_parents' pass: pos is each vertex's place in the sequence, p (all -1 on
     entry) gets each place's parent place; the corners already checked."""
-    cdef int64_t n = p.shape[0], j, k, a, b, c, lo, mid, hi
+    cdef int64_t n = p.shape[0], j, k, a, b, c, lo, mid, hi, t, old
     for k in range(triangles.shape[0]):
         a = pos[triangles[k, 0]]; b = pos[triangles[k, 1]]; c = pos[triangles[k, 2]]
         lo = a if a < b else b
@@ -92,11 +102,14 @@ cdef void _parents(const int64_t[:, ::1] triangles, const int64_t[::1] pos, int6
         hi = hi if hi > c else c
         mid = a + b + c - lo - hi
         # the last corner's candidate is the middle one, the middle one's the first,
-        # strictly earlier (a listed triangle may repeat a corner)
-        if mid < hi and mid > p[hi]:
-            p[hi] = mid
-        if lo < mid and lo > p[mid]:
-            p[mid] = lo
+        # strictly earlier (a listed triangle may repeat a corner); conditional
+        # moves, as the comparisons go either way from triangle to triangle
+        t = mid if mid < hi else -1
+        old = p[hi]
+        p[hi] = t if t > old else old
+        t = lo if lo < mid else -1
+        old = p[mid]
+        p[mid] = t if t > old else old
     for j in range(n):
         if p[j] < 0:
             p[j] = j - 1
@@ -222,10 +235,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int64_t[:, ::1] out = values, seq = seq_arr
     cdef int status = VALUES_OK
     with nogil:
-        for k in range(m):
-            for i in range(3):
-                if not 0 <= triangles[k, i] < n:
-                    status = VALUES_CORNER
+        if m and _corners_beyond(&triangles[0, 0], 3 * m, n):
+            status = VALUES_CORNER
         for j in range(n * channels):
             if zigzags[j] < 0 or zigzags[j] > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
                 status = status or VALUES_RESIDUAL
@@ -428,11 +439,8 @@ def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
             if key <= last:
                 increasing = False
             last = key
-        if status == MESH_OK:
-            for k in range(m):
-                for i in range(3):
-                    if not 0 <= triangles[k, i] < n:
-                        status = MESH_INDEX
+        if status == MESH_OK and m and _corners_beyond(&triangles[0, 0], 3 * m, n):
+            status = MESH_INDEX
         if status == MESH_OK and not given:
             _doubled_areas(vertices, triangles, ar)
         if status == MESH_OK:
@@ -557,17 +565,64 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
     return status, (keys if status == CHAINS_OK and given else None)
 
 
+def line_ranks(const int64_t[::1] keys, const int64_t[::1] perm):
+    """(distinct keys, rank, appearance): the distinct polyline point keys in
+    increasing order, each point's rank among them, and the ranks in the order the
+    chains first reach them (the sample order's polyline part, ATM.md §4.2.4), from
+    `perm`, an argsort of `keys` (any: a key's first point is the least place in its
+    group). None if perm is no permutation."""
+    cdef int64_t total = keys.shape[0], i, j, k, groups = 0, r
+    cdef bint bad = perm.shape[0] != total
+    rank_arr = np.empty(total, dtype=np.int64)
+    first_arr = np.empty(total, dtype=np.int64)
+    cdef int64_t[::1] rank = rank_arr, first = first_arr
+    with nogil:
+        for i in range(total):
+            if <uint64_t>perm[i] >= <uint64_t>total:
+                bad = True
+                break
+            rank[i] = -1
+        if not bad:
+            for i in range(total):
+                k = perm[i]
+                if rank[k] >= 0 or (i and keys[k] < keys[perm[i - 1]]):
+                    bad = True  # a place twice, or out of order: no argsort
+                    break
+                if i == 0 or keys[k] != keys[perm[i - 1]]:
+                    first[groups] = k
+                    groups += 1
+                elif k < first[groups - 1]:
+                    first[groups - 1] = k
+                rank[k] = groups - 1
+    if bad:
+        return None
+    distinct = np.empty(groups, dtype=np.int64)
+    appear_arr = np.empty(groups, dtype=np.int64)
+    cdef int64_t[::1] d = distinct, appear = appear_arr
+    with nogil:
+        for r in range(groups):
+            d[r] = keys[first[r]]
+        j = 0
+        for k in range(total):
+            r = rank[k]
+            if first[r] == k:
+                appear[j] = r
+                j += 1
+    return distinct, rank_arr, appear_arr
+
+
 def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
-                  const int64_t[::1] chain_keys, const int64_t[::1] lengths, int64_t width):
-    """(ok, vertices, free places, flat, walls): a band's vertices in raster order from
-    its polyline pixels (line_keys, increasing and distinct) and the others
-    (free_keys, increasing), merged; each free vertex's place; each polyline point's
-    vertex (flat, chain after chain, as chain_keys); and the polylines' steps as
-    vertex pairs (walls). ok is False if a pixel is in both lists. Every chain key
-    must be among line_keys (meshcode takes them from there)."""
+                  const int64_t[::1] ranks, const int64_t[::1] appear, const int64_t[::1] lengths,
+                  int64_t width):
+    """(ok, vertices, free places, flat, walls, on_line): a band's vertices in raster
+    order from its polyline pixels (line_keys, increasing and distinct) and the
+    others (free_keys, increasing), merged; each free vertex's place; each polyline
+    point's vertex (flat, chain after chain; ranks among line_keys from line_ranks);
+    the polylines' steps as vertex pairs (walls); and the polyline vertices in the
+    order line_ranks' `appear` gives. ok is False if a pixel is in both lists."""
     cdef int64_t nl = line_keys.shape[0], nf = free_keys.shape[0], n = nl + nf
-    cdef int64_t total = chain_keys.shape[0], count = lengths.shape[0]
-    cdef int64_t i = 0, j = 0, k, key, lo, hi, mid, a, b, w = 0, at = 0, y = 0, row = 0
+    cdef int64_t total = ranks.shape[0], count = lengths.shape[0], na = appear.shape[0]
+    cdef int64_t i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
     cdef bint ok = True
     if width < 1:
         raise ValueError("band_vertices: a width of at least one pixel")
@@ -576,8 +631,9 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     line_places = np.empty(nl, dtype=np.int64)
     flat_arr = np.empty(total, dtype=np.int64)
     walls_arr = np.empty((max(total - count, 0), 2), dtype=np.int64)
+    on_line_arr = np.empty(na, dtype=np.int64)
     cdef int64_t[:, ::1] v = vertices, walls = walls_arr
-    cdef int64_t[::1] fp = places, lp = line_places, flat = flat_arr
+    cdef int64_t[::1] fp = places, lp = line_places, flat = flat_arr, on_line = on_line_arr
     with nogil:
         for k in range(n):
             if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
@@ -597,22 +653,15 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
                 y += 1
             v[k, 0] = key - row
             v[k, 1] = y
+        if ok and (_corners_beyond(&ranks[0], total, nl) if total else False):
+            ok = False
+        if ok and (_corners_beyond(&appear[0], na, nl) if na else False):
+            ok = False
         if ok:
             for k in range(total):
-                # the chain key's place among the line keys (it is one of them)
-                lo = 0
-                hi = nl - 1
-                while lo < hi:
-                    mid = (lo + hi) >> 1
-                    if line_keys[mid] < chain_keys[k]:
-                        lo = mid + 1
-                    else:
-                        hi = mid
-                if nl == 0 or line_keys[lo] != chain_keys[k]:
-                    ok = False
-                    break
-                flat[k] = lp[lo]
-        if ok:
+                flat[k] = lp[ranks[k]]
+            for k in range(na):
+                on_line[k] = lp[appear[k]]
             for i in range(count):
                 for k in range(at, at + lengths[i] - 1):
                     if k + 1 >= total or w >= walls.shape[0]:
@@ -623,5 +672,5 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
                     w += 1
                 at += lengths[i]
     if not ok:
-        return False, None, None, None, None
-    return True, vertices, places, flat_arr, walls_arr
+        return False, None, None, None, None, None
+    return True, vertices, places, flat_arr, walls_arr, on_line_arr

@@ -18,7 +18,7 @@ bits, wrapping: exact for a row of fewer than 2**15 spans (a tiling's row has at
 W), which is counted. Only when the check fails is the image rasterised again counting
 each pixel's writes, to name the first pixel uncovered or covered twice."""
 
-from libc.stdint cimport int64_t, uint8_t, uint16_t
+from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
 from libc.stdlib cimport calloc, free
 
 ctypedef fused sample_t:
@@ -276,7 +276,8 @@ cdef int _render(const int64_t[:, ::1] v, const int64_t[:, ::1] vals, const int6
             detail[0] = k
             return BAD_VERTEX
     for k in range(m):
-        if not (0 <= tris[k, 0] < nv and 0 <= tris[k, 1] < nv and 0 <= tris[k, 2] < nv):
+        # unsigned: a negative index is beyond too
+        if (<uint64_t>tris[k, 0] >= <uint64_t>nv) | (<uint64_t>tris[k, 1] >= <uint64_t>nv) | (<uint64_t>tris[k, 2] >= <uint64_t>nv):
             detail[0] = k
             return BAD_INDEX
     counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))

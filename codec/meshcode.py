@@ -412,8 +412,9 @@ _NO_LINES = (_EMPTY, _EMPTY, _EMPTY, _EMPTY)
 
 
 def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
-    """(lengths, chain keys, the distinct keys sorted, each one's first place in the
-    chains) of a parsed MeshPayload's polylines, checked to lie in the band: the
+    """(lengths, the distinct keys sorted, each point's rank among them, the ranks in
+    the order the chains first reach them: _fields.line_ranks) of a parsed
+    MeshPayload's polylines, checked to lie in the band: the
     steps turned back (unturned_steps) and walked from each start in one compiled
     pass, its checks in the order of the fields."""
     count, total = int(m.polyline_count), int(m.polyline_index_count)
@@ -442,8 +443,9 @@ def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
         raise CorruptError(f"{where}: a polyline step is longer than the band")
     if status == _fields.Chains.CHAINS_LEAVES:
         raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
-    line_keys, first_seen = np.unique(chain_keys, return_index=True)
-    return lengths, chain_keys, line_keys, first_seen
+    # the distinct pixels, each point's rank among them and their first-reached order
+    line_keys, ranks, appear = _fields.line_ranks(chain_keys, np.argsort(chain_keys))
+    return lengths, line_keys, ranks, appear
 
 
 @functools.cache
@@ -469,8 +471,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     pixels = width * rows
 
     # polylines first: their points are vertices the positions do not repeat
-    lengths, chain_keys, line_keys, first_seen = _polylines(m, width, rows, where)
-    count, total = len(lengths), len(chain_keys)
+    lengths, line_keys, ranks, appear = _polylines(m, width, rows, where)
+    count, total = len(lengths), len(ranks)
 
     free = n - len(line_keys)
     if free < 0:
@@ -490,7 +492,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         free_keys = free_keys[by_curve]
     # Both key lists are increasing: merged in one compiled pass, which also finds
     # each polyline point's vertex (flat) and the walls as vertex pairs
-    ok, vertices, free_index, flat, walls = _fields.band_vertices(line_keys, free_keys, chain_keys, lengths, width)
+    ok, vertices, free_index, flat, walls, on_line = _fields.band_vertices(
+        line_keys, free_keys, ranks, appear, lengths, width)
     if not ok:
         raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
     ends = np.cumsum(lengths)
@@ -528,7 +531,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index
-    seq_order = np.concatenate([flat[np.sort(first_seen)], curve]) if total else curve
+    seq_order = np.concatenate([on_line, curve]) if total else curve
     # steps, parents and running sums in one compiled pass (vertex_steps, sample_parents
     # and tree_sums' arithmetic), every index checked there
     status, values, areas = _fields.band_values(

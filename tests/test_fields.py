@@ -271,9 +271,10 @@ def test_chains_kernel_walks_the_turned_steps(seed: int, width: int, rows: int) 
         if keep.sum() >= 2:
             lines.append(pts[keep])
     m, keys = _fields_of_chains(width, rows, lines)
-    lengths, chain_keys, line_keys, first = meshcode._polylines(m, width, rows, "band")
-    assert chain_keys.tolist() == keys.tolist()
+    lengths, line_keys, ranks, appear = meshcode._polylines(m, width, rows, "band")
+    assert line_keys[ranks].tolist() == keys.tolist()
     assert line_keys.tolist() == sorted(set(keys.tolist()))
+    assert line_keys[appear].tolist() == list(dict.fromkeys(keys.tolist()))  # first reached first
 
 
 def test_chains_kernel_refuses_in_the_fields_order() -> None:
@@ -298,8 +299,10 @@ def test_chains_kernel_refuses_in_the_fields_order() -> None:
 
 
 def test_band_vertices_merges_the_key_lists() -> None:
-    """_fields.band_vertices: the vertices of both increasing key lists in raster
-    order, across many rows (its row walk stands in for a division per key)."""
+    """_fields.line_ranks and band_vertices: the vertices of both increasing key
+    lists in raster order, across many rows (a row walk stands in for a division per
+    key), each polyline point's vertex, the walls, and the polyline vertices in the
+    order the chains first reach them."""
     from codec.native import _fields
 
     rng = np.random.default_rng(5)
@@ -309,12 +312,16 @@ def test_band_vertices_merges_the_key_lists() -> None:
     line_keys, free_keys = keys[on_line], keys[~on_line]
     chain = rng.permutation(np.r_[line_keys, line_keys[:50]])
     lengths = np.array([len(chain) - 2, 2])
-    ok, vertices, places, flat, walls = _fields.band_vertices(line_keys, free_keys, chain, lengths, width)
+    distinct, ranks, appear = _fields.line_ranks(chain, np.argsort(chain))
+    assert distinct.tolist() == line_keys.tolist()
+    ok, vertices, places, flat, walls, first = _fields.band_vertices(distinct, free_keys, ranks, appear, lengths, width)
     assert ok
     assert vertices.tolist() == np.stack([keys % width, keys // width], 1).tolist()
     assert keys[places].tolist() == free_keys.tolist()
     assert keys[flat].tolist() == chain.tolist()
+    assert keys[first].tolist() == list(dict.fromkeys(chain.tolist()))
     assert walls.tolist() == [[flat[i], flat[i + 1]] for i in range(len(chain) - 3)] + [[flat[-2], flat[-1]]]
     shared = np.r_[free_keys, line_keys[:1]]
     shared.sort()
-    assert not _fields.band_vertices(line_keys, shared, chain, lengths, width)[0]
+    assert not _fields.band_vertices(distinct, shared, ranks, appear, lengths, width)[0]
+    assert _fields.line_ranks(chain, np.zeros(len(chain), np.int64)) is None  # no permutation
