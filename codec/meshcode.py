@@ -34,7 +34,7 @@ from .coding import (
     zigzag,
 )
 from .errors import ATMError, CorruptError, LimitError
-from .mesh import Mesh, chain_steps, doubled_areas
+from .mesh import Mesh, Polylines, chain_steps, doubled_areas
 from .native import _fields
 from .triangulate import delaunay, triangulate
 
@@ -496,8 +496,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         line_keys, free_keys, ranks, appear, lengths, width)
     if not ok:
         raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
-    ends = np.cumsum(lengths)
-    lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
+    lines = Polylines(flat, lengths)
     if not total:
         walls = None
 
