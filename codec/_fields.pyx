@@ -322,9 +322,10 @@ cdef int _row_order(const void *p, const void *q) noexcept nogil:
 
 def canonical_triangles(const int64_t[:, ::1] triangles):
     """coding.canonical_triangles in one pass: each row rotated (orientation kept) to
-    its lexicographically smallest rotation, then the rows sorted (qsort,
-    lexicographic)."""
-    cdef int64_t m = triangles.shape[0], k, a, b, c, r
+    its lexicographically smallest rotation, then the rows sorted lexicographically
+    (a counting sort on the first corner when the corners are indices of a mesh,
+    qsort otherwise)."""
+    cdef int64_t m = triangles.shape[0], k, a, b, c, r, lo = 0, hi = 0
     if triangles.shape[1] != 3:
         raise ValueError("canonical_triangles: an M x 3 array")
     out = np.empty((m, 3), dtype=np.int64)
@@ -338,9 +339,58 @@ def canonical_triangles(const int64_t[:, ::1] triangles):
                 a = triangles[k, (r + 1) % 3]; b = triangles[k, (r + 2) % 3]; c = triangles[k, r]
                 if a < o[k, 0] or (a == o[k, 0] and (b < o[k, 1] or (b == o[k, 1] and c < o[k, 2]))):
                     o[k, 0] = a; o[k, 1] = b; o[k, 2] = c
-        if m > 1:
+        for k in range(m):
+            lo = o[k, 0] if k == 0 or o[k, 0] < lo else lo
+            hi = o[k, 0] if k == 0 or o[k, 0] > hi else hi
+    if m > 1 and lo >= 0 and hi < 16 * m + 1024:
+        # a counting sort on the first corner, then an insertion sort of each fan (a
+        # vertex starts a few triangles), as _renumber does: linear, where a
+        # comparison sort of the rows is not
+        counted = np.empty((m, 3), dtype=np.int64)
+        starts = np.zeros(hi + 2, dtype=np.int64)
+        nexts = np.empty(hi + 2, dtype=np.int64)
+        _sort_into(o, counted, starts, nexts)
+        return counted
+    if m > 1:
+        with nogil:
             qsort(&o[0, 0], <size_t>m, 3 * sizeof(int64_t), _row_order)
     return out
+
+
+cdef void _sort_into(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int64_t[::1] start,
+                     int64_t[::1] nxt) noexcept:
+    with nogil:
+        _count_sort_rows(rows, out, start, nxt)
+
+
+cdef void _count_sort_rows(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int64_t[::1] start,
+                           int64_t[::1] nxt) noexcept nogil:
+    """The rows (first entries in 0..len(start) - 2) sorted lexicographically into
+    `out`: counted into place by the first entry, then each run of one first entry
+    (a vertex's fan, short in a mesh) sorted by insertion, or by qsort when long.
+    start: zeroed scratch; nxt: scratch of the same length."""
+    cdef int64_t m = rows.shape[0], k, j, i, a, b, c, v
+    for k in range(m):
+        start[rows[k, 0] + 1] += 1
+    for v in range(1, start.shape[0]):
+        start[v] += start[v - 1]
+    for v in range(start.shape[0]):
+        nxt[v] = start[v]
+    for k in range(m):
+        j = nxt[rows[k, 0]]
+        nxt[rows[k, 0]] += 1
+        out[j, 0] = rows[k, 0]; out[j, 1] = rows[k, 1]; out[j, 2] = rows[k, 2]
+    for v in range(start.shape[0] - 1):
+        if start[v + 1] - start[v] > 32:
+            qsort(&out[start[v], 0], <size_t>(start[v + 1] - start[v]), 3 * sizeof(int64_t), _row_order)
+            continue
+        for i in range(start[v] + 1, start[v + 1]):
+            a = out[i, 0]; b = out[i, 1]; c = out[i, 2]
+            j = i
+            while j > start[v] and (out[j - 1, 1] > b or (out[j - 1, 1] == b and out[j - 1, 2] > c)):
+                out[j, 0] = out[j - 1, 0]; out[j, 1] = out[j - 1, 1]; out[j, 2] = out[j - 1, 2]
+                j -= 1
+            out[j, 0] = a; out[j, 1] = b; out[j, 2] = c
 
 
 def position_keys(const int64_t[::1] high, const uint8_t[::1] packed, int bits, int64_t span):

@@ -325,3 +325,22 @@ def test_band_vertices_merges_the_key_lists() -> None:
     shared.sort()
     assert not _fields.band_vertices(distinct, shared, ranks, appear, lengths, width)[0]
     assert _fields.line_ranks(chain, np.zeros(len(chain), np.int64)) is None  # no permutation
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["fans", "hub", "far", "negative"]))
+def test_canonical_triangles_counting_sort_and_its_fallback(seed: int, kind: str) -> None:
+    """The counting sort (fans of a mesh's indices; a hub vertex starting over 32
+    rows is sorted by qsort) and the qsort of rows whose indices are far beyond
+    their count or negative give the same order: each row's smallest rotation, the
+    rows sorted."""
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(1, 400))
+    n = {"fans": 60, "hub": 60, "far": 1 << 40, "negative": 60}[kind]
+    t = rng.integers(0, n, (m, 3)).astype(np.int64)
+    if kind == "hub":
+        t[: m // 2, 0] = 0
+    if kind == "negative":
+        t[0, 1] = -3
+    rotations = [min(tuple(r[i:]) + tuple(r[:i]) for i in range(3)) for r in t.tolist()]
+    assert coding.canonical_triangles(t).tolist() == sorted(map(list, rotations))
