@@ -15,7 +15,8 @@ that of their ends plus 0 (then the number of spans over each column, starts up 
 less ends up to it, is one), so each span adds one at lo and takes one at hi of a row
 of W + 1 counters, and every row must end as (1, 0, ..., 0, -1). The counters are 16
 bits, wrapping: exact for a row of fewer than 2**15 spans (a tiling's row has at most
-W), which is counted. Only when the check fails is the image rasterised again counting
+W), which is counted when there are 2**15 triangles or more (each gives a row one
+span at most). Only when the check fails is the image rasterised again counting
 each pixel's writes, to name the first pixel uncovered or covered twice."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
@@ -53,15 +54,22 @@ cdef inline void _edge_step(int64_t den, int64_t step, int64_t* dq, int64_t* dr)
     dr[0] = step - dq[0] * den
 
 
-cdef inline void _sort3(int64_t* i, const int64_t[:, ::1] v) noexcept nogil:
-    """Order three vertex indices by raster position (row, then column)."""
-    cdef int64_t t
-    if v[i[1], 1] < v[i[0], 1] or (v[i[1], 1] == v[i[0], 1] and v[i[1], 0] < v[i[0], 0]):
-        t = i[0]; i[0] = i[1]; i[1] = t
-    if v[i[2], 1] < v[i[1], 1] or (v[i[2], 1] == v[i[1], 1] and v[i[2], 0] < v[i[1], 0]):
-        t = i[1]; i[1] = i[2]; i[2] = t
-        if v[i[1], 1] < v[i[0], 1] or (v[i[1], 1] == v[i[0], 1] and v[i[1], 0] < v[i[0], 0]):
-            t = i[0]; i[0] = i[1]; i[1] = t
+cdef inline void _sort3(int64_t* i, const int64_t[:, ::1] v, int64_t w) noexcept nogil:
+    """Order three vertex indices by raster position (row, then column): a sorting
+    network of conditional moves on their pixel keys, as the order is different from
+    triangle to triangle."""
+    cdef int64_t a = i[0], b = i[1], c = i[2], t, kt
+    cdef int64_t ka = v[a, 1] * w + v[a, 0], kb = v[b, 1] * w + v[b, 0], kc = v[c, 1] * w + v[c, 0]
+    cdef bint s
+    s = kb < ka
+    t = b if s else a; b = a if s else b; a = t
+    kt = kb if s else ka; kb = ka if s else kb; ka = kt
+    s = kc < kb
+    t = c if s else b; c = b if s else c; b = t
+    kt = kc if s else kb; kc = kb if s else kc; kb = kt
+    s = kb < ka
+    t = b if s else a; b = a if s else b; a = t
+    i[0] = a; i[1] = b; i[2] = c
 
 
 cdef struct Plane:
@@ -116,7 +124,7 @@ cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
     cdef sample_t* p
     for k in range(m):
         corner[0] = tris[k, 0]; corner[1] = tris[k, 1]; corner[2] = tris[k, 2]
-        _sort3(corner, v)  # T, M, B
+        _sort3(corner, v, w)  # T, M, B
         tx = v[corner[0], 0]; ty = v[corner[0], 1]
         mx = v[corner[1], 0]; my = v[corner[1], 1]
         bx = v[corner[2], 0]; by = v[corner[2], 1]
@@ -220,7 +228,8 @@ cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
                     if cover == NULL:
                         counts[y * stride + lo] += 1
                         counts[y * stride + hi] -= 1
-                        spans[y] += 1
+                        if spans != NULL:
+                            spans[y] += 1
                     else:
                         for x in range(row + lo, row + hi):
                             seen = cover[x]
@@ -251,7 +260,7 @@ cdef int _check_counts(const uint16_t* counts, const int64_t* spans, int64_t w, 
     cdef uint16_t acc
     cdef const uint16_t* row
     for y in range(h):
-        if spans[y] >= 1 << 15:
+        if spans != NULL and spans[y] >= 1 << 15:
             return 0
         row = counts + y * stride
         acc = (row[0] ^ 1) | (row[w] ^ 0xFFFF)
@@ -281,8 +290,10 @@ cdef int _render(const int64_t[:, ::1] v, const int64_t[:, ::1] vals, const int6
             detail[0] = k
             return BAD_INDEX
     counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
-    spans = <int64_t*>calloc(<size_t>h, sizeof(int64_t))
-    if counts == NULL or spans == NULL:
+    # a triangle gives a row one span at most: with fewer than 2**15 triangles no row
+    # can have more spans, and they need no count
+    spans = <int64_t*>calloc(<size_t>h, sizeof(int64_t)) if m >= 1 << 15 else NULL
+    if counts == NULL or (spans == NULL and m >= 1 << 15):
         free(counts)
         free(spans)
         return NO_MEMORY
