@@ -188,8 +188,10 @@ def check_output_format(fmt: str) -> None:
 
 def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") -> int:
     """Decode one .atm input (a path or -) to an image output (a path or -) in `fmt`;
-    PGM/PPM and .npy are written band by band. Returns the bytes written."""
+    PGM/PPM and .npy are written as the bands come (small bands rendered a group at
+    a time, as codec.decode does). Returns the bytes written."""
     from codec.files import encode_image
+    from codec.stream import GROUP_PIXELS
 
     with open_input(src_name) as f:
         dec = codec.StreamDecoder(f, backend=backend)
@@ -207,15 +209,15 @@ def decode_file(src_name: str, dst_name: str, fmt: str, backend: str = "cpu") ->
                     np.lib.format.write_array_header_1_0(
                         out, {"descr": np.lib.format.dtype_to_descr(np.dtype(dec.dtype)), "fortran_order": False, "shape": dec.shape}
                     )
-                    for _, rows in dec:
+                    for _, rows in dec.rows(GROUP_PIXELS):
                         out.write(rows.tobytes())
                 else:
                     out.write(rowio.pnm_header(dec.width, dec.height, dec.dtype, dec.channels))
-                    for _, rows in dec:
+                    for _, rows in dec.rows(GROUP_PIXELS):
                         out.write(rowio.pnm_rows(rows))
             return out.count
         image = np.empty(dec.shape, dec.dtype)
-        for y0, rows in dec:
+        for y0, rows in dec.rows(GROUP_PIXELS):
             image[y0 : y0 + len(rows)] = rows
     # a TIFF gets its georeferencing back (the geotiff metadata record)
     data = geotiff.write(image, dec.metadata, dec.nodata) if fmt in ("tif", "tiff") else encode_image(image, "." + fmt)

@@ -80,10 +80,20 @@ def sample_parents(const int64_t[:, ::1] triangles, const int64_t[::1] seq_order
     return None if bad else parent
 
 
+cdef bint _corners_beyond(const int64_t* corners, int64_t count, int64_t n) noexcept nogil:
+    """Whether any of `count` vertex indices lies outside 0..n-1 (one unsigned
+    comparison each, without a branch: a loop the compiler vectorises)."""
+    cdef uint64_t bad = 0
+    cdef int64_t i
+    for i in range(count):
+        bad |= <uint64_t>corners[i] >= <uint64_t>n
+    return bad != 0
+
+
 cdef void _parents(const int64_t[:, ::1] triangles, const int64_t[::1] pos, int64_t[::1] p) noexcept nogil:
     """sample_parents' pass: pos is each vertex's place in the sequence, p (all -1 on
     entry) gets each place's parent place; the corners already checked."""
-    cdef int64_t n = p.shape[0], j, k, a, b, c, lo, mid, hi
+    cdef int64_t n = p.shape[0], j, k, a, b, c, lo, mid, hi, t, old
     for k in range(triangles.shape[0]):
         a = pos[triangles[k, 0]]; b = pos[triangles[k, 1]]; c = pos[triangles[k, 2]]
         lo = a if a < b else b
@@ -92,11 +102,14 @@ cdef void _parents(const int64_t[:, ::1] triangles, const int64_t[::1] pos, int6
         hi = hi if hi > c else c
         mid = a + b + c - lo - hi
         # the last corner's candidate is the middle one, the middle one's the first,
-        # strictly earlier (a listed triangle may repeat a corner)
-        if mid < hi and mid > p[hi]:
-            p[hi] = mid
-        if lo < mid and lo > p[mid]:
-            p[mid] = lo
+        # strictly earlier (a listed triangle may repeat a corner); conditional
+        # moves, as the comparisons go either way from triangle to triangle
+        t = mid if mid < hi else -1
+        old = p[hi]
+        p[hi] = t if t > old else old
+        t = lo if lo < mid else -1
+        old = p[mid]
+        p[mid] = t if t > old else old
     for j in range(n):
         if p[j] < 0:
             p[j] = j - 1
@@ -222,10 +235,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int64_t[:, ::1] out = values, seq = seq_arr
     cdef int status = VALUES_OK
     with nogil:
-        for k in range(m):
-            for i in range(3):
-                if not 0 <= triangles[k, i] < n:
-                    status = VALUES_CORNER
+        if m and _corners_beyond(&triangles[0, 0], 3 * m, n):
+            status = VALUES_CORNER
         for j in range(n * channels):
             if zigzags[j] < 0 or zigzags[j] > 2 * top:  # zigzag(r) <= 2 top iff |r| <= top
                 status = status or VALUES_RESIDUAL
@@ -311,9 +322,10 @@ cdef int _row_order(const void *p, const void *q) noexcept nogil:
 
 def canonical_triangles(const int64_t[:, ::1] triangles):
     """coding.canonical_triangles in one pass: each row rotated (orientation kept) to
-    its lexicographically smallest rotation, then the rows sorted (qsort,
-    lexicographic)."""
-    cdef int64_t m = triangles.shape[0], k, a, b, c, r
+    its lexicographically smallest rotation, then the rows sorted lexicographically
+    (a counting sort on the first corner when the corners are indices of a mesh,
+    qsort otherwise)."""
+    cdef int64_t m = triangles.shape[0], k, a, b, c, r, lo = 0, hi = 0
     if triangles.shape[1] != 3:
         raise ValueError("canonical_triangles: an M x 3 array")
     out = np.empty((m, 3), dtype=np.int64)
@@ -327,9 +339,58 @@ def canonical_triangles(const int64_t[:, ::1] triangles):
                 a = triangles[k, (r + 1) % 3]; b = triangles[k, (r + 2) % 3]; c = triangles[k, r]
                 if a < o[k, 0] or (a == o[k, 0] and (b < o[k, 1] or (b == o[k, 1] and c < o[k, 2]))):
                     o[k, 0] = a; o[k, 1] = b; o[k, 2] = c
-        if m > 1:
+        for k in range(m):
+            lo = o[k, 0] if k == 0 or o[k, 0] < lo else lo
+            hi = o[k, 0] if k == 0 or o[k, 0] > hi else hi
+    if m > 1 and lo >= 0 and hi < 16 * m + 1024:
+        # a counting sort on the first corner, then an insertion sort of each fan (a
+        # vertex starts a few triangles), as _renumber does: linear, where a
+        # comparison sort of the rows is not
+        counted = np.empty((m, 3), dtype=np.int64)
+        starts = np.zeros(hi + 2, dtype=np.int64)
+        nexts = np.empty(hi + 2, dtype=np.int64)
+        _sort_into(o, counted, starts, nexts)
+        return counted
+    if m > 1:
+        with nogil:
             qsort(&o[0, 0], <size_t>m, 3 * sizeof(int64_t), _row_order)
     return out
+
+
+cdef void _sort_into(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int64_t[::1] start,
+                     int64_t[::1] nxt) noexcept:
+    with nogil:
+        _count_sort_rows(rows, out, start, nxt)
+
+
+cdef void _count_sort_rows(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int64_t[::1] start,
+                           int64_t[::1] nxt) noexcept nogil:
+    """The rows (first entries in 0..len(start) - 2) sorted lexicographically into
+    `out`: counted into place by the first entry, then each run of one first entry
+    (a vertex's fan, short in a mesh) sorted by insertion, or by qsort when long.
+    start: zeroed scratch; nxt: scratch of the same length."""
+    cdef int64_t m = rows.shape[0], k, j, i, a, b, c, v
+    for k in range(m):
+        start[rows[k, 0] + 1] += 1
+    for v in range(1, start.shape[0]):
+        start[v] += start[v - 1]
+    for v in range(start.shape[0]):
+        nxt[v] = start[v]
+    for k in range(m):
+        j = nxt[rows[k, 0]]
+        nxt[rows[k, 0]] += 1
+        out[j, 0] = rows[k, 0]; out[j, 1] = rows[k, 1]; out[j, 2] = rows[k, 2]
+    for v in range(start.shape[0] - 1):
+        if start[v + 1] - start[v] > 32:
+            qsort(&out[start[v], 0], <size_t>(start[v + 1] - start[v]), 3 * sizeof(int64_t), _row_order)
+            continue
+        for i in range(start[v] + 1, start[v + 1]):
+            a = out[i, 0]; b = out[i, 1]; c = out[i, 2]
+            j = i
+            while j > start[v] and (out[j - 1, 1] > b or (out[j - 1, 1] == b and out[j - 1, 2] > c)):
+                out[j, 0] = out[j - 1, 0]; out[j, 1] = out[j - 1, 1]; out[j, 2] = out[j - 1, 2]
+                j -= 1
+            out[j, 0] = a; out[j, 1] = b; out[j, 2] = c
 
 
 def position_keys(const int64_t[::1] high, const uint8_t[::1] packed, int bits, int64_t span):
@@ -428,11 +489,8 @@ def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
             if key <= last:
                 increasing = False
             last = key
-        if status == MESH_OK:
-            for k in range(m):
-                for i in range(3):
-                    if not 0 <= triangles[k, i] < n:
-                        status = MESH_INDEX
+        if status == MESH_OK and m and _corners_beyond(&triangles[0, 0], 3 * m, n):
+            status = MESH_INDEX
         if status == MESH_OK and not given:
             _doubled_areas(vertices, triangles, ar)
         if status == MESH_OK:
@@ -450,3 +508,219 @@ def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     if status != MESH_OK:
         return status, increasing, 0, 0
     return status, increasing, total, rows
+
+
+cpdef enum Chains:
+    CHAINS_OK = 0
+    CHAINS_LENGTHS = 1    # the lengths do not add up to the points, or one is below 2
+    CHAINS_START = 2      # a polyline starts outside the band
+    CHAINS_EMPTY = 3      # a step is (0, 0)
+    CHAINS_LONG = 4       # a step is as long as the band or longer
+    CHAINS_LEAVES = 5     # a polyline point lies outside the band
+
+
+cdef inline int _quadrant(int64_t dx, int64_t dy) noexcept nogil:
+    """meshcode.quadrants of one non-zero step."""
+    if dx > 0:
+        return 0 if dy >= 0 else 3
+    if dy > 0:
+        return 1
+    return 2 if dx < 0 else 3
+
+
+def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[::1] steps,
+           int64_t total, int64_t width, int64_t rows):
+    """(status, chain keys): meshcode._polylines' passes over a band's polylines
+    (ATM.md §4.2.2) in one call: the lengths checked against `total` points, the
+    zigzag start gaps summed into pixel keys inside the band, the zigzag steps
+    decoded, each turned back by the quadrants of the steps before it on its polyline
+    and walked from the start; the key y * width + x of every polyline point. The
+    checks come in meshcode's order, each over all of its field first, so a file
+    wrong in two ways gets the same message; keys is None on an error. Every sum is
+    checked before it can overflow: the varints are below 2**35. starts or steps
+    None (their varints were bad): the checks stop before that field, keys None."""
+    cdef int64_t count = lengths.shape[0], i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
+    cdef int64_t pixels = width * rows, nsteps = total - count
+    cdef uint64_t u
+    cdef int turn, q
+    cdef bint given = steps is not None, started = starts is not None
+    given = given and started
+    if width < 1 or rows < 1 or (started and starts.shape[0] != count) or (given and steps.shape[0] != 2 * nsteps):
+        raise ValueError("chains: a start per polyline and two numbers per step")
+    keys = np.empty(total, dtype=np.int64)
+    turned = np.empty(2 * nsteps if nsteps > 0 else 0, dtype=np.int64)
+    cdef int64_t[::1] o = keys, st = turned
+    cdef int status = CHAINS_OK
+    with nogil:
+        for i in range(count):
+            if lengths[i] < 2:
+                status = CHAINS_LENGTHS
+            s += lengths[i]  # each below 2**35: no overflow
+        if status == CHAINS_OK and s != total:
+            status = CHAINS_LENGTHS
+        if status == CHAINS_OK and started:
+            for i in range(count):
+                u = <uint64_t>starts[i]
+                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+                if key < 0 or key >= pixels:
+                    status = CHAINS_START
+                    break
+        if status == CHAINS_OK and given:
+            for j in range(2 * nsteps):
+                u = <uint64_t>steps[j]
+                st[j] = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+            for j in range(nsteps):
+                if st[2 * j] == 0 and st[2 * j + 1] == 0:
+                    status = CHAINS_EMPTY
+                    break
+        if status == CHAINS_OK and given:
+            # a step's turn is the sum of the stored quadrants before it on its polyline
+            j = 0
+            for i in range(count):
+                turn = 0
+                for k in range(lengths[i] - 1):
+                    dx = st[2 * j]; dy = st[2 * j + 1]
+                    q = _quadrant(dx, dy)
+                    if turn == 1:
+                        t = dx; dx = -dy; dy = t
+                    elif turn == 2:
+                        dx = -dx; dy = -dy
+                    elif turn == 3:
+                        t = dx; dx = dy; dy = -t
+                    if dx >= width or -dx >= width or dy >= rows or -dy >= rows:
+                        status = CHAINS_LONG
+                    st[2 * j] = dx; st[2 * j + 1] = dy
+                    turn = (turn + q) & 3
+                    j += 1
+        if status == CHAINS_OK and given:
+            key = 0
+            j = 0
+            first = 0
+            for i in range(count):
+                u = <uint64_t>starts[i]
+                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+                x = key % width
+                y = key // width
+                o[first] = key
+                for k in range(1, lengths[i]):
+                    x += st[2 * j]; y += st[2 * j + 1]
+                    j += 1
+                    if x < 0 or x >= width or y < 0 or y >= rows:
+                        status = CHAINS_LEAVES
+                        break
+                    o[first + k] = y * width + x
+                if status != CHAINS_OK:
+                    break
+                first += lengths[i]
+    return status, (keys if status == CHAINS_OK and given else None)
+
+
+def line_ranks(const int64_t[::1] keys, const int64_t[::1] perm):
+    """(distinct keys, rank, appearance): the distinct polyline point keys in
+    increasing order, each point's rank among them, and the ranks in the order the
+    chains first reach them (the sample order's polyline part, ATM.md §4.2.4), from
+    `perm`, an argsort of `keys` (any: a key's first point is the least place in its
+    group). None if perm is no permutation."""
+    cdef int64_t total = keys.shape[0], i, j, k, groups = 0, r
+    cdef bint bad = perm.shape[0] != total
+    rank_arr = np.empty(total, dtype=np.int64)
+    first_arr = np.empty(total, dtype=np.int64)
+    cdef int64_t[::1] rank = rank_arr, first = first_arr
+    with nogil:
+        for i in range(total):
+            if <uint64_t>perm[i] >= <uint64_t>total:
+                bad = True
+                break
+            rank[i] = -1
+        if not bad:
+            for i in range(total):
+                k = perm[i]
+                if rank[k] >= 0 or (i and keys[k] < keys[perm[i - 1]]):
+                    bad = True  # a place twice, or out of order: no argsort
+                    break
+                if i == 0 or keys[k] != keys[perm[i - 1]]:
+                    first[groups] = k
+                    groups += 1
+                elif k < first[groups - 1]:
+                    first[groups - 1] = k
+                rank[k] = groups - 1
+    if bad:
+        return None
+    distinct = np.empty(groups, dtype=np.int64)
+    appear_arr = np.empty(groups, dtype=np.int64)
+    cdef int64_t[::1] d = distinct, appear = appear_arr
+    with nogil:
+        for r in range(groups):
+            d[r] = keys[first[r]]
+        j = 0
+        for k in range(total):
+            r = rank[k]
+            if first[r] == k:
+                appear[j] = r
+                j += 1
+    return distinct, rank_arr, appear_arr
+
+
+def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
+                  const int64_t[::1] ranks, const int64_t[::1] appear, const int64_t[::1] lengths,
+                  int64_t width):
+    """(ok, vertices, free places, flat, walls, on_line): a band's vertices in raster
+    order from its polyline pixels (line_keys, increasing and distinct) and the
+    others (free_keys, increasing), merged; each free vertex's place; each polyline
+    point's vertex (flat, chain after chain; ranks among line_keys from line_ranks);
+    the polylines' steps as vertex pairs (walls); and the polyline vertices in the
+    order line_ranks' `appear` gives. ok is False if a pixel is in both lists."""
+    cdef int64_t nl = line_keys.shape[0], nf = free_keys.shape[0], n = nl + nf
+    cdef int64_t total = ranks.shape[0], count = lengths.shape[0], na = appear.shape[0]
+    cdef int64_t i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
+    cdef bint ok = True
+    if width < 1:
+        raise ValueError("band_vertices: a width of at least one pixel")
+    vertices = np.empty((n, 2), dtype=np.int64)
+    places = np.empty(nf, dtype=np.int64)
+    line_places = np.empty(nl, dtype=np.int64)
+    flat_arr = np.empty(total, dtype=np.int64)
+    walls_arr = np.empty((max(total - count, 0), 2), dtype=np.int64)
+    on_line_arr = np.empty(na, dtype=np.int64)
+    cdef int64_t[:, ::1] v = vertices, walls = walls_arr
+    cdef int64_t[::1] fp = places, lp = line_places, flat = flat_arr, on_line = on_line_arr
+    with nogil:
+        for k in range(n):
+            if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
+                key = line_keys[i]
+                lp[i] = k
+                i += 1
+            else:
+                key = free_keys[j]
+                if i < nl and line_keys[i] == key:
+                    ok = False
+                    break
+                fp[j] = k
+                j += 1
+            # the keys increase: the row advances instead of a 64-bit division each
+            while key - row >= width:
+                row += width
+                y += 1
+            v[k, 0] = key - row
+            v[k, 1] = y
+        if ok and (_corners_beyond(&ranks[0], total, nl) if total else False):
+            ok = False
+        if ok and (_corners_beyond(&appear[0], na, nl) if na else False):
+            ok = False
+        if ok:
+            for k in range(total):
+                flat[k] = lp[ranks[k]]
+            for k in range(na):
+                on_line[k] = lp[appear[k]]
+            for i in range(count):
+                for k in range(at, at + lengths[i] - 1):
+                    if k + 1 >= total or w >= walls.shape[0]:
+                        ok = False
+                        break
+                    walls[w, 0] = flat[k]
+                    walls[w, 1] = flat[k + 1]
+                    w += 1
+                at += lengths[i]
+    if not ok:
+        return False, None, None, None, None, None
+    return True, vertices, places, flat_arr, walls_arr, on_line_arr

@@ -171,7 +171,8 @@ def canonical_triangles(triangles: np.ndarray) -> np.ndarray:
 
 def triangle_crc(canonical: np.ndarray) -> int:
     """CRC-32 of a canonical triangle list as little-endian u32 triples."""
-    return zlib.crc32(np.ascontiguousarray(canonical, dtype="<u4").tobytes()) & 0xFFFFFFFF
+    # the array's own buffer: no copy to bytes first
+    return zlib.crc32(np.ascontiguousarray(canonical, dtype="<u4").reshape(-1).view(np.uint8)) & 0xFFFFFFFF
 
 
 def runs(mask: np.ndarray) -> np.ndarray:

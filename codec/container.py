@@ -13,7 +13,7 @@ import io
 import struct
 import zlib
 from dataclasses import dataclass
-from typing import BinaryIO, Iterator
+from typing import BinaryIO, Iterator, NamedTuple
 
 import numpy as np
 from construct import ConstructError
@@ -101,6 +101,13 @@ _MESH_FIXED = struct.Struct(
 #: schema.ChunkHead (length, type) as a struct: parsed once per chunk.
 _CHUNK_HEAD = struct.Struct("<I4s")
 assert _CHUNK_HEAD.size == schema.ChunkHead.sizeof()
+#: schema.FileHeader (signature, version) and schema.Header (width, height,
+#: sample_type, channels) as structs: construct's parse cost more than a small
+#: file's decode
+_FILE_HEAD = struct.Struct("<8sH")
+assert _FILE_HEAD.size == schema.FileHeader.sizeof()
+_HEADER = struct.Struct("<IIBB")
+assert _HEADER.size == schema.Header.sizeof()
 
 #: Frames up to this size are decompressed whole at once (cheaper than reading their
 #: fixed fields first); larger ones have their fixed fields checked first.
@@ -275,6 +282,15 @@ class _Counted:
         return b"".join(parts)
 
 
+class _RawFields(NamedTuple):
+    """schema.Header's fields, as its parse names them."""
+
+    width: int
+    height: int
+    sample_type: int
+    channels: int
+
+
 @dataclass(frozen=True)
 class _RawHeader:
     sample_type: int
@@ -351,14 +367,14 @@ class Reader:
         self._iterated = False
 
     def _read_signature(self) -> int:
-        head = self._stream.read(schema.FileHeader.sizeof())
+        head = self._stream.read(_FILE_HEAD.size)
         if len(head) < len(schema.SIGNATURE) and head and schema.SIGNATURE.startswith(head):
             raise TruncatedError("the file ends inside the .atm signature")
         if not head.startswith(schema.SIGNATURE):
             raise FormatError("not an .atm file (the signature does not match)")
-        if len(head) < schema.FileHeader.sizeof():
+        if len(head) < _FILE_HEAD.size:
             raise TruncatedError("the file ends inside the version field")
-        version = schema.FileHeader.parse(head).version
+        version = _FILE_HEAD.unpack(head)[1]
         if version != schema.VERSION:
             # version 5 has version 6's bytes, but its implicit triangles were one
             # library's tie-breaking (ATM.md section 7)
@@ -409,9 +425,9 @@ class Reader:
 
     @staticmethod
     def _parse_header(payload: bytes) -> "_RawHeader":
-        if len(payload) != schema.Header.sizeof():
-            raise CorruptError(f"AHDR chunk has {len(payload)} bytes, not {schema.Header.sizeof()}")
-        h = schema.Header.parse(payload)
+        if len(payload) != _HEADER.size:
+            raise CorruptError(f"AHDR chunk has {len(payload)} bytes, not {_HEADER.size}")
+        h = _RawFields(*_HEADER.unpack(payload))
         if h.sample_type not in schema.SAMPLE_DTYPES:
             raise UnsupportedError(
                 f"unknown sample type {h.sample_type} (0 = uint8, 1 = uint16, 2 = quantised float, "

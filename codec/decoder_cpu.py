@@ -29,8 +29,8 @@ uncovered, or covered twice).
 
 The rasteriser is a compiled kernel (codec/_rasterise.pyx, built by the package's
 own build), exact integer arithmetic throughout, that releases the GIL: threads
-decoding different files run in parallel. Each call owns its buffers (the image and a
-byte per pixel counting its writes); nothing is shared between calls. The kernel
+decoding different files run in parallel. Each call owns its buffers (the image and
+the counters of its coverage check); nothing is shared between calls. The kernel
 checks every index it reads (vertices inside the image, triangle corners among the
 vertices), so a mesh that skipped validation cannot make it write out of bounds.
 """
@@ -94,8 +94,7 @@ def render(mesh: Mesh) -> np.ndarray:
     values = np.ascontiguousarray(mesh.values, dtype=np.int64).reshape(len(vertices), c)
     triangles = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
     out = np.empty((h * w, c), dtype=mesh.dtype)
-    cover = np.zeros(h * w, dtype=np.uint8)
-    status, detail = _rasterise.rasterise(vertices, values, triangles, out, cover, w, h)
+    status, detail = _rasterise.rasterise(vertices, values, triangles, out, w, h)
     if status == _rasterise.Status.BAD_VERTEX:
         raise CorruptError(f"vertex {detail} lies outside the {w}x{h} image")
     if status == _rasterise.Status.BAD_INDEX:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -9,6 +10,40 @@ import numpy as np
 from . import limits
 from .errors import CorruptError, LimitError
 from .native import _fields
+
+
+class Polylines(Sequence):
+    """Polylines stored one after another, as a decoder reads them: `flat` vertex
+    indices and each polyline's length. It reads as a list of index arrays (each a
+    view of `flat`, made when asked), so that a band of hundreds of walls does not
+    make hundreds of arrays it may never use."""
+
+    __slots__ = ("flat", "lengths", "_starts")
+
+    def __init__(self, flat: np.ndarray, lengths: np.ndarray):
+        self.flat = flat
+        self.lengths = lengths
+        self._starts: list[int] | None = None
+
+    def __len__(self) -> int:
+        return len(self.lengths)
+
+    def _bounds(self) -> list[int]:
+        if self._starts is None:
+            self._starts = np.r_[0, np.cumsum(self.lengths)].tolist()
+        return self._starts
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[k] for k in range(*i.indices(len(self)))]
+        k = range(len(self))[i]  # IndexError, negative indices as a list's
+        bounds = self._bounds()
+        return self.flat[bounds[k] : bounds[k + 1]]
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        bounds, flat = self._bounds(), self.flat
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            yield flat[a:b]
 
 
 @dataclass(eq=False)
@@ -29,7 +64,7 @@ class Mesh:
     triangles: np.ndarray
     width: int
     height: int
-    constraints: list[np.ndarray] = field(default_factory=list)
+    constraints: Sequence[np.ndarray] = field(default_factory=list)
     #: height x width booleans, True where the image has no data (None: no holes).
     #: Decoders give hole pixels the file's nodata value; no vertex value comes from them.
     holes: np.ndarray | None = None
@@ -132,9 +167,12 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
     if not mesh.constraints:
         return
     lines = mesh.constraints
-    lengths = np.fromiter(map(len, lines), np.int64, len(lines))
+    if isinstance(lines, Polylines):  # a decoder's: already one array
+        lengths, flat = lines.lengths, lines.flat
+    else:
+        lengths = np.fromiter(map(len, lines), np.int64, len(lines))
+        flat = np.concatenate(lines)
     # with every polyline 2 long or more, its steps name each of its indices
-    flat = np.concatenate(lines)
     if lengths.min() < 2 or flat.min() < 0 or flat.max() >= len(v):
         raise CorruptError("a constraint polyline refers to a missing vertex")
     if len(t) and not walls_are_edges:

@@ -22,6 +22,7 @@ from .format_spec import schema
 
 from . import frames, limits
 from .coding import (
+    MAX_VARINT_BYTES,
     canonical_triangles,
     hilbert_keys,
     hilbert_levels,
@@ -33,7 +34,7 @@ from .coding import (
     zigzag,
 )
 from .errors import ATMError, CorruptError, LimitError
-from .mesh import Mesh, chain_steps, doubled_areas
+from .mesh import Mesh, Polylines, chain_steps, doubled_areas
 from .native import _fields
 from .triangulate import delaunay, triangulate
 
@@ -153,20 +154,6 @@ def unturned_steps(stored: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     before -= q
     first = _first_steps(lengths)
     return turn(stored, before - np.repeat(before[first], lengths - 1))
-
-
-def _chain_points(lengths: np.ndarray, starts: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """(x, y) of every polyline point, polyline after polyline: each polyline's
-    start plus the running sum of its steps (vectorised over all of them)."""
-    firsts = np.cumsum(lengths) - lengths
-    inc = np.empty((int(lengths.sum()), 2), dtype=np.int64)
-    rest = np.ones(len(inc), dtype=bool)
-    rest[firsts] = False
-    inc[rest] = steps
-    inc[firsts] = starts
-    run = np.cumsum(inc, axis=0)
-    before = run[firsts] - starts  # the running sum up to each polyline's start
-    return run - np.repeat(before, lengths, axis=0)
 
 
 #: Vertex steps vary with fan area within 1/STEP_RANGE .. STEP_RANGE times the base step.
@@ -420,46 +407,45 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None
 
 _EMPTY = np.zeros(0, np.int64)
 _EMPTY.flags.writeable = False
-_EMPTY2 = np.zeros((0, 2), np.int64)
-_EMPTY2.flags.writeable = False
 #: _polylines of a band without polylines (read-only: shared by every such band)
-_NO_LINES = (_EMPTY, _EMPTY2, _EMPTY2, _EMPTY, _EMPTY, _EMPTY)
+_NO_LINES = (_EMPTY, _EMPTY, _EMPTY, _EMPTY)
 
 
 def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
-    """(lengths, steps, points, chain keys, the distinct keys sorted, each one's first
-    place in the chains) of a parsed MeshPayload's polylines, checked to lie in the
-    band."""
+    """(lengths, the distinct keys sorted, each point's rank among them, the ranks in
+    the order the chains first reach them: _fields.line_ranks) of a parsed
+    MeshPayload's polylines, checked to lie in the band: the
+    steps turned back (unturned_steps) and walked from each start in one compiled
+    pass, its checks in the order of the fields."""
     count, total = int(m.polyline_count), int(m.polyline_index_count)
     if not (count or total or m.polyline_lengths or m.polyline_starts or m.polyline_steps):
         # no polylines (most small bands): none of the arrays below has an element
         return _NO_LINES
-    pixels = width * rows
     lengths = unvarints(m.polyline_lengths, count, f"{where} polyline lengths")
-    if lengths.sum() != total or (count and lengths.min() < 2):
+    if count > total:  # each polyline has two points or more
         raise CorruptError(f"{where}: polyline lengths do not add up")
-    start_keys = np.cumsum(unzigzag(unvarints(m.polyline_starts, count, f"{where} polyline starts")))
-    if count and (start_keys.min() < 0 or start_keys.max() >= pixels):
+    # the other fields' varints are refused in the order the fields come, after the
+    # kernel's checks of the fields before them
+    ok_starts, starts = _fields.unvarints(np.frombuffer(m.polyline_starts, np.uint8), count, MAX_VARINT_BYTES)
+    ok_steps, steps = _fields.unvarints(np.frombuffer(m.polyline_steps, np.uint8), 2 * (total - count), MAX_VARINT_BYTES)
+    status, chain_keys = _fields.chains(lengths, starts, steps, total, width, rows)
+    if status == _fields.Chains.CHAINS_LENGTHS:
+        raise CorruptError(f"{where}: polyline lengths do not add up")
+    if ok_starts != _fields.Varints.VARINTS_OK:
+        unvarints(m.polyline_starts, count, f"{where} polyline starts")  # raises its error
+    if status == _fields.Chains.CHAINS_START:
         raise CorruptError(f"{where}: a polyline starts outside the {width}x{rows} band")
-    steps = unzigzag(unvarints(m.polyline_steps, 2 * (total - count), f"{where} polyline steps"))
-    steps = steps.reshape(-1, 2)
-    if len(steps) and not np.abs(steps).any(axis=1).all():
+    if ok_steps != _fields.Varints.VARINTS_OK:
+        unvarints(m.polyline_steps, 2 * (total - count), f"{where} polyline steps")  # raises its error
+    if status == _fields.Chains.CHAINS_EMPTY:
         raise CorruptError(f"{where}: a polyline step is empty")
-    steps = unturned_steps(steps, lengths)
-    if len(steps) and (
-        np.abs(steps[:, 0]).max() >= width
-        or np.abs(steps[:, 1]).max() >= rows
-    ):
+    if status == _fields.Chains.CHAINS_LONG:
         raise CorruptError(f"{where}: a polyline step is longer than the band")
-    starts = np.stack([start_keys % width, start_keys // width], 1)
-    points = _chain_points(lengths, starts, steps)
-    if total and (
-        points.min() < 0 or points[:, 0].max() >= width or points[:, 1].max() >= rows
-    ):
+    if status == _fields.Chains.CHAINS_LEAVES:
         raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
-    chain_keys = points[:, 1] * width + points[:, 0]
-    line_keys, first_seen = np.unique(chain_keys, return_index=True)
-    return lengths, steps, points, chain_keys, line_keys, first_seen
+    # the distinct pixels, each point's rank among them and their first-reached order
+    line_keys, ranks, appear = _fields.line_ranks(chain_keys, np.argsort(chain_keys))
+    return lengths, line_keys, ranks, appear
 
 
 @functools.cache
@@ -485,8 +471,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     pixels = width * rows
 
     # polylines first: their points are vertices the positions do not repeat
-    lengths, steps, points, chain_keys, line_keys, first_seen = _polylines(m, width, rows, where)
-    count, total = len(lengths), len(chain_keys)
+    lengths, line_keys, ranks, appear = _polylines(m, width, rows, where)
+    count, total = len(lengths), len(ranks)
 
     free = n - len(line_keys)
     if free < 0:
@@ -504,34 +490,15 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         free_keys = y * width + x
         by_curve = np.argsort(free_keys)
         free_keys = free_keys[by_curve]
-    # Both key lists are increasing: merged, each free vertex's index is its own rank
-    # plus the number of polyline pixels before it (searchsorted), and a shared pixel
-    # is one of those found equal
-    if total:
-        free_index = np.searchsorted(line_keys, free_keys)
-        if free:
-            found = line_keys[np.minimum(free_index, len(line_keys) - 1)]
-            if (found == free_keys).any():
-                raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
-        free_index += np.arange(free)
-        keys = np.empty(n, np.int64)
-        is_free = np.zeros(n, bool)
-        is_free[free_index] = True
-        keys[free_index] = free_keys
-        keys[~is_free] = line_keys
-    else:  # every vertex stored by position, in raster order
-        free_index = np.arange(free)
-        keys = free_keys
-    vertices = np.empty((n, 2), np.int64)
-    np.divmod(keys, width, out=(vertices[:, 1], vertices[:, 0]))
-    flat = np.searchsorted(keys, chain_keys)
-    ends = np.cumsum(lengths)
-    lines = [flat[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
-    walls = None
-    if total:
-        # the steps as pairs of chain positions
-        pairs = chain_steps(np.arange(total), lengths)
-        walls = flat[pairs]
+    # Both key lists are increasing: merged in one compiled pass, which also finds
+    # each polyline point's vertex (flat) and the walls as vertex pairs
+    ok, vertices, free_index, flat, walls, on_line = _fields.band_vertices(
+        line_keys, free_keys, ranks, appear, lengths, width)
+    if not ok:
+        raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
+    lines = Polylines(flat, lengths)
+    if not total:
+        walls = None
 
     if m.connectivity == schema.DELAUNAY:
         if m.triangles:
@@ -563,7 +530,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index
-    seq_order = np.concatenate([flat[np.sort(first_seen)], curve]) if total else curve
+    seq_order = np.concatenate([on_line, curve]) if total else curve
     # steps, parents and running sums in one compiled pass (vertex_steps, sample_parents
     # and tree_sums' arithmetic), every index checked there
     status, values, areas = _fields.band_values(

@@ -240,6 +240,31 @@ def test_cpu_overlap_is_corrupt() -> None:
         decoder_cpu.render(doubled)
 
 
+def test_cpu_overlap_in_many_layers_is_corrupt() -> None:
+    """The coverage check counts span starts and ends per row in 16-bit counters: a
+    triangle repeated 2**16 times brings them back round to a tiling's values, which
+    the per-row span count must catch (it did not without it)."""
+    m = _grid_mesh()
+    layers = np.concatenate([m.triangles] + [m.triangles[:1]] * (1 << 16))
+    with pytest.raises(CorruptError, match="twice"):
+        decoder_cpu.render(Mesh(m.vertices, m.values, layers, m.width, m.height))
+
+
+def test_cpu_rows_of_more_spans_than_the_counters_hold() -> None:
+    """A valid mesh whose rows have over 2**15 spans each (a 40,000-pixel-wide strip of
+    one-pixel triangles) renders as the rule says: the check falls back to counting
+    every pixel's writes."""
+    w, h = 40000, 2
+    xs = np.arange(w)
+    vertices = np.concatenate([np.stack([xs, np.zeros(w, np.int64)], 1), np.stack([xs, np.ones(w, np.int64)], 1)])
+    top, bottom = xs[:-1], xs[:-1] + w
+    triangles = np.concatenate([np.stack([top, top + 1, bottom], 1), np.stack([top + 1, bottom + 1, bottom], 1)])
+    values = (np.arange(2 * w) * 7 % 251).astype(np.uint8)
+    mesh = Mesh(vertices, values, triangles, w, h)
+    validate(mesh)
+    assert np.array_equal(decoder_cpu.render(mesh), values.reshape(h, w))
+
+
 @st.composite
 def flipped(draw) -> Mesh:
     """A valid mesh with some of its diagonals flipped (where the two triangles on an

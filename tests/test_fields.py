@@ -237,3 +237,110 @@ def test_validate_checks_elements_in_one_pass_whatever_the_arrays() -> None:
         for message, (vv, tt) in cases.items():
             with pytest.raises(CorruptError, match=message):
                 validate(Mesh(cast(vv), values, cast(tt), 4, 3))
+
+
+def _fields_of_chains(width: int, rows: int, lines: list[np.ndarray]):
+    """A parsed MeshPayload's polyline fields for polylines given as (x, y) points,
+    coded as the encoder codes them (start gaps, turned steps, zigzag varints)."""
+    from types import SimpleNamespace
+
+    lengths = np.array([len(p) for p in lines], np.int64)
+    flat = np.concatenate(lines) if lines else np.zeros((0, 2), np.int64)
+    steps = meshcode.chain_steps(flat, lengths)
+    keys = flat[:, 1] * width + flat[:, 0]
+    start_keys = keys[np.cumsum(lengths) - lengths]
+    return SimpleNamespace(
+        polyline_count=len(lines), polyline_index_count=len(flat),
+        polyline_lengths=coding.varints(lengths),
+        polyline_starts=coding.varints(coding.zigzag(np.diff(start_keys, prepend=0))),
+        polyline_steps=coding.varints(coding.zigzag(meshcode.turned_steps(steps[:, 1] - steps[:, 0], lengths)).ravel()),
+    ), keys
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.integers(1, 30))
+def test_chains_kernel_walks_the_turned_steps(seed: int, width: int, rows: int) -> None:
+    """_fields.chains (through meshcode._polylines) gives the keys of the points the
+    encoder coded: unturned_steps' turn and the walk from each start, in one pass."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for _ in range(rng.integers(0, 6)):
+        n = int(rng.integers(2, 9))
+        pts = np.stack([rng.integers(0, width, n), rng.integers(0, rows, n)], 1)
+        keep = np.r_[True, (np.diff(pts, axis=0) != 0).any(axis=1)]  # no empty step
+        if keep.sum() >= 2:
+            lines.append(pts[keep])
+    m, keys = _fields_of_chains(width, rows, lines)
+    lengths, line_keys, ranks, appear = meshcode._polylines(m, width, rows, "band")
+    assert line_keys[ranks].tolist() == keys.tolist()
+    assert line_keys.tolist() == sorted(set(keys.tolist()))
+    assert line_keys[appear].tolist() == list(dict.fromkeys(keys.tolist()))  # first reached first
+
+
+def test_chains_kernel_refuses_in_the_fields_order() -> None:
+    """Each malformed polyline field gets its own message, and a band wrong in two
+    ways gets the one of the field that comes first (starts before steps)."""
+    line = [np.array([[1, 1], [4, 1], [4, 3]])]
+    m, _ = _fields_of_chains(6, 5, line)
+    cases = [
+        (dict(polyline_index_count=4), "lengths do not add up"),
+        (dict(polyline_starts=coding.varints(coding.zigzag(np.array([30])))), "starts outside the 6x5 band"),
+        (dict(polyline_starts=coding.varints(coding.zigzag(np.array([30]))), polyline_steps=b"\x80"),
+         "starts outside"),
+        (dict(polyline_steps=b"\x80"), "polyline steps: 1 bytes do not hold 4 numbers"),
+        (dict(polyline_steps=coding.varints(np.array([0, 0, 2, 2]))), "a polyline step is empty"),
+        (dict(polyline_steps=coding.varints(coding.zigzag(np.array([6, 0, 1, 0])))), "longer than the band"),
+        (dict(polyline_steps=coding.varints(coding.zigzag(np.array([5, 0, 1, 0])))), "leaves the 6x5 band"),
+    ]
+    for change, message in cases:
+        bad = type(m)(**{**vars(m), **change})
+        with pytest.raises(CorruptError, match=message):
+            meshcode._polylines(bad, 6, 5, "band")
+
+
+def test_band_vertices_merges_the_key_lists() -> None:
+    """_fields.line_ranks and band_vertices: the vertices of both increasing key
+    lists in raster order, across many rows (a row walk stands in for a division per
+    key), each polyline point's vertex, the walls, and the polyline vertices in the
+    order the chains first reach them."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(5)
+    width = 37
+    keys = np.unique(rng.integers(0, width * 300, 2000))
+    on_line = rng.random(len(keys)) < 0.3
+    line_keys, free_keys = keys[on_line], keys[~on_line]
+    chain = rng.permutation(np.r_[line_keys, line_keys[:50]])
+    lengths = np.array([len(chain) - 2, 2])
+    distinct, ranks, appear = _fields.line_ranks(chain, np.argsort(chain))
+    assert distinct.tolist() == line_keys.tolist()
+    ok, vertices, places, flat, walls, first = _fields.band_vertices(distinct, free_keys, ranks, appear, lengths, width)
+    assert ok
+    assert vertices.tolist() == np.stack([keys % width, keys // width], 1).tolist()
+    assert keys[places].tolist() == free_keys.tolist()
+    assert keys[flat].tolist() == chain.tolist()
+    assert keys[first].tolist() == list(dict.fromkeys(chain.tolist()))
+    assert walls.tolist() == [[flat[i], flat[i + 1]] for i in range(len(chain) - 3)] + [[flat[-2], flat[-1]]]
+    shared = np.r_[free_keys, line_keys[:1]]
+    shared.sort()
+    assert not _fields.band_vertices(distinct, shared, ranks, appear, lengths, width)[0]
+    assert _fields.line_ranks(chain, np.zeros(len(chain), np.int64)) is None  # no permutation
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["fans", "hub", "far", "negative"]))
+def test_canonical_triangles_counting_sort_and_its_fallback(seed: int, kind: str) -> None:
+    """The counting sort (fans of a mesh's indices; a hub vertex starting over 32
+    rows is sorted by qsort) and the qsort of rows whose indices are far beyond
+    their count or negative give the same order: each row's smallest rotation, the
+    rows sorted."""
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(1, 400))
+    n = {"fans": 60, "hub": 60, "far": 1 << 40, "negative": 60}[kind]
+    t = rng.integers(0, n, (m, 3)).astype(np.int64)
+    if kind == "hub":
+        t[: m // 2, 0] = 0
+    if kind == "negative":
+        t[0, 1] = -3
+    rotations = [min(tuple(r[i:]) + tuple(r[:i]) for i in range(3)) for r in t.tolist()]
+    assert coding.canonical_triangles(t).tolist() == sorted(map(list, rotations))

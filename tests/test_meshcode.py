@@ -5,6 +5,7 @@ parents and their sums."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -110,3 +111,24 @@ def test_sample_parents_and_sums_follow_the_spec(count, seed):
     for j in range(len(order)):
         expected[j] = increments[j] + (expected[parent[j]] if parent[j] >= 0 else 0)
     np.testing.assert_array_equal(sums, expected)
+
+
+def test_decoded_polylines_read_as_a_list_of_index_arrays() -> None:
+    """A decoded band's constraints (mesh.Polylines: one flat array and the lengths)
+    behave as the list of index arrays a mesher makes: length, indexing from either
+    end, slices, iteration, concatenation and pickling."""
+    import pickle
+
+    from codec.mesh import Polylines
+
+    flat = np.arange(10, 19, dtype=np.int64)
+    lines = Polylines(flat, np.array([2, 4, 3], np.int64))
+    expected = [[10, 11], [12, 13, 14, 15], [16, 17, 18]]
+    assert len(lines) == 3 and bool(lines) and not Polylines(flat[:0], flat[:0])
+    assert [c.tolist() for c in lines] == expected
+    assert lines[-1].tolist() == expected[-1] and lines[1].tolist() == expected[1]
+    assert [c.tolist() for c in lines[1:]] == expected[1:]
+    assert np.concatenate(lines).tolist() == flat.tolist()
+    with pytest.raises(IndexError):
+        lines[3]
+    assert [c.tolist() for c in pickle.loads(pickle.dumps(lines))] == expected
