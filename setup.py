@@ -11,8 +11,11 @@ from setuptools import Extension, setup
 #: The kernels, each a module of its own.
 KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber", "codec._mask", "codec._elements", "codec._polylines"]
 
-# MSVC spells optimisation its own way; gcc and clang take -O2.
-OPTIMISE = ["/O2"] if sys.platform == "win32" else ["-O2"]
+# MSVC spells optimisation its own way; gcc and clang take -O2. No fused multiply-add
+# contraction (gcc and clang contract by default where the target has FMA, e.g. ARM):
+# the encoder's float sums pick worst pixels and plane values, so an encode must give
+# the same bytes on every platform (/fp:precise, MSVC's default, does not contract).
+OPTIMISE = ["/O2", "/fp:precise"] if sys.platform == "win32" else ["-O2", "-ffp-contract=off"]
 
 extensions = [
     # depends: C++ headers beside a kernel (codec/cdt.hpp), rebuilt on change, in the sdist
