@@ -390,7 +390,7 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None
     # along the curve, evenly spread ones along the rows
     raster = position_fields(np.diff(sorted_keys[free], prepend=-1) - 1)
     curve = position_fields(np.diff(curve_keys, prepend=-1) - 1)
-    sizes = [len(frames.compress(f["positions"])) + len(f["position_bits"]) for f in (raster, curve)]
+    sizes = [frames.trial_size(f["positions"]) + len(f["position_bits"]) for f in (raster, curve)]
     position_order = schema.POSITIONS_RASTER if sizes[0] <= sizes[1] else schema.POSITIONS_HILBERT
     tri_fields = np.zeros(0, np.int64)
     if not delaunay and len(triangles):
