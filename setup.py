@@ -9,7 +9,7 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 #: The kernels, each a module of its own.
-KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber"]
+KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber", "codec._lsq"]
 
 # MSVC spells optimisation its own way; gcc and clang take -O2.
 OPTIMISE = ["/O2"] if sys.platform == "win32" else ["-O2"]
