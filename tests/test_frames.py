@@ -110,4 +110,4 @@ def test_a_large_payload_is_compressed_once(monkeypatch):
     monkeypatch.setattr(frames, "compress", lambda data: seen.append(len(data)) or compress(data))
     field = b"".join(parts) * 4
     assert frames.trial_size(field) > 0
-    assert seen == [frames.SEARCH_BELOW]
+    assert seen == [frames.TRIAL_PIECES * frames.TRIAL_PIECE]
