@@ -37,10 +37,12 @@ def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     float64).
 
     With `number` (per vertex: its unknown's number, or -1 if held) and `known` (N x C,
-    the held vertices' values), the held corners are eliminated as values.refit needs:
-    their part of the equations moves to the right-hand side, their rows and columns
-    of the element matrix are zeroed, and a third result gives the corners in the
-    unknowns' numbering, held ones pointing at a sink numbered after the largest.
+    the held vertices' values), only the triangles with a free corner are summed (the
+    rows of the results are theirs, in order), and the held corners are eliminated as
+    values.refit needs: their part of the equations moves to the right-hand side, their
+    rows and columns of the element matrix are zeroed, and a third result gives the
+    corners in the unknowns' numbering, held ones pointing at a sink numbered after the
+    largest.
 
     ValueError if a corner index or a vertex lies outside the arrays or the image, or a
     triangle is not counter-clockwise in raster coordinates (D <= 0)."""
@@ -54,16 +56,37 @@ def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
         if known is None or number.shape[0] != n or known.shape[0] != n or known.shape[1] != image.shape[2]:
             raise ValueError("triangle_normals: number (N) and known (N x C) go together")
         sink = max(np.max(number) if n else -1, -1) + 1
-    numbered_array = np.zeros((m if eliminate else 0, 3), dtype=np.int64)
+    cdef int64_t t, i, j, k, l, ch, dy, x, y, left, right, rows, up, upper, lower, tall
+    # the triangles to sum: all, or (eliminating) those with a free corner
+    keep_array = np.arange(m, dtype=np.int64)
+    cdef int64_t[::1] keep = keep_array
+    cdef int64_t count = m, o, a
+    if eliminate:
+        count = 0
+        with nogil:
+            for t in range(m):
+                for i in range(3):
+                    a = triangles[t, i]
+                    if a < 0 or a >= n:
+                        count = -1
+                        break
+                    if number[a] >= 0:
+                        keep[count] = t
+                        count += 1
+                        break
+                if count < 0:
+                    break
+        if count < 0:
+            raise ValueError("triangle_normals: a corner index beyond the vertices")
+    numbered_array = np.zeros((count if eliminate else 0, 3), dtype=np.int64)
     cdef int64_t[:, ::1] numbered = numbered_array
     cdef double corr
-    gram_array = np.zeros((m, 3, 3), dtype=np.float64)
-    rhs_array = np.zeros((m, channels, 3), dtype=np.float64)
+    gram_array = np.zeros((count, 3, 3), dtype=np.float64)
+    rhs_array = np.zeros((count, channels, 3), dtype=np.float64)
     sums_array = np.zeros((channels, 3), dtype=np.float64)
     cdef double[:, :, ::1] gram = gram_array
     cdef double[:, :, ::1] rhs = rhs_array
     cdef double[:, ::1] s = sums_array  # per channel: b, u b, v b
-    cdef int64_t t, i, j, k, l, ch, c0, dy, x, y, left, right, rows, up, upper, lower, tall
     cdef int64_t px[3]
     cdef int64_t py[3]
     cdef int64_t coef[3][3]
@@ -74,7 +97,8 @@ def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     cdef double su, suu, sb, sub, u, v, b, dd
     cdef int status = 0
     with nogil:
-        for t in range(m):
+        for o in range(count):
+            t = keep[o]
             for i in range(3):
                 j = triangles[t, i]
                 if j < 0 or j >= n:
@@ -183,26 +207,26 @@ def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
             for i in range(3):
                 for j in range(i, 3):
                     b = (cm[i][0] * coef[j][0] + cm[i][1] * coef[j][1] + cm[i][2] * coef[j][2]) / (dd * dd)
-                    gram[t, i, j] = b
-                    gram[t, j, i] = b
+                    gram[o, i, j] = b
+                    gram[o, j, i] = b
             for ch in range(channels):
                 for i in range(3):
-                    rhs[t, ch, i] = (coef[i][0] * s[ch, 1] + coef[i][1] * s[ch, 2] + coef[i][2] * s[ch, 0]) / dd
+                    rhs[o, ch, i] = (coef[i][0] * s[ch, 1] + coef[i][1] * s[ch, 2] + coef[i][2] * s[ch, 0]) / dd
             if eliminate:
                 for ch in range(channels):
                     for i in range(3):
                         corr = 0.0
                         for j in range(3):
                             if number[triangles[t, j]] < 0:
-                                corr = corr + gram[t, i, j] * known[triangles[t, j], ch]
-                        rhs[t, ch, i] -= corr
+                                corr = corr + gram[o, i, j] * known[triangles[t, j], ch]
+                        rhs[o, ch, i] -= corr
                 for i in range(3):
-                    numbered[t, i] = number[triangles[t, i]]
-                    if numbered[t, i] < 0:
-                        numbered[t, i] = sink
+                    numbered[o, i] = number[triangles[t, i]]
+                    if numbered[o, i] < 0:
+                        numbered[o, i] = sink
                         for j in range(3):
-                            gram[t, i, j] = 0.0
-                            gram[t, j, i] = 0.0
+                            gram[o, i, j] = 0.0
+                            gram[o, j, i] = 0.0
     if status == 1:
         raise ValueError("triangle_normals: a corner index beyond the vertices")
     if status == 2:

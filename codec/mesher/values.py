@@ -226,9 +226,9 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
         return previous.copy()
     layout = layout_for(image) if layout is None else layout
     vertices = np.ascontiguousarray(vertices, dtype=np.int64)
-    near = np.ascontiguousarray(triangles[free[triangles].any(axis=1)], dtype=np.int64)
-    # the triangles' equations summed pixel by pixel in one compiled pass (small
-    # triangles own a few pixels each); the border lines' from their spans
+    # the equations of the triangles that touch a free vertex, summed pixel by pixel in
+    # one compiled pass (small triangles own a few pixels each); the border lines' from
+    # their spans
     plane = image.reshape(height, width, -1)
     if plane.dtype not in (np.uint8, np.uint16):
         plane = plane.astype(np.float64)
@@ -239,7 +239,8 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
     number = np.full(n, -1, np.int64)
     number[free] = np.arange(unknowns)
     prev = np.ascontiguousarray(prev)
-    gram, rhs, corners = _lsq.triangle_normals(vertices, near, np.ascontiguousarray(plane), number, prev)
+    gram, rhs, corners = _lsq.triangle_normals(vertices, np.ascontiguousarray(triangles, dtype=np.int64),
+                                               np.ascontiguousarray(plane), number, prev)
     lines = line_raster(vertices, width, height)
     line_gram, line_rhs = normal_equations(lines.coef, lines.den, *layout.fit_part(layout(lines)))
     held = ~free[lines.corners]  # E x 3
