@@ -34,7 +34,7 @@ from .coding import (
 )
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, chain_steps, doubled_areas
-from .native import _fields
+from .native import _fields, _renumber
 from .triangulate import delaunay, triangulate
 
 
@@ -310,7 +310,9 @@ def layout(mesh: Mesh) -> Layout:
     vertices = mesh.vertices[order]
     flat = _flat(lines)
     lengths = np.array([len(c) for c in lines], dtype=np.int64)
-    triangles = canonical_triangles(inverse[mesh.triangles])
+    # canonical_triangles(inverse[mesh.triangles]) by a counting sort (a comparison
+    # sort of 1.2M triangles took 0.16 s)
+    triangles = _renumber.canonical_renumbered(np.ascontiguousarray(mesh.triangles, dtype=np.int64), inverse)
     seq, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
     return Layout(
         order, inverse, sorted_keys, vertices, lines, flat, lengths, chain_steps(flat, lengths), triangles,

@@ -250,10 +250,10 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
     gram, rhs = np.concatenate([gram, line_gram]), np.concatenate([rhs, line_rhs])
     corners = np.concatenate([corners, np.where(held, unknowns, number[lines.corners])])
     start = np.vstack([prev[free], np.zeros((1, prev.shape[1]))])
-    samples = sample(image, vertices).reshape(n, -1).astype(np.float64)
-    anchor = np.vstack([samples[free], np.zeros((1, prev.shape[1]))])
+    # the free vertices' own pixels (work in proportion to them, not to the mesh)
+    at = vertices[free]
+    anchor = np.vstack([image[at[:, 1], at[:, 0]].reshape(len(at), -1), np.zeros((1, prev.shape[1]))])
     solved = solve(corners, gram, rhs, start, anchor=anchor)
-    out = prev.copy()
-    out[free] = solved[:-1]
-    out = np.where(free[:, None], _to_dtype(out, image.dtype), previous.reshape(n, -1))
+    out = np.array(previous, dtype=np.result_type(previous, image)).reshape(n, -1)
+    out[free] = _to_dtype(solved[:-1], image.dtype)
     return out[:, 0] if image.ndim == 2 else out
