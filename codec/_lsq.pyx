@@ -26,7 +26,7 @@ cdef inline int64_t ceil_div(int64_t num, int64_t den) noexcept nogil:
 
 def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                      const sample_t[:, :, ::1] image, const int64_t[::1] number=None,
-                     const double[:, ::1] known=None):
+                     const double[:, ::1] known=None, int64_t spare=0):
     """Per triangle, its part of A^T W A (M x 3 x 3, corner by corner, as listed) and of
     A^T W b (M x C x 3), where a pixel's row of A holds its corners' weights
     w_i = (alpha_i u + beta_i v + gamma_i) / D of the decoder (ATM.md, "Decoding"), u and
@@ -43,6 +43,9 @@ def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     rows and columns of the element matrix are zeroed, and a third result gives the
     corners in the unknowns' numbering, held ones pointing at a sink numbered after the
     largest.
+
+    spare: rows of zeros left at the end of every result, for the caller's own elements
+    (refit's border lines), so that adding them copies nothing.
 
     ValueError if a corner index or a vertex lies outside the arrays or the image, or a
     triangle is not counter-clockwise in raster coordinates (D <= 0)."""
@@ -78,11 +81,13 @@ def triangle_normals(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
                     break
         if count < 0:
             raise ValueError("triangle_normals: a corner index beyond the vertices")
-    numbered_array = np.zeros((count if eliminate else 0, 3), dtype=np.int64)
+    if spare < 0:
+        raise ValueError("triangle_normals: spare must be >= 0")
+    numbered_array = np.zeros((count + spare if eliminate else 0, 3), dtype=np.int64)
     cdef int64_t[:, ::1] numbered = numbered_array
     cdef double corr
-    gram_array = np.zeros((count, 3, 3), dtype=np.float64)
-    rhs_array = np.zeros((count, channels, 3), dtype=np.float64)
+    gram_array = np.zeros((count + spare, 3, 3), dtype=np.float64)
+    rhs_array = np.zeros((count + spare, channels, 3), dtype=np.float64)
     sums_array = np.zeros((channels, 3), dtype=np.float64)
     cdef double[:, :, ::1] gram = gram_array
     cdef double[:, :, ::1] rhs = rhs_array

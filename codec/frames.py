@@ -46,8 +46,11 @@ PARAMETERS = (
 #: How a large field's trial is sampled: this many evenly spaced pieces of this many
 #: bytes. On the position fields of SRTM float and synthetic DEMs at max_error 0.5-50
 #: (10 encodes, fields of 90-640 kB) it chose the order the whole fields' frames choose
-#: every time; 4 pieces of 16 KiB chose wrongly once (SRTM at 2: 718 bytes, 0.6 %).
-TRIAL_PIECES, TRIAL_PIECE = 32, 4096
+#: but in 4 close calls, which cost 10-111 bytes (at most 0.12 % of a file); 32 pieces
+#: chose as they do every time but the two trials then took longer than the MESH frame
+#: itself (0.7 s against 0.46 s on SRTM at max_error=2); 4 pieces of 16 KiB chose
+#: wrongly on SRTM at 2 (718 bytes, 0.6 %).
+TRIAL_PIECES, TRIAL_PIECE = 16, 4096
 
 
 def trial_size(data: bytes) -> float:

@@ -236,6 +236,12 @@ def test_the_compiled_normal_equations_are_those_of_the_triangles_spans(corpus):
         np.testing.assert_allclose(r, want_r, rtol=1e-9, atol=1e-6)
         np.testing.assert_allclose(g, want_gram * (~held)[:, :, None] * (~held)[:, None, :], rtol=1e-9, atol=1e-9)
         np.testing.assert_array_equal(corners, np.where(held, free.sum(), number[t]))
+        # rows left for the caller's own elements: zeros after the same results
+        more = _lsq.triangle_normals(vertices.astype(np.int64), triangles.astype(np.int64), planes, number,
+                                     known, 7)
+        for got, want in zip(more, (g, r, corners)):
+            assert len(got) == len(want) + 7 and not got[len(want):].any()
+            np.testing.assert_array_equal(got[: len(want)], want)
     vertices, triangles = random_mesh(gray, 50)
     v, t, planes = vertices.astype(np.int64), triangles.astype(np.int64), np.ascontiguousarray(gray[:, :, None])
     beyond = t.copy()

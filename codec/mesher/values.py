@@ -239,16 +239,16 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
     number = np.full(n, -1, np.int64)
     number[free] = np.arange(unknowns)
     prev = np.ascontiguousarray(prev)
-    gram, rhs, corners = _lsq.triangle_normals(vertices, np.ascontiguousarray(triangles, dtype=np.int64),
-                                               np.ascontiguousarray(plane), number, prev)
     lines = line_raster(vertices, width, height)
+    gram, rhs, corners = _lsq.triangle_normals(vertices, np.ascontiguousarray(triangles, dtype=np.int64),
+                                               np.ascontiguousarray(plane), number, prev, len(lines))
     line_gram, line_rhs = normal_equations(lines.coef, lines.den, *layout.fit_part(layout(lines)))
     held = ~free[lines.corners]  # E x 3
     known = np.where(held[:, :, None], prev[lines.corners], 0.0)  # E x 3 x C
-    line_rhs = line_rhs - np.einsum("eij,ejc->eci", line_gram, known)
-    line_gram = line_gram * (~held)[:, :, None] * (~held)[:, None, :]
-    gram, rhs = np.concatenate([gram, line_gram]), np.concatenate([rhs, line_rhs])
-    corners = np.concatenate([corners, np.where(held, unknowns, number[lines.corners])])
+    end = len(gram) - len(lines)  # the lines go in the rows the kernel left for them
+    rhs[end:] = line_rhs - np.einsum("eij,ejc->eci", line_gram, known)
+    gram[end:] = line_gram * (~held)[:, :, None] * (~held)[:, None, :]
+    corners[end:] = np.where(held, unknowns, number[lines.corners])
     start = np.vstack([prev[free], np.zeros((1, prev.shape[1]))])
     # the free vertices' own pixels (work in proportion to them, not to the mesh)
     at = vertices[free]
