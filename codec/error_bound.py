@@ -74,9 +74,9 @@ WALL_TAIL = 4
 #: Most pixels are over such a bound until most are vertices, so rounds of GROWTH alone
 #: are many and small, each paying for a whole render and measurement: float DEMs
 #: (synthetic 1024² at 0.5/5/50, SRTM at 0.5/2/10) took 28-35 rounds, with this 12-24,
-#: for -0.1 to +1.8 % bytes (median +0.2 %; 0.1 gave up to 7.7 %). Under wider bounds
-#: (integer data) it cost bytes: motorcycle disparity at max_error=4 +12.8 %, camera
-#: at 6 +2.5 %, uint16 SRTM at 3 +1.1 %.
+#: for +0.20/+0.49/+1.42 and -0.01/+0.76/+0.15 % bytes (0.1 gave up to 7.7 %).
+#: Under wider bounds (integer data) it cost bytes: motorcycle disparity at
+#: max_error=4 +12.8 %, camera at 6 +2.5 %, uint16 SRTM at 3 +1.1 %.
 FAR = 0.05
 
 
