@@ -58,11 +58,17 @@ def trial_size(data: bytes) -> float:
     that of a level-19 frame of it, or for a field longer than TRIAL_PIECES pieces of
     TRIAL_PIECE bytes, of those pieces evenly spaced, scaled to the whole (two level-19
     trials of a 640 kB field took 0.5-0.8 s)."""
-    if len(data) <= TRIAL_PIECES * TRIAL_PIECE:
-        return float(len(compress(data)))
-    step = (len(data) - TRIAL_PIECE) // (TRIAL_PIECES - 1)
-    sample = b"".join(data[i * step : i * step + TRIAL_PIECE] for i in range(TRIAL_PIECES))
+    sample = _sample(data)
     return len(compress(sample)) * len(data) / len(sample)
+
+
+def _sample(data: bytes) -> bytes:
+    """TRIAL_PIECES evenly spaced pieces of TRIAL_PIECE bytes of `data` (all of it if
+    it is not longer)."""
+    if len(data) <= TRIAL_PIECES * TRIAL_PIECE:
+        return data
+    step = (len(data) - TRIAL_PIECE) // (TRIAL_PIECES - 1)
+    return b"".join(data[i * step : i * step + TRIAL_PIECE] for i in range(TRIAL_PIECES))
 
 
 def _compressors(size: int) -> list[zstandard.ZstdCompressor]:
@@ -90,15 +96,18 @@ def _blocks(zc: zstandard.ZstdCompressor, parts: list[bytes], cuts: set[int]) ->
     return b"".join(out)
 
 
-#: A payload of at least this many bytes is compressed once, with LARGE's parameters
-#: and blocks that merge small parts: a level-19 frame of a float DEM's 1.6 MB mesh
-#: takes about 0.4 s, and the nine candidates took a quarter of a max_error encode.
-#: On large payloads that one is the smallest or within 0.7 % of it (corpus at quality
-#: 50/70, SRTM float and synthetic DEMs at max_error 0.5-50: 0.00-0.69 %, median 0.02 %),
-#: while below this size the search costs a few milliseconds and gains up to 3 %.
+#: A payload of at least this many bytes is compressed twice, with LARGE's parameters
+#: and blocks that merge small parts, and the smaller frame kept: a level-19 frame of
+#: a float DEM's 1.6 MB mesh takes about 0.4 s, and the nine candidates took a quarter
+#: of a max_error encode. On large payloads (corpus at quality 50/70, SRTM float and
+#: synthetic DEMs at max_error 0.5-50, Kinect and TUM depth and SRTM float at E = 0.1-2 %
+#: of the range, mesh only) the smaller of the two is the smallest of the nine or within
+#: 0.69 % of it (median 0.00 %); either alone loses up to 5.7 % (level 19's own on the
+#: DEMs, minimum match 6 on TUM's depth); a choice by a sample's frames up to 2.8 %.
+#: Below this size the search costs a few milliseconds and gains up to 3 %.
 SEARCH_BELOW = 1 << 16
-#: The parameters (PARAMETERS' second) used alone from SEARCH_BELOW on.
-LARGE = 1
+#: The parameters (indices into PARAMETERS) tried from SEARCH_BELOW on.
+LARGE = (0, 1)
 
 
 def compress_parts(parts: list[bytes]) -> bytes:
@@ -116,7 +125,8 @@ def compress_parts(parts: list[bytes]) -> bytes:
     if parts and len(parts[-1]) < SMALL_PART:
         merged.discard(len(parts) - 2)
     if len(whole) >= SEARCH_BELOW:
-        return _blocks(_compressors(len(whole))[LARGE], parts, merged)
+        compressors = _compressors(len(whole))
+        return min((_blocks(compressors[k], parts, merged) for k in LARGE), key=len)
     candidates = []
     for zc in _compressors(len(whole)):
         candidates.append(zc.compress(whole))
