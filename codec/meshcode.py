@@ -35,7 +35,7 @@ from .coding import (
 )
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, Polylines, chain_steps, doubled_areas
-from .native import _fields
+from .native import _fields, _renumber
 from .triangulate import delaunay, triangulate
 
 
@@ -297,7 +297,9 @@ def layout(mesh: Mesh) -> Layout:
     vertices = mesh.vertices[order]
     flat = _flat(lines)
     lengths = np.array([len(c) for c in lines], dtype=np.int64)
-    triangles = canonical_triangles(inverse[mesh.triangles])
+    # canonical_triangles(inverse[mesh.triangles]) by a counting sort (a comparison
+    # sort of 1.2M triangles took 0.16 s)
+    triangles = _renumber.canonical_renumbered(np.ascontiguousarray(mesh.triangles, dtype=np.int64), inverse)
     seq, free, curve_keys = _sample_order(vertices, flat, hilbert_levels(mesh.width, mesh.height))
     return Layout(
         order, inverse, sorted_keys, vertices, lines, flat, lengths, chain_steps(flat, lengths), triangles,
@@ -377,7 +379,7 @@ def encode_band(y0: int, mesh: Mesh, step: int = 1, delaunay: bool | None = None
     # along the curve, evenly spread ones along the rows
     raster = position_fields(np.diff(sorted_keys[free], prepend=-1) - 1)
     curve = position_fields(np.diff(curve_keys, prepend=-1) - 1)
-    sizes = [len(frames.compress(f["positions"])) + len(f["position_bits"]) for f in (raster, curve)]
+    sizes = [frames.trial_size(f["positions"]) + len(f["position_bits"]) for f in (raster, curve)]
     position_order = schema.POSITIONS_RASTER if sizes[0] <= sizes[1] else schema.POSITIONS_HILBERT
     tri_fields = np.zeros(0, np.int64)
     if not delaunay and len(triangles):

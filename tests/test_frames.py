@@ -73,3 +73,41 @@ def test_info_refuses_bytes_after_a_large_mesh_frame():
         codec.info(bad)
     with pytest.raises(codec.CorruptError, match="after its zstd frame"):
         codec.decode(bad)
+
+
+def test_a_large_payload_is_compressed_once(monkeypatch):
+    """#20: the candidate search made nine level-19 frames of every MESH payload, a
+    quarter of a float DEM's max_error encode; from frames.SEARCH_BELOW bytes on two
+    are made, with the parameters and blocks that are best or close to it there."""
+    made = []
+
+    class Counting:
+        def __init__(self, zc):
+            self.zc = zc
+
+        def compress(self, data):
+            made.append(len(data))
+            return self.zc.compress(data)
+
+        def compressobj(self, size):
+            made.append(size)
+            return self.zc.compressobj(size=size)
+
+    real = frames._compressors
+    monkeypatch.setattr(frames, "_compressors", lambda size: [Counting(zc) for zc in real(size)])
+    rng = np.random.default_rng(5)
+    parts = [bytes(rng.integers(0, 30, n, dtype=np.uint8)) for n in (32, 4, 40000, 4, 40000, 4)]
+    frame = frames.compress_parts(parts)
+    assert len(made) == len(frames.LARGE) == 2
+    assert frames.decompress(frame, 80044, "test") == b"".join(parts)
+    made.clear()
+    frames.compress_parts([p[:9000] for p in parts])  # a small payload: the whole search
+    assert len(made) == 9
+    # choosing how to write a large field (meshcode's position order) compresses a
+    # sample of it, not all of it
+    seen = []
+    compress = frames.compress
+    monkeypatch.setattr(frames, "compress", lambda data: seen.append(len(data)) or compress(data))
+    field = b"".join(parts) * 4
+    assert frames.trial_size(field) > 0
+    assert seen == [frames.TRIAL_PIECES * frames.TRIAL_PIECE]

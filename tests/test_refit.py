@@ -125,8 +125,10 @@ def test_refinement_finds_a_rounds_new_triangles_by_their_new_corners(corpus, mo
 
 def test_the_kept_triangulation_grows_as_a_full_one_would():
     """Refinement's kept triangulation (error_bound._Growing: inserting each round's
-    vertices) gives the mesh meshcode.in_stored_order makes by triangulating them all
-    again, triangles in the same canonical order, with walls, round after round."""
+    vertices) gives the triangles meshcode.in_stored_order makes by triangulating them
+    all again, with walls, round after round (in the mesh's own numbering: put in stored
+    order, the same canonical list)."""
+    from codec.coding import canonical_triangles
     from codec import meshcode
     from codec.mesh import segments
 
@@ -150,9 +152,11 @@ def test_the_kept_triangulation_grows_as_a_full_one_would():
                      mesh.triangles, w, h, mesh.constraints)
         full = meshcode.in_stored_order(grown)
         kept = growing.grow(grown, len(mesh.vertices))
-        np.testing.assert_array_equal(kept.vertices, full.vertices)
-        np.testing.assert_array_equal(kept.triangles, full.triangles)
-        assert [c.tolist() for c in kept.constraints] == [c.tolist() for c in full.constraints]
+        np.testing.assert_array_equal(kept.vertices, grown.vertices)
+        stored = meshcode.in_stored_order(kept, triangulate_again=False)
+        np.testing.assert_array_equal(stored.vertices, full.vertices)
+        np.testing.assert_array_equal(canonical_triangles(stored.triangles), full.triangles)
+        assert [c.tolist() for c in stored.constraints] == [c.tolist() for c in full.constraints]
         assert len(segments(kept.constraints))
         mesh = kept
 
@@ -189,3 +193,126 @@ def test_renumbered_triangles_come_in_canonical_order():
         _renumber.canonical_renumbered(np.array([[0, 1, 5]]), np.arange(3))
     with pytest.raises(ValueError):
         _renumber.canonical_renumbered(np.array([[0, 1, 2]]), np.array([0, 1, 7]))
+
+
+def _span_normals(image, vertices, triangles):
+    """The numpy route to the triangles' normal equations: row spans, prefix-sum
+    statistics per element, then the 3 x 3 products."""
+    from codec.mesher.elements import triangle_raster
+
+    h, w = image.shape[:2]
+    layout = vertex_values.layout_for(image)
+    raster = triangle_raster(vertices, triangles, w, h)
+    return vertex_values.normal_equations(raster.coef, raster.den, *layout.fit_part(layout(raster)))
+
+
+def test_the_compiled_normal_equations_are_those_of_the_triangles_spans(corpus):
+    """codec._lsq.triangle_normals sums each triangle's pixels itself, replacing spans,
+    prefix sums and products in numpy (most of a max_error encode's refits): the same
+    pixels with the same weights, on gray, 16-bit, float and RGB images."""
+    from codec.native import _lsq
+
+    rng = np.random.default_rng(4)
+    gray = corpus["camera"][:180, :230]
+    cases = [gray, gray.astype(np.uint16) * 257, gray.astype(np.float64) / 7, corpus["astronaut"][:150, :170]]
+    for k, image in enumerate(cases):
+        vertices, triangles = random_mesh(image, [30, 300, 3000, 800][k], seed=k)
+        planes = np.ascontiguousarray(image.reshape(image.shape[0], image.shape[1], -1))
+        gram, rhs = _lsq.triangle_normals(vertices.astype(np.int64), triangles.astype(np.int64), planes)
+        want_gram, want_rhs = _span_normals(image, vertices, triangles)
+        np.testing.assert_allclose(gram, want_gram, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(rhs, want_rhs, rtol=1e-9, atol=1e-6)
+        # held corners eliminated as refit does it in numpy
+        n, c = len(vertices), planes.shape[2]
+        free = rng.random(n) < 0.4
+        number = np.where(free, np.cumsum(free) - 1, -1).astype(np.int64)
+        known = rng.random((n, c)) * 200
+        g, r, corners = _lsq.triangle_normals(vertices.astype(np.int64), triangles.astype(np.int64), planes,
+                                              number, known)
+        touching = free[triangles].any(axis=1)  # only these are summed
+        t, want_gram, want_rhs = triangles[touching], want_gram[touching], want_rhs[touching]
+        held = ~free[t]
+        want_r = want_rhs - np.einsum("eij,ejc->eci", want_gram, np.where(held[:, :, None], known[t], 0.0))
+        np.testing.assert_allclose(r, want_r, rtol=1e-9, atol=1e-6)
+        np.testing.assert_allclose(g, want_gram * (~held)[:, :, None] * (~held)[:, None, :], rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(corners, np.where(held, free.sum(), number[t]))
+        # rows left for the caller's own elements: zeros after the same results
+        more = _lsq.triangle_normals(vertices.astype(np.int64), triangles.astype(np.int64), planes, number,
+                                     known, 7)
+        for got, want in zip(more, (g, r, corners)):
+            assert len(got) == len(want) + 7 and not got[len(want):].any()
+            np.testing.assert_array_equal(got[: len(want)], want)
+    vertices, triangles = random_mesh(gray, 50)
+    v, t, planes = vertices.astype(np.int64), triangles.astype(np.int64), np.ascontiguousarray(gray[:, :, None])
+    beyond = t.copy()
+    beyond[len(t) // 2, 1] = len(v)
+    for bad_v, bad_t, message in ((v, beyond, "corner index"), (v * 2, t, "outside the image"),
+                                  (v, t[:, ::-1].copy(), "counter-clockwise")):
+        with pytest.raises(ValueError, match=message):
+            _lsq.triangle_normals(bad_v, bad_t, planes)
+
+
+def test_refit_sums_the_triangles_pixels_in_one_compiled_pass(corpus, monkeypatch):
+    """refit no longer cuts the triangles into row spans for prefix-sum statistics."""
+    from codec.mesher import elements
+
+    def spans(*args, **kwargs):
+        raise AssertionError("refit rasterised the triangles into spans")
+
+    monkeypatch.setattr(elements, "triangle_raster", spans)
+    image = corpus["camera"][:120, :140]
+    vertices, triangles = random_mesh(image, 600, seed=5)
+    start = vertex_values.sample(image, vertices)
+    free = np.random.default_rng(6).random(len(vertices)) < 0.3
+    out = vertex_values.refit(image, vertices, triangles, start, free)
+    assert np.array_equal(out[~free], start[~free])
+    assert squared_error(image, vertices, triangles, out) < squared_error(image, vertices, triangles, start)
+
+
+def _numpy_conjugate_gradients(corners, gram, rhs, start, ridge, anchor, rtol, max_iter):
+    """values.solve as it was in numpy: the reference the compiled one follows."""
+    n, flat = len(start), corners.ravel()
+
+    def apply(x):
+        y = np.einsum("eij,ej->ei", gram, x[corners])
+        return np.bincount(flat, weights=y.ravel(), minlength=n) + ridge * x
+
+    diag = np.bincount(flat, weights=np.diagonal(gram, axis1=1, axis2=2).ravel(), minlength=n) + ridge
+    out = np.empty(start.shape)
+    for ch in range(start.shape[1]):
+        b = np.bincount(flat, weights=rhs[:, ch, :].ravel(), minlength=n) + ridge * anchor[:, ch]
+        x = start[:, ch].copy()
+        r = b - apply(x)
+        z = r / diag
+        p, rz = z, r @ z
+        for _ in range(max_iter):
+            if np.linalg.norm(r) <= rtol * np.linalg.norm(b):
+                break
+            q = apply(p)
+            alpha = rz / (p @ q)
+            x, r = x + alpha * p, r - alpha * q
+            z = r / diag
+            rz, previous = r @ z, rz
+            p = z + (rz / previous) * p
+        out[:, ch] = x
+    return out
+
+
+def test_the_compiled_conjugate_gradients_follow_the_numpy_iteration(corpus):
+    from codec.native import _lsq
+
+    image = corpus["astronaut"][:90, :110]
+    vertices, triangles = random_mesh(image, 400, seed=8)
+    gram, rhs = (np.ascontiguousarray(a) for a in _span_normals(image, vertices, triangles))
+    n = len(vertices)
+    start = vertex_values.sample(image, vertices).reshape(n, -1).astype(np.float64)
+    ridge = np.full(n, vertex_values.RIDGE) + np.random.default_rng(9).random(n)
+    anchor = start + 3.0
+    for rtol, steps in ((1e-4, 300), (1e-12, 5), (1e-12, 300)):
+        got = _lsq.conjugate_gradients(triangles.astype(np.int64), gram, rhs, start, ridge, anchor, rtol, steps)
+        want = _numpy_conjugate_gradients(triangles, gram, rhs, start, ridge, anchor, rtol, steps)
+        np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-6)
+    bad = triangles.astype(np.int64)
+    bad[3, 2] = n
+    with pytest.raises(ValueError, match="corner out of range"):
+        _lsq.conjugate_gradients(bad, gram, rhs, start, ridge, anchor, 1e-4, 10)

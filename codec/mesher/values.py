@@ -76,48 +76,20 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
     """Minimise sum over elements of the squared error plus ridge * |z - anchor|^2 for
     every channel: (A^T W A + ridge I) z = A^T W b + ridge * anchor, by conjugate
     gradients with a diagonal preconditioner, matrix-free (element by element), from
-    `start` (n x C; also the default anchor). Returns n x C float64."""
+    `start` (n x C; also the default anchor). Returns n x C float64.
+
+    Compiled (codec._lsq): in numpy each step's gathers and scatter-adds over the
+    elements took a fifth of a refit's time after refinement's rounds."""
+    from ..native import _lsq
+
     anchor = start if anchor is None else anchor
     n = len(start)
-    flat = corners.ravel()
-
-    # contiguous per (row, column) of the element matrices and per corner: the
-    # products run over plain arrays instead of broadcast (E, 3) blocks
-    g = [[np.ascontiguousarray(gram[:, i, j]) for j in range(3)] for i in range(3)]
-    by_corner = np.ascontiguousarray(corners.T)
-    y = np.empty((3, len(corners)))
-
-    def apply(x: np.ndarray) -> np.ndarray:
-        x0, x1, x2 = (np.take(x, c) for c in by_corner)
-        for i in range(3):
-            np.multiply(g[i][0], x0, out=y[i])
-            y[i] += g[i][1] * x1
-            y[i] += g[i][2] * x2
-        # summed element by element, corner by corner, as flat lists them
-        return np.bincount(flat, weights=y.T.ravel(), minlength=n) + ridge * x
-
-    diag = _diagonal(corners, gram, n) + ridge
-    out = np.empty(start.shape)
-    for ch in range(start.shape[1]):
-        b = np.bincount(flat, weights=rhs[:, ch, :].ravel(), minlength=n) + ridge * anchor[:, ch]
-        x = start[:, ch].astype(np.float64)
-        r = b - apply(x)
-        limit = rtol * np.linalg.norm(b)
-        z = r / diag
-        p = z
-        rz = r @ z
-        for _ in range(MAX_ITER):
-            if np.linalg.norm(r) <= limit:
-                break
-            q = apply(p)
-            alpha = rz / (p @ q)
-            x = x + alpha * p
-            r = r - alpha * q
-            z = r / diag
-            rz, previous = r @ z, rz
-            p = z + (rz / previous) * p
-        out[:, ch] = x
-    return out
+    ridge = np.ascontiguousarray(np.broadcast_to(np.asarray(ridge, dtype=np.float64), (n,)))
+    return _lsq.conjugate_gradients(
+        np.ascontiguousarray(corners, dtype=np.int64), np.ascontiguousarray(gram, dtype=np.float64),
+        np.ascontiguousarray(rhs, dtype=np.float64), np.ascontiguousarray(start, dtype=np.float64),
+        ridge, np.ascontiguousarray(anchor, dtype=np.float64), rtol, MAX_ITER,
+    )
 
 
 def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarray, values: np.ndarray,
@@ -243,7 +215,8 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
     minimise the squared error over the pixels of the triangles that touch them (plus
     the bottom row and right column elements), the held ones entering as known terms;
     conjugate gradients start from `previous`."""
-    from .elements import concat, line_raster, triangle_raster
+    from ..native import _lsq
+    from .elements import line_raster
 
     height, width = image.shape[:2]
     n = len(vertices)
@@ -252,25 +225,35 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
     if not free.any():
         return previous.copy()
     layout = layout_for(image) if layout is None else layout
-    near = triangles[free[triangles].any(axis=1)]
-    raster = concat([triangle_raster(vertices, near, width, height), line_raster(vertices, width, height)])
-    moments, sums = layout.fit_part(layout(raster))
-    gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
+    vertices = np.ascontiguousarray(vertices, dtype=np.int64)
+    # the equations of the triangles that touch a free vertex, summed pixel by pixel in
+    # one compiled pass (small triangles own a few pixels each); the border lines' from
+    # their spans
+    plane = image.reshape(height, width, -1)
+    if plane.dtype not in (np.uint8, np.uint16):
+        plane = plane.astype(np.float64)
     # unknowns: the free vertices, numbered 0..F-1; a held corner moves its part of the
     # element's equations to the right-hand side and points at a sink F, whose row is
     # left empty (its ridge pins it to 0)
-    held = ~free[raster.corners]  # E x 3
-    known = np.where(held[:, :, None], prev[raster.corners], 0.0)  # E x 3 x C
-    rhs = rhs - np.einsum("eij,ejc->eci", gram, known)
-    gram = gram * (~held)[:, :, None] * (~held)[:, None, :]
-    number = np.full(n, int(free.sum()), np.int64)
-    number[free] = np.arange(int(free.sum()))
-    corners = number[raster.corners]
+    unknowns = int(free.sum())
+    number = np.full(n, -1, np.int64)
+    number[free] = np.arange(unknowns)
+    prev = np.ascontiguousarray(prev)
+    lines = line_raster(vertices, width, height)
+    gram, rhs, corners = _lsq.triangle_normals(vertices, np.ascontiguousarray(triangles, dtype=np.int64),
+                                               np.ascontiguousarray(plane), number, prev, len(lines))
+    line_gram, line_rhs = normal_equations(lines.coef, lines.den, *layout.fit_part(layout(lines)))
+    held = ~free[lines.corners]  # E x 3
+    known = np.where(held[:, :, None], prev[lines.corners], 0.0)  # E x 3 x C
+    end = len(gram) - len(lines)  # the lines go in the rows the kernel left for them
+    rhs[end:] = line_rhs - np.einsum("eij,ejc->eci", line_gram, known)
+    gram[end:] = line_gram * (~held)[:, :, None] * (~held)[:, None, :]
+    corners[end:] = np.where(held, unknowns, number[lines.corners])
     start = np.vstack([prev[free], np.zeros((1, prev.shape[1]))])
-    samples = sample(image, vertices).reshape(n, -1).astype(np.float64)
-    anchor = np.vstack([samples[free], np.zeros((1, prev.shape[1]))])
+    # the free vertices' own pixels (work in proportion to them, not to the mesh)
+    at = vertices[free]
+    anchor = np.vstack([image[at[:, 1], at[:, 0]].reshape(len(at), -1), np.zeros((1, prev.shape[1]))])
     solved = solve(corners, gram, rhs, start, anchor=anchor)
-    out = prev.copy()
-    out[free] = solved[:-1]
-    out = np.where(free[:, None], _to_dtype(out, image.dtype), previous.reshape(n, -1))
+    out = np.array(previous, dtype=np.result_type(previous, image)).reshape(n, -1)
+    out[free] = _to_dtype(solved[:-1], image.dtype)
     return out[:, 0] if image.ndim == 2 else out
