@@ -68,8 +68,8 @@ GROWTH = 0.25
 #: pixels on them divided by this: what is left is the walls' own error.
 WALL_TAIL = 4
 
-#: Under a max_error below one level (every level must come back exact: float data,
-#: whose quantisation step max_error chose, pipeline.MESH_SLACK), new vertices per
+#: Under a max_error below one level (every level must come back exact: float data
+#: whose quantisation step max_error chose with no slack, codec.slack), new vertices per
 #: round are also at least this share of the pixels over it (one per cell, as above).
 #: Most pixels are over such a bound until most are vertices, so rounds of GROWTH alone
 #: are many and small, each paying for a whole render and measurement: float DEMs

@@ -24,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 from . import banding, error_bound, holes as hole_stage, integers, meshcode, quantise
+from . import slack as slack_rule
 from .errors import ATMError, OptionError, UnsupportedError
 from .image import SAMPLE_TYPES
 from .mesh import Mesh
@@ -42,11 +43,6 @@ START_DENSITY = 0.002
 #: costs about a tenth of the squared error and buys more vertices than it costs
 #: (benchmarks/rate.py: lower RMS at equal bytes than 0.7 or 1.4 on the corpus).
 STEP_FACTOR = 1.0
-#: Levels of slack the mesh gets under `max_error` on float data, whose step is then
-#: about max_error / (MESH_SLACK + 1/2) (_float_step). Measured bytes (study in the
-#: commit message; SRTM as float32 and a synthetic float DEM at E = 0.5, 2, 10 m):
-#: slack 0 (every level exact, step about 2E) is smallest in most cases.
-MESH_SLACK = 0
 #: A holed band is meshed again, at most REMESHES times, while the mesher's vertices
 #: off the holes miss its share by more than REMESH_OFF (points=N is to give N
 #: vertices within 10 %), asking for at most MAX_REMESH times the share.
@@ -162,29 +158,43 @@ class Plan:
     values: str
     quant: quantise.Quantiser | None
     nodata: float | None
+    #: levels of max_error left to the mesh of float data (codec.slack)
+    slack: int = 0
 
 
-def _float_step(s: Settings) -> float | None:
+def needs_roughness(settings: Settings, dtype) -> bool:
+    """Whether plan() takes the first band's roughness (codec.slack): float data under
+    `max_error` alone, met by the mesh, with no precision given."""
+    s = settings
+    return (np.dtype(dtype).kind == "f" and s.precision is None and s.max_error is not None
+            and s.max_rms is None and s.quality is None and not s.layered)
+
+
+def _float_step(s: Settings, slack: int) -> float | None:
     """Float data's quantisation step: `precision` if given (the expert's override);
-    under `max_error` alone, on the mesh path, the step that leaves the mesh MESH_SLACK
+    under `max_error` alone, on the mesh path, the step that leaves the mesh `slack`
     levels of the bound (the finest step would spend the budget on 16-bit vertex
     values); otherwise None, the finest step 65,536 levels allow."""
     if s.precision is not None:
         return s.precision
     if s.max_error is None or s.max_rms is not None or s.quality is not None or s.layered:
         return None
-    return quantise.step_for_error(*s.value_range, s.max_error, MESH_SLACK)
+    return quantise.step_for_error(*s.value_range, s.max_error, slack)
 
 
-def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: int = 1) -> Plan:
+def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: int = 1,
+         roughness: tuple[float, float] | None = None) -> Plan:
     """The Plan of an image of this geometry under `settings`; OptionError or
-    UnsupportedError if they do not fit together."""
+    UnsupportedError if they do not fit together. roughness: the first band's
+    (codec.slack.roughness: median and upper quartile, in data units) where
+    needs_roughness(); None: not measured (the mesh then gets no slack)."""
     for name, value in (("width", width), ("height", height)):
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
             raise OptionError(f"{name} must be a positive whole number, not {value!r}")
     dtype = np.dtype(dtype)
     s = settings
     quant = None
+    slack = 0
     max_rms, max_error = s.max_rms, s.max_error
     if integers.is_signed(dtype):
         if channels != 1:
@@ -207,7 +217,9 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
                 "a float stream needs value_range=(lowest, highest) so that the header can "
                 "carry the quantisation before the data arrives"
             )
-        quant = quantise.plan(*s.value_range, precision=_float_step(s))
+        if needs_roughness(s, dtype):
+            slack = slack_rule.mesh_slack(s.max_error, roughness)
+        quant = quantise.plan(*s.value_range, precision=_float_step(s, slack))
         if s.quality is None:
             max_rms, max_error = quant.integer_bounds(max_rms, max_error, quant.scale / 2)
     elif s.value_range is not None or s.precision is not None:
@@ -240,7 +252,7 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
     values = s.values or inspect.signature(builder(s.mesher)).parameters["values"].default
     return Plan(
         s, int(width), int(height), dtype, channels, np.dtype(storage),
-        int(min(band_height, max(height - 1, 1))), int(points), bound, step, values, quant, nodata,
+        int(min(band_height, max(height - 1, 1))), int(points), bound, step, values, quant, nodata, slack,
     )
 
 

@@ -12,6 +12,7 @@ from typing import BinaryIO, Callable, Iterator
 import numpy as np
 
 from . import container, integers, lossless_float, pipeline, representation, residual
+from . import slack as slack_rule
 from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
@@ -90,21 +91,17 @@ class StreamEncoder:
         self.band_height = p.band_height
         self._nodata = p.nodata
         self._quant = p.quant
-        header = container.Header(
-            p.width,
-            p.height,
-            np.dtype(np.float32) if p.dtype.kind == "f" else p.dtype,
-            p.channels,
-            quant=p.quant,
-            nodata=None if p.nodata is None else float(p.nodata),
-            metadata=settings.metadata,
-            channel_axis=channel_axis and p.channels == 1,
-            exact=self._exact,
-            steps=self._wide,
-        )
+        self._settings, self._fileobj = settings, fileobj
+        self._channel_axis = channel_axis and p.channels == 1
         if settings.metadata is not None:
             container.encode_metadata(settings.metadata)  # checked before anything is written
-        self._writer = container.Writer(fileobj, header)
+        #: float data under max_error, mesh only: its quantisation (the mesh's slack,
+        #: codec.slack) waits for the first band's rows, held here as they came
+        self._pending: list[tuple[np.ndarray, np.ndarray]] | None = None
+        if self._residual is None and pipeline.needs_roughness(settings, p.dtype):
+            self._pending = []
+        else:
+            self._writer = self._open()
         shape = (self.band_height + 1, p.width) + ((p.channels,) if p.channels > 1 else ())
         self._buf = np.empty(shape, p.storage)
         self._holes = np.zeros(shape[:2], bool)
@@ -122,6 +119,39 @@ class StreamEncoder:
         #: Totals over the bands written so far (shared-row vertices count in both bands).
         self.bands = self.vertices = self.triangles = 0
 
+    def _open(self) -> container.Writer:
+        """Write the header (the plan's quantisation decided) and return the writer."""
+        p, settings = self._plan, self._settings
+        header = container.Header(
+            p.width,
+            p.height,
+            np.dtype(np.float32) if p.dtype.kind == "f" else p.dtype,
+            p.channels,
+            quant=p.quant,
+            nodata=None if p.nodata is None else float(p.nodata),
+            metadata=settings.metadata,
+            channel_axis=self._channel_axis,
+            exact=self._exact,
+            steps=self._wide,
+        )
+        return container.Writer(self._fileobj, header)
+
+    def _settle(self, pending: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        """Plan again with the roughness of the first band (codec.slack), which
+        `pending`'s rows (and holes) cover, open the writer, and code those rows."""
+        self._pending = None
+        rows, missing = pending[0] if len(pending) == 1 else (
+            np.concatenate([r for r, _ in pending]), np.concatenate([m for _, m in pending]))
+        first, gone = rows[: len(self._buf)], missing[: len(self._buf)]
+        if self._nodata is not None and not np.isnan(self._nodata):
+            gone = gone | (first == self._nodata)
+        rough = slack_rule.roughness(first, gone)
+        p = self._plan
+        self._plan = pipeline.plan(self._settings, p.width, p.height, p.dtype, p.channels, roughness=rough)
+        self._quant = self._plan.quant
+        self._writer = self._open()
+        self._take(rows, missing)
+
     def write(self, rows, holes=None) -> None:
         """Add rows (an n x W, or n x W x 3, array; a single row may be 1-D).
 
@@ -130,7 +160,7 @@ class StreamEncoder:
         if self._closed:
             raise ATMError("write() on a closed StreamEncoder")
         rows = np.asarray(rows)
-        if self._writer.header.channel_axis and rows.ndim == 3 and rows.shape[2:] == (1,):
+        if self._channel_axis and rows.ndim == 3 and rows.shape[2:] == (1,):
             rows = rows[:, :, 0]
         row_ndim = 1 if self.channels == 1 else 2
         if rows.ndim == row_ndim:
@@ -147,6 +177,20 @@ class StreamEncoder:
             if holes.shape != rows.shape[:2]:
                 raise ATMError(f"holes must have shape {rows.shape[:2]}, not {holes.shape}")
             missing |= holes
+        if self._pending is not None:
+            held = sum(len(r) for r, _ in self._pending) + len(rows)
+            if held > self.height:
+                raise ATMError(f"more than the {self.height} rows declared")
+            if held >= len(self._buf) or held == self.height:
+                self._settle(self._pending + [(rows, missing)])
+            else:
+                self._pending.append((rows.copy(), missing))  # the caller may reuse its array
+            return
+        self._take(rows, missing)
+
+    def _take(self, rows: np.ndarray, missing: np.ndarray) -> None:
+        """Quantise checked rows (`missing`: the holes given with them) into the band
+        buffer, coding each band as it fills."""
         unfit = keys = None
         if self._exact:
             # holes are the pixels with the hole value's very bits (so -0.0 is no hole of
@@ -262,8 +306,9 @@ class StreamEncoder:
         """Finish the file. Raises ATMError if fewer rows came than were declared."""
         if self._closed:
             return
-        if self._received != self.height:
-            raise ATMError(f"the stream got {self._received} of the {self.height} rows declared")
+        got = self._received + sum(len(r) for r, _ in self._pending or [])
+        if got != self.height:
+            raise ATMError(f"the stream got {got} of the {self.height} rows declared")
         self._writer.close()
         self._closed = True
 
