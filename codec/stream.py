@@ -39,7 +39,9 @@ class StreamEncoder:
     Float images (dtype float32/float64, one channel) are stored as 16-bit integers with
     a scale and offset: give `value_range=(lowest, highest)` and optionally `precision`
     (the quantisation step). `max_rms`/`max_error` are then in data units and include
-    the quantisation error; decoding returns float32.
+    the quantisation error; decoding returns float32. Under `max_error` with
+    residual=False and no precision, the step depends on the first band's roughness
+    (codec.slack): nothing is written until that band's rows have come.
 
     progress(rows_done, height) is called after each band is written and, under an error
     bound, after each round of a band's refinement (rows_done then counts the band's
