@@ -217,3 +217,16 @@ def test_study_value_domain_predictors_keep_the_bound() -> None:
             d = image - guess
             q = study.quantise_around(d, e, step, case.integer)
             assert np.abs(guess + q * step - image).max() <= (np.floor(e) if case.integer else e) + 1e-4
+
+
+def test_slack_benchmark_prints_its_table() -> None:
+    run = subprocess.run(
+        [sys.executable, "benchmarks/slack.py", "--data", "dem64", "--multiples", "0.5", "3"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, rule, *rows = _table(run.stdout)
+    assert len(head) == len(rule) == 11 and [r[0] for r in rows] == ["dem64", "dem64"]
+    # below the threshold the rule keeps every level exact; well above it, it gives slack
+    assert [r[8] for r in rows] == ["0", "1"]
+    assert all(int(r[3].replace(",", "")) > 0 and int(r[5].replace(",", "")) > 0 for r in rows)
