@@ -109,10 +109,22 @@ def test_streamed_rows_cli_and_encode_give_the_same_bytes(tmp_path):
                                  precision=quantise.step_for_error(lo, hi, e, 0))
 
 
-def test_a_stream_cut_short_before_its_first_band_says_how_many_rows_came():
+def test_a_stream_cut_short_or_overfilled_before_its_first_band_is_refused_with_counts():
     img = _smooth_dem(64)
-    enc = codec.StreamEncoder(io.BytesIO(), 64, 64, dtype=np.float32, value_range=(0.0, float(img.max())),
-                              max_error=50.0, residual=False)
+
+    def start() -> codec.StreamEncoder:
+        return codec.StreamEncoder(io.BytesIO(), 64, 64, dtype=np.float32, value_range=(0.0, float(img.max())),
+                                   max_error=50.0, residual=False)
+
+    enc = start()
+    enc.write(img[:40])
+    try:
+        enc.write(img[:30])
+    except codec.ATMError as err:
+        assert "more than the 64 rows" in str(err)
+    else:
+        raise AssertionError("70 rows of 64 accepted")
+    enc = start()
     enc.write(img[:10])
     try:
         enc.close()
