@@ -8,8 +8,10 @@ range and never reads past the chunk (status codes; codec.residual turns them in
 CorruptError)."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
-from libc.stdlib cimport free, malloc, realloc
+from libc.stdlib cimport free, malloc
 from libc.string cimport memcpy
+
+from codec.rangecoder cimport RangeEncoder, rc_begin, rc_flush, rc_shift_low
 
 import numpy as np
 
@@ -77,56 +79,23 @@ cdef inline void _update(uint16_t* p, uint8_t* n, int bit, int64_t stride) noexc
 
 
 cdef struct Encoder:
-    uint64_t low
-    uint32_t rng
-    uint8_t cache
-    uint64_t pending
-    uint8_t* buf
-    size_t size
-    size_t cap
-    int failed
+    # LZMA's range encoder (codec/rangecoder.pxd, shared with the HOLE chunk's coder)
+    # and the plane's model count: the two estimates of a model lie that far apart
+    RangeEncoder rc
     int64_t stride
-
-
-cdef inline void _put(Encoder* e, uint8_t b) noexcept nogil:
-    cdef uint8_t* grown
-    if e.size == e.cap:
-        grown = <uint8_t*>realloc(e.buf, e.cap * 2 + 64)
-        if grown == NULL:
-            e.failed = 1
-            return
-        e.buf = grown
-        e.cap = e.cap * 2 + 64
-    e.buf[e.size] = b
-    e.size += 1
-
-
-cdef inline void _shift_low(Encoder* e) noexcept nogil:
-    # LZMA's carry handling: a byte is held back while a carry may still reach it
-    cdef uint8_t carry
-    if e.low < <uint64_t>0xFF000000 or e.low >= (<uint64_t>1 << 32):
-        carry = <uint8_t>(e.low >> 32)
-        _put(e, <uint8_t>(e.cache + carry))
-        while e.pending:
-            _put(e, <uint8_t>(0xFF + carry))
-            e.pending -= 1
-        e.cache = <uint8_t>((e.low >> 24) & 0xFF)
-    else:
-        e.pending += 1
-    e.low = (e.low & 0x00FFFFFF) << 8
 
 
 cdef inline void _encode_bit(Encoder* e, uint16_t* p, uint8_t* n, int bit) noexcept nogil:
     # p NULL: a raw bit, probability one half and no model
-    cdef uint32_t bound = (e.rng >> 16) * (((p[0] + p[e.stride]) >> 1) if p != NULL else 32768)
+    cdef uint32_t bound = (e.rc.rng >> 16) * (((p[0] + p[e.stride]) >> 1) if p != NULL else 32768)
     if bit:
-        e.low += bound
-        e.rng -= bound
+        e.rc.low += bound
+        e.rc.rng -= bound
     else:
-        e.rng = bound
-    while e.rng < TOP:
-        e.rng <<= 8
-        _shift_low(e)
+        e.rc.rng = bound
+    while e.rc.rng < TOP:
+        e.rc.rng <<= 8
+        rc_shift_low(&e.rc)
     if n != NULL:
         _update(p, n, bit, e.stride)
 
@@ -454,15 +423,7 @@ cdef void _after_interp(int64_t* above, int64_t* above_res, bint started, const 
 
 
 cdef object _begin_encoder(Encoder* e):
-    e.low = 0
-    e.rng = 0xFFFFFFFF
-    e.cache = 0
-    e.pending = 0
-    e.size = 0
-    e.cap = 4096
-    e.failed = 0
-    e.buf = <uint8_t*>malloc(e.cap)
-    if e.buf == NULL:
+    if rc_begin(&e.rc) != 0:
         raise MemoryError()
 
 
@@ -516,14 +477,13 @@ def encode(planes, int predictor, samples_list, holes, int64_t error, int64_t to
                 raise MemoryError()
             plane.started = True
         with nogil:
-            for _ in range(5):
-                _shift_low(&e)
-        if e.failed:
+            rc_flush(&e.rc)
+        if e.rc.failed:
             raise MemoryError()
         # LZMA's coder always starts with a zero byte: it is not stored
-        return bytes(e.buf[1 : e.size])
+        return bytes(e.rc.buf[1 : e.rc.size])
     finally:
-        free(e.buf)
+        free(e.rc.buf)
 
 
 def decode(planes, int predictor, const uint8_t[::1] data, holes, int64_t error, int64_t top):

@@ -1,5 +1,5 @@
 # The byte output of LZMA's binary range encoder (ATM.md §4.8.2), as inline functions
-# a kernel cimports (codec._mask; codec._residual keeps its own copy of the same coder).
+# the kernels cimport (codec._residual's layer and codec._mask's HOLE chunk).
 
 from libc.stdint cimport uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport free, malloc, realloc
