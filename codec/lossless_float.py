@@ -1,6 +1,6 @@
 """Lossless float data: every valid sample decodes to the same binary32 bits.
 
-Two routes, the cheaper first:
+Three routes, the cheapest first:
 
 - **Exact steps** (`exact_step`): many float rasters are whole numbers times a step
   (an SRTM DEM as float, depths in millimetres as metres). When offset + scale * q,
@@ -16,7 +16,7 @@ Two routes, the cheaper first:
   and NaNs of any payload are samples like any other; holes are the pixels whose bits
   equal the hole value's (`hole_bits`), which decode to those bits.
 
-The stored mesh is in both routes a `sample_type` 2 preview over the finite values.
+The stored mesh is in every route a `sample_type` 2 preview over the finite values.
 """
 
 from __future__ import annotations
