@@ -170,14 +170,14 @@ def needs_roughness(settings: Settings, dtype) -> bool:
             and s.max_rms is None and s.quality is None and not s.layered)
 
 
-def _float_step(s: Settings, slack: int) -> float | None:
+def _float_step(s: Settings, dtype, slack: int) -> float | None:
     """Float data's quantisation step: `precision` if given (the expert's override);
-    under `max_error` alone, on the mesh path, the step that leaves the mesh `slack`
-    levels of the bound (the finest step would spend the budget on 16-bit vertex
-    values); otherwise None, the finest step 65,536 levels allow."""
+    under `max_error` alone, on the mesh path (needs_roughness), the step that leaves
+    the mesh `slack` levels of the bound (the finest step would spend the budget on
+    16-bit vertex values); otherwise None, the finest step 65,536 levels allow."""
     if s.precision is not None:
         return s.precision
-    if s.max_error is None or s.max_rms is not None or s.quality is not None or s.layered:
+    if not needs_roughness(s, dtype):
         return None
     return quantise.step_for_error(*s.value_range, s.max_error, slack)
 
@@ -219,7 +219,7 @@ def plan(settings: Settings, width: int, height: int, dtype=np.uint8, channels: 
             )
         if needs_roughness(s, dtype):
             slack = slack_rule.mesh_slack(s.max_error, roughness)
-        quant = quantise.plan(*s.value_range, precision=_float_step(s, slack))
+        quant = quantise.plan(*s.value_range, precision=_float_step(s, dtype, slack))
         if s.quality is None:
             max_rms, max_error = quant.integer_bounds(max_rms, max_error, quant.scale / 2)
     elif s.value_range is not None or s.precision is not None:
