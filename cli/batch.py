@@ -142,6 +142,7 @@ def _stop(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
     # ProcessPoolExecutor has no public way to end its workers before Python 3.14's
     # terminate_workers(); without this, shutdown waits for every running conversion
     workers = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown forgets it
     pool.shutdown(wait=False, cancel_futures=True)
     for p in workers:
         p.terminate()  # SIGTERM: the worker's partial output is removed as it exits
@@ -151,6 +152,11 @@ def _stop(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
         if p.is_alive():
             p.kill()
             p.join()
+    # the executor's manager thread closes its wake-up pipe once it sees the workers
+    # gone; at exit Python writes to that pipe unlocked, so a thread still closing it
+    # then races the write ("Bad file descriptor" on stderr): let it finish first
+    if manager is not None:
+        manager.join(grace)
 
 
 def run(args: argparse.Namespace, command: str) -> int:

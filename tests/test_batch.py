@@ -140,3 +140,26 @@ def test_float_data_decodes_only_to_formats_that_keep_it(tmp_path):
     assert not (tmp_path / "d.png").exists()
     assert atm("decode", tmp_path / "d.atm", tmp_path / "d.npy").returncode == 0
     assert np.abs(np.load(tmp_path / "d.npy") - depth).max() <= 0.01 + 1e-6
+
+
+def test_stopping_a_batch_leaves_no_executor_thread_to_race_the_exit():
+    """Ctrl-C in a batch: _stop ends the workers mid-file, and the executor's manager
+    thread must be gone when it returns. Left running, it closes its wake-up pipe while
+    Python's exit handler writes to it, and `atm` printed a "Bad file descriptor"
+    traceback after "atm: interrupted" (a flaky failure of the Ctrl-C test)."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    from codec.cli import batch
+
+    pool = ProcessPoolExecutor(2, initializer=batch._worker_setup)
+    futures = [pool.submit(time.sleep, 60) for _ in range(3)]
+    deadline = time.monotonic() + 20
+    while not any(f.running() for f in futures) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    manager = pool._executor_manager_thread
+    started = time.monotonic()
+    batch._stop(pool)
+    assert time.monotonic() - started < 10
+    assert not manager.is_alive()
+    assert futures[-1].cancelled() or futures[-1].done()
