@@ -61,7 +61,9 @@ def encode_options(args: argparse.Namespace) -> dict:
     """The encoder options the command line sets (the ones left unset take the codec's
     defaults): every option of codec.settings that has a flag, by the same name."""
     options = {n: getattr(args, n) for n in cli_option_names() if getattr(args, n, None) is not None}
-    clash = size_conflict(n for n, v in options.items() if v is not False)  # --no-residual sets no size
+    # --no-residual sets no size, but the mesh then meets the bound alone
+    clash = size_conflict((n for n, v in options.items() if v is not False),
+                          mesh_only=options.get("residual") is False)
     if clash:
         a, b = (flag(n) for n in clash)
         raise codec.OptionError(f"{a} and {b} both set the size: give one of them")

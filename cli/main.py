@@ -152,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     enc.add_argument("output", nargs="?", metavar="OUT", help=".atm file, - for standard output, or (batch) the output directory")
     _add_output_option(enc, ".atm file")
     enc.add_argument("-q", "--quality", type=int, metavar="Q", help="1..100 on JPEG's scale: about JPEG's error at the same quality (an RMS bound; 100 is lossless)")
-    enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); not with a bound")
+    enc.add_argument("--points", type=int, metavar="N", help="target vertex count (default: 2.8%% of the pixels); with a bound, the size of the mesh beside the residual layer (not with --no-residual)")
     enc.add_argument("--max-rms", type=float, metavar="E", help="largest RMS error of the decoded image, per channel")
     enc.add_argument("--max-error", type=float, metavar="E", help="largest error of any decoded sample")
     enc.add_argument("--lossless", action="store_true", default=None, help="every valid sample decodes exactly (float data: its binary32 bits); not with a bound")

@@ -54,7 +54,7 @@ class Settings:
     """
 
     points: int | None = _option(
-        None, "target vertex count, within 10 % (default: 2.8 % of the pixels); not with an error bound, which sets the count itself", cli=True
+        None, "target vertex count, within 10 % (default: 2.8 % of the pixels); with an error bound met by the residual layer (the default), the preview mesh's size; not with residual=False, where the bound sets the count itself", cli=True
     )
     quality: int | None = _option(None, "1..100 on JPEG's scale: an RMS bound at about JPEG's error at that quality (100 is lossless)", cli=True)
     max_rms: float | None = _option(None, "largest RMS error of the decoded image, per channel, in sample (float data: data) units", cli=True)
@@ -104,8 +104,9 @@ class Settings:
         if self.quality is not None:
             _whole(self.quality, "quality", 1, 100)
         clash = size_conflict(
-            n for n in ("points", "quality", "max_rms", "max_error", "lossless", "residual")
-            if getattr(self, n) not in (None, False)
+            (n for n in ("points", "quality", "max_rms", "max_error", "lossless", "residual")
+             if getattr(self, n) not in (None, False)),
+            mesh_only=self.residual is False or self.residual == "auto",
         )
         if clash:
             raise OptionError(f"{clash[0]} and {clash[1]} both set the size: give one of them")
@@ -191,19 +192,20 @@ class Settings:
         return self.quality is not None or self.max_rms is not None or self.max_error is not None
 
 
-def size_conflict(given) -> tuple[str, str] | None:
+def size_conflict(given, mesh_only: bool = False) -> tuple[str, str] | None:
     """The first pair of the given size options (by name) that cannot go together:
-    `points` fixes the vertex count, so it takes no error bound, and `quality` is an RMS
-    bound, so it takes no `max_rms`. `max_rms` with `max_error` is two bounds, both met.
-    With `residual` or `lossless`, a residual layer meets the bound and `points` sets
-    the size of the preview mesh beside it."""
+    `quality` is an RMS bound, so it takes no `max_rms`, and `lossless` takes no bound.
+    `max_rms` with `max_error` is two bounds, both met. A bound is met by a residual layer
+    unless `mesh_only` (residual=False, or 'auto', which also encodes the mesh alone):
+    `points` then sets the size of the preview mesh beside the layer, and only a mesh
+    that must meet the bound itself refuses `points` with it."""
     given = list(given)
-    if "residual" in given:
-        # the layer meets them; points then sizes the preview mesh
-        given = [n for n in given if n not in ("max_error", "max_rms")]
-    for a, b in (("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
-                 ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error"),
-                 ("residual", "quality"), ("lossless", "residual")):
+    pairs = [("points", "quality"), ("points", "max_rms"), ("points", "max_error"), ("quality", "max_rms"),
+             ("lossless", "quality"), ("lossless", "max_rms"), ("lossless", "max_error"),
+             ("residual", "quality"), ("lossless", "residual")]
+    if not mesh_only:
+        pairs = [(a, b) for a, b in pairs if not (a == "points" and b in ("max_rms", "max_error"))]
+    for a, b in pairs:
         if a in given and b in given:
             return a, b
     return None

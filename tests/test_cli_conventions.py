@@ -80,6 +80,15 @@ def test_conflicting_size_flags_are_named(png, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err == "atm: error: --points and --quality both set the size: give one of them"
     assert not (tmp_path / "c.atm").exists()
+    # a bound is met by the residual layer: --points then sizes the mesh beside it,
+    # unless the mesh must meet the bound alone
+    assert main(["encode", str(png), str(tmp_path / "p.atm"), "--max-error", "4", "--points", "60"]) == 0
+    assert codec.info((tmp_path / "p.atm").read_bytes())["vertices"] == 60
+    capsys.readouterr()
+    args = ["encode", str(png), str(tmp_path / "n.atm"), "--max-error", "4", "--points", "60", "--no-residual"]
+    assert main(args) == 2
+    assert capsys.readouterr().err.strip() == "atm: error: --points and --max-error both set the size: give one of them"
+    assert not (tmp_path / "n.atm").exists()
 
 
 def test_messages_speak_command_line(png, tmp_path, capsys):

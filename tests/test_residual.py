@@ -144,6 +144,27 @@ def test_lossless_uses_the_layer_and_a_light_mesh():
     assert codec.info(codec.encode(image, max_error=5, residual=True, points=400))["vertices"] >= 300
 
 
+@pytest.mark.parametrize("bound", [dict(max_error=5), dict(max_rms=3)])
+def test_points_size_the_preview_beside_the_default_layer(bound):
+    """The layer is the default way to meet a bound, so `points` goes with max_error or
+    max_rms without residual=True: it sizes the mesh, the layer keeps the bound. Only a
+    mesh that must meet the bound alone (residual=False, or 'auto', which tries it)
+    refuses the pair."""
+    image, _ = _image(4, 64, 80, np.uint16, 0.0)
+    data = codec.encode(image, points=400, **bound)
+    assert 300 <= codec.info(data)["vertices"] <= 400
+    assert residual.CHUNK in [t for _, t, _ in chunks(data)]
+    error = np.abs(codec.decode(data).astype(np.int64) - image)
+    if "max_error" in bound:
+        assert error.max() <= 5
+    else:
+        assert np.sqrt((error.astype(float) ** 2).mean()) <= 3
+    name = next(iter(bound))
+    for mesh_only in (False, "auto"):
+        with pytest.raises(OptionError, match=f"points and {name} both set the size"):
+            codec.encode(image, points=400, residual=mesh_only, **bound)
+
+
 def test_info_reports_the_layer(tmp_path):
     image, _ = _image(9, 20, 30, np.uint16, 0.0)
     assert codec.info(codec.encode(image, lossless=True))["residual"] == 0
