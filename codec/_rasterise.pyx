@@ -17,12 +17,14 @@ and n*e / (d * 2**s) < V*d*d / (d * 2**s) <= 1/d. And n*M < V*2**s + V*d.
   through on the way. A pixel costs an add and a shift.
 * An edge from column x0 that moves dx columns over dy rows is at
   x = x0 + dx*k/dy on its k-th row, and ceil(x) = floor(n / dy) with
-  n = x0*dy + dx*k + dy - 1, 0 <= n < W*dy: walked the same way, with V = W and
-  es = 62 - bits(W) (at most 54). The multipliers of every edge height are made once
-  per call, so a triangle of one channel costs one division (its plane's M).
+  n = x0*dy + dx*k + dy - 1, 0 <= n < W*dy: walked the same way, with V = W below
+  2**22 and s = 40 (a constant: a variable shift costs more), so edges over up to
+  2**((40 - bits(W)) / 2) rows (2**15 for W = 512). The multipliers of every edge
+  height are made once per call, so a triangle of one channel costs one division
+  (its plane's M).
 
 Triangles beyond those bounds (d2 over 2**23 for 8-bit samples, 2**15 for 16-bit: 2
-million and 8,192 pixels; edges over 2**((es - bits(W)) / 2) rows, or 2**16), with a
+million and 8,192 pixels; taller edges, or over 2**16 rows; images 2**22 wide), with a
 corner in the last column (where the rule needs to know whether the right edge is
 exactly on a column), and those of colour images take the general walk: edges as
 quotient and remainder over their rows (one float64 division per edge, corrected to
@@ -266,7 +268,7 @@ cdef inline uint64_t _reciprocal(int64_t d, int shift) noexcept nogil:
 
 cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, uint64_t ady, int64_t tx,
                                int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by, int64_t last,
-                               bint long_left, int es, const uint64_t* recip, int64_t w, int mode, uint16_t* counts,
+                               bint long_left, const uint64_t* recip, int64_t w, int mode, uint16_t* counts,
                                int64_t* spans, uint8_t* cover) noexcept nogil:
     """A triangle of one channel in fixed point, its edges too (most triangles of a
     gray image; none with a corner in the last column), its rows walked in locals: the
@@ -274,8 +276,8 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
     each edge's ceiling taken alike and the two ordered by the triangle's orientation
     (a select, not a call per run of rows). An edge from column x0 moving dx columns
     over dy rows has ceil(x) = floor(n / dy) on its k-th row, n = x0*dy + dx*k + dy - 1,
-    with 0 <= n < W*dy, read as (n * E) >> es with E = ceil(2**es / dy) (exact when
-    W*dy*dy <= 2**es, as for the planes: see the module's docstring). The pixels
+    with 0 <= n < W*dy, read as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when
+    W*dy*dy <= 2**40, as for the planes: see the module's docstring). The pixels
     written."""
     cdef int64_t lo, hi, x, ca, cb, y = ty, stop, written = 0, dy
     cdef uint64_t a, e, ea, sa, eb, sb
@@ -298,8 +300,8 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
         stop = last + 1
     while True:
         while y < stop:
-            ca = <int64_t>(ea >> es)
-            cb = <int64_t>(eb >> es)
+            ca = <int64_t>(ea >> 40)
+            cb = <int64_t>(eb >> 40)
             lo = ca if long_left else cb
             hi = cb if long_left else ca
             _write1(row, arow + adx * <uint64_t>lo, adx, lo, hi)
@@ -335,7 +337,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     cdef Edge lng, top, bottom
     cdef Planes pl
     cdef bint long_left, border
-    cdef int bits, es
+    cdef int bits
     cdef int64_t edge_lim
     cdef uint64_t* recip
     # s = 62 - log2 V; the fixed point is exact for d2 up to 2**((s - log2 V) / 2)
@@ -346,13 +348,12 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
         pl.shift = 46
         lim = 1 << 15
     one = <int64_t>1 << pl.shift
-    # the edges' fixed point: es = 62 - bits(W) (at most 54, for _reciprocal), exact
-    # for edges over up to 2**((es - bits(W)) / 2) rows
+    # the edges' fixed point (shift 40) is exact for edges over up to
+    # 2**((40 - bits(W)) / 2) rows, in images below 2**22 wide (n * E < 2**64)
     bits = 0
     while (<int64_t>1 << bits) <= w:
         bits += 1
-    es = 62 - bits if bits >= 8 else 54
-    edge_lim = <int64_t>1 << ((es - bits) // 2)
+    edge_lim = <int64_t>1 << ((40 - bits) // 2) if bits <= 22 else 0
     # (a table of at most 2**16 entries, whatever the band's height)
     edge_lim = min(edge_lim, h - 1, 1 << 16)
     # E for every edge height the fixed point takes (an edge spans 1 .. H - 1 rows):
@@ -361,9 +362,9 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     if recip != NULL:
         recip[0] = 0
         if edge_lim >= 1:
-            recip[1] = <uint64_t>1 << es
+            recip[1] = <uint64_t>1 << 40
         for k in range(2, edge_lim + 1):
-            recip[k] = _reciprocal(k, es)
+            recip[k] = _reciprocal(k, 40)
     for k in range(m):
         corner[0] = tris[3 * k]; corner[1] = tris[3 * k + 1]; corner[2] = tris[3 * k + 2]
         _sort3(corner, v, w)  # T, M, B
@@ -407,7 +408,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
         border = tx == w - 1 or mx == w - 1 or bx == w - 1
         if c == 1 and pl.fast and not border and dyb <= edge_lim and recip != NULL:
             written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last, long_left,
-                                  es, recip, w, mode, counts, spans, cover)
+                                  recip, w, mode, counts, spans, cover)
             continue
         _edge_start(&lng, tx, dxb, dyb)
         y = ty
