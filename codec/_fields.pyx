@@ -724,3 +724,52 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     if not ok:
         return False, None, None, None, None, None
     return True, vertices, places, flat_arr, walls_arr, on_line_arr
+
+
+def argsort_keys(const int64_t[::1] keys, int64_t span):
+    """The permutation that sorts distinct keys in 0..span-1 (numpy's argsort of such
+    keys, which any sort gives alike): a least-significant-digit radix sort in as few
+    passes of at most 11-bit digits as span needs, the keys moved with their indices,
+    linear in the keys (the Hilbert order of a band's free vertices, where a comparison
+    sort cost more than the rest of the field decoding). None if a key lies outside
+    0..span-1."""
+    cdef int64_t n = keys.shape[0], j, b, total, c, bits = 0, passes, digit, shift = 0, mask
+    cdef bint bad = False
+    while bits < 63 and (<int64_t>1 << bits) < span:
+        bits += 1
+    passes = (bits + 10) // 11
+    digit = (bits + passes - 1) // passes if passes else 1
+    mask = (<int64_t>1 << digit) - 1
+    order = np.arange(n, dtype=np.int64)
+    arrays = [np.array(keys, dtype=np.int64), np.empty(n, dtype=np.int64), order, np.empty(n, dtype=np.int64),
+              np.empty(mask + 1, dtype=np.int64)]
+    cdef int64_t[::1] k_src = arrays[0], k_dst = arrays[1], i_src = arrays[2], i_dst = arrays[3], tmp
+    cdef int64_t[::1] count = arrays[4]
+    with nogil:
+        for j in range(n):
+            bad |= <uint64_t>keys[j] >= <uint64_t>span
+        while not bad and passes > 0:
+            count[:] = 0
+            for j in range(n):
+                count[(k_src[j] >> shift) & mask] += 1
+            total = 0
+            for b in range(mask + 1):
+                c = count[b]
+                count[b] = total
+                total += c
+            for j in range(n):
+                b = (k_src[j] >> shift) & mask
+                k_dst[count[b]] = k_src[j]
+                i_dst[count[b]] = i_src[j]
+                count[b] += 1
+            tmp = k_src
+            k_src = k_dst
+            k_dst = tmp
+            tmp = i_src
+            i_src = i_dst
+            i_dst = tmp
+            shift += digit
+            passes -= 1
+    if bad:
+        return None
+    return np.asarray(i_src)

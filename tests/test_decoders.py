@@ -492,3 +492,18 @@ def test_corpus_backends_through_the_api(gl, corpus) -> None:
     img = corpus["coins"]
     data = codec.encode(img)
     assert np.array_equal(codec.decode(data, backend="gl"), codec.decode(data, backend="cpu"))
+
+
+def test_a_decode_returns_an_array_of_its_own(corpus) -> None:
+    """A file of one band decodes to the render itself (no image to copy it into): each
+    decode's array is its own, writeable and C-contiguous, with the mesh's pixels."""
+    img = corpus["camera"]
+    one = codec.encode(img)
+    assert codec.info(one)["bands"] == 1
+    a, b = codec.decode(one), codec.decode(one)
+    assert not np.shares_memory(a, b)
+    assert a.flags.writeable and a.flags.c_contiguous and a.shape == img.shape and a.dtype == img.dtype
+    a[0, 0] ^= 1
+    assert not np.array_equal(a, b)
+    whole = codec.decode_mesh(one)
+    assert np.array_equal(b, decoder_cpu.render(whole))
