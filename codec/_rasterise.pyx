@@ -266,12 +266,44 @@ cdef inline uint64_t _reciprocal(int64_t d, int shift) noexcept nogil:
     return <uint64_t>m
 
 
+cdef inline void _fixed_edge(int64_t x0, int64_t dx, int64_t dy, const uint64_t* recip, uint64_t* e,
+                             uint64_t* step) noexcept nogil:
+    """An edge from column x0 moving dx columns over dy rows in _triangle1's fixed
+    point: (n * E) at its first row, and E * dx per row."""
+    cdef uint64_t m = recip[dy]
+    e[0] = <uint64_t>(x0 * dy + dy - 1) * m
+    step[0] = <uint64_t>dx * m
+
+
+cdef inline int64_t _fixed_edges(int64_t tx, int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by,
+                                 int64_t last, const uint64_t* recip, uint64_t* ea, uint64_t* sa, uint64_t* eb,
+                                 uint64_t* sb) noexcept nogil:
+    """The long edge T -> B (ea, sa) and the short one of the first rows (eb, sb): T -> M,
+    or M -> B for a flat top; the row where the short one ends (turns at M, or the
+    triangle's end)."""
+    _fixed_edge(tx, bx - tx, by - ty, recip, ea, sa)
+    if my > ty:
+        _fixed_edge(tx, mx - tx, my - ty, recip, eb, sb)
+        return my if by > my else last + 1
+    _fixed_edge(mx, bx - mx, by - my, recip, eb, sb)
+    return last + 1
+
+
+cdef inline void _ends(uint64_t ea, uint64_t eb, bint long_left, int64_t* lo, int64_t* hi) noexcept nogil:
+    """A row's span from the two edges' ceilings (the long edge's first), ordered by
+    the triangle's orientation."""
+    cdef int64_t ca = <int64_t>(ea >> 40), cb = <int64_t>(eb >> 40)
+    lo[0] = ca if long_left else cb
+    hi[0] = cb if long_left else ca
+
+
 cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, uint64_t ady, int64_t tx,
                                int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by, int64_t last,
                                bint long_left, const uint64_t* recip, int64_t w, int mode, uint16_t* counts,
                                int64_t* spans, uint8_t* cover) noexcept nogil:
     """A triangle of one channel in fixed point, its edges too (most triangles of a
-    gray image; none with a corner in the last column), its rows walked in locals: the
+    gray image; none with a corner in the last column, nor a plane too large for the
+    fixed point), its rows walked in locals: the
     long edge T -> B and the short one, T -> M above M's row and M -> B from there on,
     each edge's ceiling taken alike and the two ordered by the triangle's orientation
     (a select, not a call per run of rows). An edge from column x0 moving dx columns
@@ -279,31 +311,13 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
     with 0 <= n < W*dy, read as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when
     W*dy*dy <= 2**40, as for the planes: see the module's docstring). The pixels
     written."""
-    cdef int64_t lo, hi, x, ca, cb, y = ty, stop, written = 0, dy
-    cdef uint64_t a, e, ea, sa, eb, sb
+    cdef int64_t lo, hi, y = ty, stop, written = 0
+    cdef uint64_t ea, sa, eb, sb
     cdef sample_t* row = pixels + ty * w
-    dy = by - ty
-    e = recip[dy]
-    ea = <uint64_t>(tx * dy + dy - 1) * e
-    sa = <uint64_t>(bx - tx) * e
-    if my > ty:
-        dy = my - ty
-        e = recip[dy]
-        eb = <uint64_t>(tx * dy + dy - 1) * e
-        sb = <uint64_t>(mx - tx) * e
-        stop = my if by > my else last + 1
-    else:  # a flat top: M -> B from the first row
-        dy = by - my
-        e = recip[dy]
-        eb = <uint64_t>(mx * dy + dy - 1) * e
-        sb = <uint64_t>(bx - mx) * e
-        stop = last + 1
+    stop = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb)
     while True:
         while y < stop:
-            ca = <int64_t>(ea >> 40)
-            cb = <int64_t>(eb >> 40)
-            lo = ca if long_left else cb
-            hi = cb if long_left else ca
+            _ends(ea, eb, long_left, &lo, &hi)
             _write1(row, arow + adx * <uint64_t>lo, adx, lo, hi)
             written += hi - lo
             if mode != MODE_TOTAL:
@@ -316,10 +330,42 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
         if y > last:
             return written
         # M's row: the short edge turns there
-        dy = by - my
-        e = recip[dy]
-        eb = <uint64_t>(mx * dy + dy - 1) * e
-        sb = <uint64_t>(bx - mx) * e
+        _fixed_edge(mx, bx - mx, by - my, recip, &eb, &sb)
+        stop = last + 1
+
+
+cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t tx, int64_t ty, int64_t mx,
+                              int64_t my, int64_t bx, int64_t by, int64_t last, bint long_left,
+                              const uint64_t* recip, int64_t w, int mode, uint16_t* counts, int64_t* spans,
+                              uint8_t* cover) noexcept nogil:
+    """_triangle1 for C > 1 channels (kept apart: the gray walk keeps its plane in
+    registers)."""
+    cdef int64_t lo, hi, ch, x, y = ty, stop, written = 0
+    cdef uint64_t a, ea, sa, eb, sb
+    cdef sample_t* row = pixels + ty * w * c
+    stop = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb)
+    while True:
+        while y < stop:
+            _ends(ea, eb, long_left, &lo, &hi)
+            for ch in range(c):
+                a = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
+                for x in range(lo, hi):
+                    if sample_t is uint8_t:
+                        row[x * c + ch] = <sample_t>(a >> 54)
+                    else:
+                        row[x * c + ch] = <sample_t>(a >> 46)
+                    a += pl.dx[ch]
+                pl.row[ch] += pl.dy[ch]
+            written += hi - lo
+            if mode != MODE_TOTAL:
+                _account(mode, y, lo, hi, w, counts, spans, cover)
+            ea += sa
+            eb += sb
+            row += w * c
+            y += 1
+        if y > last:
+            return written
+        _fixed_edge(mx, bx - mx, by - my, recip, &eb, &sb)
         stop = last + 1
 
 
@@ -331,7 +377,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     module's docstring) and `spans` (non-empty spans per row, or NULL), MODE_COVER by
     counting each pixel's writes in `cover` (capped at 2). Returns the number of pixels
     written. Vertices and corners are checked by the caller."""
-    cdef int64_t k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim, one
+    cdef int64_t k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
     cdef int64_t tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl, vt, vm, vb, mult
     cdef int64_t corner[3]
     cdef Edge lng, top, bottom
@@ -347,7 +393,6 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     else:
         pl.shift = 46
         lim = 1 << 15
-    one = <int64_t>1 << pl.shift
     # the edges' fixed point (shift 40) is exact for edges over up to
     # 2**((40 - bits(W)) / 2) rows, in images below 2**22 wide (n * E < 2**64)
     bits = 0
@@ -358,7 +403,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     edge_lim = min(edge_lim, h - 1, 1 << 16)
     # E for every edge height the fixed point takes (an edge spans 1 .. H - 1 rows):
     # one division per height and call instead of three per triangle
-    recip = <uint64_t*>malloc(<size_t>(edge_lim + 1) * sizeof(uint64_t)) if c == 1 else NULL
+    recip = <uint64_t*>malloc(<size_t>(edge_lim + 1) * sizeof(uint64_t))
     if recip != NULL:
         recip[0] = 0
         if edge_lim >= 1:
@@ -406,9 +451,13 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
         last = by if by == h - 1 else by - 1
         long_left = d > 0
         border = tx == w - 1 or mx == w - 1 or bx == w - 1
-        if c == 1 and pl.fast and not border and dyb <= edge_lim and recip != NULL:
-            written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last, long_left,
-                                  recip, w, mode, counts, spans, cover)
+        if pl.fast and not border and dyb <= edge_lim and recip != NULL:
+            if c == 1:
+                written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last,
+                                      long_left, recip, w, mode, counts, spans, cover)
+            else:
+                written += _triangle_colour(pixels, &pl, c, tx, ty, mx, my, bx, by, last, long_left, recip, w,
+                                            mode, counts, spans, cover)
             continue
         _edge_start(&lng, tx, dxb, dyb)
         y = ty

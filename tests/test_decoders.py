@@ -228,19 +228,20 @@ def test_cpu_tiles_path_matches_normative_rule(mesh: Mesh) -> None:
     assert np.array_equal(decoder_cpu.render(mesh, tiles=True), reference(mesh))
 
 
-@pytest.mark.parametrize("dtype, w, h", [
+@pytest.mark.parametrize("dtype, w, h, strip, channels", [
     # 16-bit samples: the planes' fixed point holds up to 2|D| = 2**15 (two triangles
     # of legs n - 1 have 2|D| = 2 (n - 1)**2), the exact walk beyond
-    (np.uint16, 128, 128), (np.uint16, 129, 129), (np.uint16, 130, 130),
-    # 8-bit samples: up to 2|D| = 2**23
-    (np.uint8, 4097, 1025), (np.uint8, 4098, 1025),
+    *[(np.uint16, n, n, strip, channels) for n in (128, 129, 130)
+      for strip, channels in ((False, 1), (True, 1), (True, 3))],
+    # 8-bit samples: up to 2|D| = 2**23 (the same arithmetic with other constants;
+    # 4 million pixels of brute force each)
+    (np.uint8, 4097, 1025, True, 1), (np.uint8, 4098, 1025, True, 1),
 ])
-@pytest.mark.parametrize("strip", [False, True])
-def test_cpu_fixed_point_at_its_bounds(dtype, w: int, h: int, strip: bool) -> None:
+def test_cpu_fixed_point_at_its_bounds(dtype, w: int, h: int, strip: bool, channels: int) -> None:
     """Triangles at the largest size the kernel reads in fixed point and just beyond,
     with extreme and random samples: the rule's pixels either way. With a strip of one
     more column on the right the two large triangles keep off the last column and take
-    the kernel's one-channel walk, else its general one."""
+    the kernel's fixed-point walk (one channel's, or colour's), else its general one."""
     corners = _corners(w, h)
     vertices = np.array(corners + ([(w, 0), (w, h - 1)] if strip else []), np.int64)
     triangles = orient(vertices, [[0, 1, 2], [1, 3, 2]] + ([[1, 4, 3], [4, 5, 3]] if strip else []))
@@ -248,6 +249,8 @@ def test_cpu_fixed_point_at_its_bounds(dtype, w: int, h: int, strip: bool) -> No
     rng = np.random.default_rng(w * h)
     for values in ([0, top, top, 0], [top, 0, 1, top - 1], rng.integers(0, top + 1, 4)):
         values = np.resize(np.array(values, dtype), len(vertices))
+        if channels == 3:  # the channels in different orders
+            values = np.stack([values, values[::-1], np.roll(values, 1)], 1)
         mesh = Mesh(vertices, values, triangles, w + strip, h)
         validate(mesh)
         expected = reference(mesh)
