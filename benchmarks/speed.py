@@ -9,7 +9,8 @@ the median over the rounds of each round's own ratio, a time the median time.
    quality 90 and PNG (cv2.imdecode), and WebP, AVIF and JPEG XL at level 90
    (imagecodecs, in the bench extra; left out when it is not installed; WebP codes a
    gray image as three equal channels). Also the parts of a decode:
-   render (the rasteriser alone, mesh -> image) and triangulate (the constrained
+   render (the rasteriser alone, mesh -> image, as a decode runs it on a validated
+   mesh: decoder_cpu.render(tiles=True)) and triangulate (the constrained
    Delaunay triangulation the format leaves implicit, which no decoder can skip: the
    compiled kernel codec.triangulate.delaunay the decoder uses, and against it
    Triangle followed by the canonical flip pass, the way it was built before).
@@ -135,7 +136,8 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int) -
         for peer, (enc, dec) in peer_codecs(img).items():
             if peer in peers:
                 fns[peer] = lambda dec=dec, b=enc(img): dec(b)
-        fns["render"] = lambda: decoder_cpu.render(mesh)
+        # as a decode renders it: a file's mesh is validated, so it tiles the image
+        fns["render"] = lambda: decoder_cpu.render(mesh, tiles=True)
         fns["decode"] = lambda: codec.decode(data, backend="cpu")
         fns["triangulate"] = lambda: [delaunay(v, s) for v, s in bands]
         fns["triangle+canonical"] = lambda: [canonical_triangles(by_triangle(v, s)) for v, s in bands]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import itertools
 import mmap
 import os
 from typing import BinaryIO, NoReturn, Union
@@ -287,8 +288,18 @@ def _as_bytes(data: Buffer, limit: int | None = None) -> bytes:
 
 def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
     """Decode a StreamDecoder's bands into `out` (checked first) or a new array."""
+    from .stream import GROUP_PIXELS
+
     shape, dtype = tuple(dec.shape), np.dtype(dec.dtype)
+    groups = dec.rows(GROUP_PIXELS)  # small bands rendered a group at a time
     if out is None:
+        first = next(groups, None)
+        second = next(groups, None) if first is not None else None
+        if second is None and first is not None and first[0] == 0 and _whole(first[1], shape, dtype):
+            # one render gave the whole image (a file of one band): it is the result,
+            # without an image to allocate and copy it into
+            return first[1]
+        groups = itertools.chain([g for g in (first, second) if g is not None], groups)
         image = np.empty(shape, dtype)
         target = image[..., 0] if dec.channels == 1 and image.ndim == 3 else image
     else:
@@ -306,11 +317,15 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
             raise ATMError("out is read-only; pass a writeable array")
         # a view, whatever the strides: the gray image fills the one channel in place
         target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
-    from .stream import GROUP_PIXELS
-
-    for y0, rows in dec.rows(GROUP_PIXELS):  # small bands rendered a group at a time
+    for y0, rows in groups:
         target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
     return out if out is not None else image
+
+
+def _whole(rows: np.ndarray, shape: tuple, dtype: np.dtype) -> bool:
+    """Whether rows, as the decoder made them (no other reference to their memory),
+    can be the decoded image itself."""
+    return rows.shape == shape and rows.dtype == dtype and rows.flags.c_contiguous and rows.flags.writeable
 
 
 __all__ = [

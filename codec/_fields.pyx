@@ -90,26 +90,31 @@ cdef bint _corners_beyond(const int64_t* corners, int64_t count, int64_t n) noex
     return bad != 0
 
 
+cdef inline void _parent_of(int64_t a, int64_t b, int64_t c, int64_t[::1] p) noexcept nogil:
+    """One triangle's part of sample_parents, its corners' sequence places a, b, c: the
+    last corner's candidate is the middle one, the middle one's the first, strictly
+    earlier (a listed triangle may repeat a corner); conditional moves, as the
+    comparisons go either way from triangle to triangle."""
+    cdef int64_t lo, mid, hi, t, old
+    lo = a if a < b else b
+    lo = lo if lo < c else c
+    hi = a if a > b else b
+    hi = hi if hi > c else c
+    mid = a + b + c - lo - hi
+    t = mid if mid < hi else -1
+    old = p[hi]
+    p[hi] = t if t > old else old
+    t = lo if lo < mid else -1
+    old = p[mid]
+    p[mid] = t if t > old else old
+
+
 cdef void _parents(const int64_t[:, ::1] triangles, const int64_t[::1] pos, int64_t[::1] p) noexcept nogil:
     """sample_parents' pass: pos is each vertex's place in the sequence, p (all -1 on
     entry) gets each place's parent place; the corners already checked."""
-    cdef int64_t n = p.shape[0], j, k, a, b, c, lo, mid, hi, t, old
+    cdef int64_t n = p.shape[0], j, k
     for k in range(triangles.shape[0]):
-        a = pos[triangles[k, 0]]; b = pos[triangles[k, 1]]; c = pos[triangles[k, 2]]
-        lo = a if a < b else b
-        lo = lo if lo < c else c
-        hi = a if a > b else b
-        hi = hi if hi > c else c
-        mid = a + b + c - lo - hi
-        # the last corner's candidate is the middle one, the middle one's the first,
-        # strictly earlier (a listed triangle may repeat a corner); conditional
-        # moves, as the comparisons go either way from triangle to triangle
-        t = mid if mid < hi else -1
-        old = p[hi]
-        p[hi] = t if t > old else old
-        t = lo if lo < mid else -1
-        old = p[mid]
-        p[mid] = t if t > old else old
+        _parent_of(pos[triangles[k, 0]], pos[triangles[k, 1]], pos[triangles[k, 2]], p)
     for j in range(n):
         if p[j] < 0:
             p[j] = j - 1
@@ -156,15 +161,24 @@ cdef void _vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] area
     to even and kept within 1..65535; `step` where a vertex has no fan. The arithmetic
     is numpy's (binary64, one rounding each), so encoder and decoder agree exactly.
     Corners already checked; fan is zeroed scratch of n entries."""
-    cdef int64_t n = steps.shape[0], k, i, total = 0, some = 0
+    cdef int64_t k, i
+    if step > 1:
+        for k in range(triangles.shape[0]):
+            for i in range(3):
+                fan[triangles[k, i]] += areas[k]
+    _steps_of_fans(fan, step, bound, triangles.shape[0], steps)
+
+
+cdef void _steps_of_fans(const int64_t[::1] fan, int64_t step, double bound, int64_t m,
+                         int64_t[::1] steps) noexcept nogil:
+    """_vertex_steps from the vertices' fan areas (sums of their triangles' doubled
+    areas; m triangles)."""
+    cdef int64_t n = steps.shape[0], i, total = 0, some = 0
     cdef double mean, factor, s
     for i in range(n):
         steps[i] = step
-    if step <= 1 or triangles.shape[0] == 0:
+    if step <= 1 or m == 0:
         return
-    for k in range(triangles.shape[0]):
-        for i in range(3):
-            fan[triangles[k, i]] += areas[k]
     for i in range(n):
         if fan[i] > 0:
             total += fan[i]
@@ -219,7 +233,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     its parent's sample (sample_parents) and checked within 0..top; values (n x
     channels, int64) in vertex order, areas the triangles' doubled areas. Every index
     is checked before it is used; values and areas are None on an error."""
-    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q, a, b, c, xa, ya, area
     cdef int64_t channels = zigzags.shape[0] // n if n else 1
     cdef uint64_t u
     cdef int64_t r
@@ -231,7 +245,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     steps_arr = np.empty(n, dtype=np.int64)
     parent_arr = np.empty(n, dtype=np.int64)
     seq_arr = np.empty((n, channels), dtype=np.int64)
-    cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr
+    fan_arr = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr, fan = fan_arr
     cdef int64_t[:, ::1] out = values, seq = seq_arr
     cdef int status = VALUES_OK
     with nogil:
@@ -247,19 +262,29 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 break
             pos[k] = j
         if status == VALUES_OK:
-            _doubled_areas(vertices, triangles, ar)
-            for i in range(n):
-                pos[i] = 0  # now the fan areas' scratch
-            _vertex_steps(triangles, ar, step, bound, pos, steps)
+            # one pass over the triangles: their doubled areas, the vertices' fan areas
+            # and the samples' parents (_doubled_areas, _vertex_steps' sums and
+            # _parents, each of which would read the corners again)
+            for j in range(n):
+                fan[j] = 0
+                p[j] = -1
+            for k in range(m):
+                a = triangles[k, 0]; b = triangles[k, 1]; c = triangles[k, 2]
+                xa = vertices[a, 0]; ya = vertices[a, 1]
+                area = (vertices[b, 0] - xa) * (vertices[c, 1] - ya) - (vertices[c, 0] - xa) * (vertices[b, 1] - ya)
+                ar[k] = area
+                fan[a] += area
+                fan[b] += area
+                fan[c] += area
+                _parent_of(pos[a], pos[b], pos[c], p)
+            for j in range(n):
+                if p[j] < 0:
+                    p[j] = j - 1
+            _steps_of_fans(fan, step, bound, m, steps)
             if top_pinned:
                 for i in range(n):
                     if vertices[i, 1] == 0:
                         steps[i] = 1
-            # places again: the parents are found in sequence places
-            for j in range(n):
-                pos[seq_order[j]] = j
-                p[j] = -1
-            _parents(triangles, pos, p)
             for j in range(n):
                 q = p[j]
                 for ch in range(channels):
@@ -724,3 +749,52 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     if not ok:
         return False, None, None, None, None, None
     return True, vertices, places, flat_arr, walls_arr, on_line_arr
+
+
+def argsort_keys(const int64_t[::1] keys, int64_t span):
+    """The permutation that sorts distinct keys in 0..span-1 (numpy's argsort of such
+    keys, which any sort gives alike): a least-significant-digit radix sort in as few
+    passes of at most 11-bit digits as span needs, the keys moved with their indices,
+    linear in the keys (the Hilbert order of a band's free vertices, where a comparison
+    sort cost more than the rest of the field decoding). None if a key lies outside
+    0..span-1."""
+    cdef int64_t n = keys.shape[0], j, b, total, c, bits = 0, passes, digit, shift = 0, mask
+    cdef bint bad = False
+    while bits < 63 and (<int64_t>1 << bits) < span:
+        bits += 1
+    passes = (bits + 10) // 11
+    digit = (bits + passes - 1) // passes if passes else 1
+    mask = (<int64_t>1 << digit) - 1
+    order = np.arange(n, dtype=np.int64)
+    arrays = [np.array(keys, dtype=np.int64), np.empty(n, dtype=np.int64), order, np.empty(n, dtype=np.int64),
+              np.empty(mask + 1, dtype=np.int64)]
+    cdef int64_t[::1] k_src = arrays[0], k_dst = arrays[1], i_src = arrays[2], i_dst = arrays[3], tmp
+    cdef int64_t[::1] count = arrays[4]
+    with nogil:
+        for j in range(n):
+            bad |= <uint64_t>keys[j] >= <uint64_t>span
+        while not bad and passes > 0:
+            count[:] = 0
+            for j in range(n):
+                count[(k_src[j] >> shift) & mask] += 1
+            total = 0
+            for b in range(mask + 1):
+                c = count[b]
+                count[b] = total
+                total += c
+            for j in range(n):
+                b = (k_src[j] >> shift) & mask
+                k_dst[count[b]] = k_src[j]
+                i_dst[count[b]] = i_src[j]
+                count[b] += 1
+            tmp = k_src
+            k_src = k_dst
+            k_dst = tmp
+            tmp = i_src
+            i_src = i_dst
+            i_dst = tmp
+            shift += digit
+            passes -= 1
+    if bad:
+        return None
+    return np.asarray(i_src)

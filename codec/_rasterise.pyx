@@ -1,26 +1,58 @@
 """The CPU decoder's kernel: exact integer scanline rasterisation of a mesh, with the
 GIL released (see codec.decoder_cpu for the rule it implements, ATM.md §5).
 
-Every quantity is an int64 integer: the pixel centres and vertices are integer
-points, so a span's ends and a pixel's value are exact fractions, walked from row to
-row and pixel to pixel as quotient and remainder. A division (float64, corrected to
-the exact floor) happens only when a triangle or one of its edges starts; rows and
-pixels add quotient and remainder steps with a carry. Bounds: with W*H <= 2**32 and
-samples below 2**16, every numerator is below 2**53 (see the plane in _triangles), so
-the float64 quotients are off by at most one before correction.
+The pixel centres and vertices are integer points, so a span's ends and a pixel's
+value are exact fractions, read here in fixed point. Division by multiplication
+(Granlund and Montgomery): for integers 0 <= n < V*d and M = ceil(2**s / d),
+floor(n / d) = (n * M) >> s whenever V*d*d <= 2**s. Writing n = q*d + r and
+e = M*d - 2**s < d, n*M / 2**s = q + r/d + n*e / (d * 2**s), where r/d <= 1 - 1/d
+and n*e / (d * 2**s) < V*d*d / (d * 2**s) <= 1/d. And n*M < V*2**s + V*d.
 
-Coverage (every pixel written exactly once) is checked per span, not per pixel: row
-y's spans [lo, hi) tile 0..W exactly when the multiset of their starts plus W equals
-that of their ends plus 0 (then the number of spans over each column, starts up to it
-less ends up to it, is one), so each span adds one at lo and takes one at hi of a row
-of W + 1 counters, and every row must end as (1, 0, ..., 0, -1). The counters are 16
-bits, wrapping: exact for a row of fewer than 2**15 spans (a tiling's row has at most
-W), which is counted when there are 2**15 triangles or more (each gives a row one
-span at most). Only when the check fails is the image rasterised again counting
-each pixel's writes, to name the first pixel uncovered or covered twice."""
+* A channel's value at (x, y) is floor(N / d2), N = ga*x + gb*y + gc an exact integer
+  plane over d2 = 2|D| (D the doubled area). At every pixel a triangle writes, N/d2 is
+  a mean of its corners' samples plus 1/2, so 0 < N < V*d2 with V = 2**8 or 2**16 (the
+  samples' range); s = 62 - log2 V keeps N*M below 2**63. N*M is linear in x and y:
+  a row adds gb*M, a pixel ga*M, in uint64 arithmetic modulo 2**64, exact wherever the
+  true value lies in [0, 2**64) (at every pixel written) whatever the walk passes
+  through on the way. A pixel costs an add and a shift.
+* An edge from column x0 that moves dx columns over dy rows is at
+  x = x0 + dx*k/dy on its k-th row, and ceil(x) = floor(n / dy) with
+  n = x0*dy + dx*k + dy - 1, 0 <= n < W*dy: walked the same way, with V = W below
+  2**22 and s = 40 (a constant: a variable shift costs more), so edges over up to
+  2**((40 - bits(W)) / 2) rows (2**15 for W = 512). The multipliers of every edge
+  height are made once per call, so a triangle of one channel costs one division
+  (its plane's M).
+
+Triangles beyond those bounds (d2 over 2**23 for 8-bit samples, 2**15 for 16-bit: 2
+million and 8,192 pixels; taller edges, or over 2**16 rows; images 2**22 wide), with a
+corner in the last column (where the rule needs to know whether the right edge is
+exactly on a column), and those of colour images take the general walk: edges as
+quotient and remainder over their rows (one float64 division per edge, corrected to
+the exact floor), planes in fixed point or, when too large, as quotient and remainder
+(one division per span and a carry per pixel). Bounds: with W*H <= 2**32 and samples
+below 2**16, every plane coefficient and N is below 2**53 in magnitude.
+
+Coverage (every pixel written exactly once). A mesh that mesh.validate has checked
+tiles the image (total area, positive orientation, and edges shared as a tiling
+shares them: ATM.md §4.2.3), and the ownership rule then gives every pixel to exactly
+one triangle, so the caller may ask for the cheap check alone (CHECK_TOTAL): the
+written pixels counted, which must be W*H. The total area with every triangle
+positively oriented would not be proof enough by itself: two overlapping triangles
+can leave a gap of their overlap's area (tests/test_decoders.py's sheared meshes),
+which is why validate also checks the edges, or knows them (the decoder's own
+triangulation of vertices whose hull is the image). Any other mesh (CHECK_SPANS) is
+checked per span, not per pixel: row y's spans [lo, hi) tile 0..W exactly when the
+multiset of their starts plus W equals that of their ends plus 0 (then the number of
+spans over each column, starts up to it less ends up to it, is one), so each span
+adds one at lo and takes one at hi of a row of W + 1 counters, and every row must end
+as (1, 0, ..., 0, -1). The counters are 16 bits, wrapping: exact for a row of fewer
+than 2**15 spans (a tiling's row has at most W), which is counted when there are
+2**15 triangles or more (each gives a row one span at most). When either check
+fails the image is rasterised again counting each pixel's writes, to name the first
+pixel uncovered or covered twice."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
-from libc.stdlib cimport calloc, free
+from libc.stdlib cimport calloc, free, malloc
 
 ctypedef fused sample_t:
     uint8_t
@@ -36,6 +68,19 @@ cpdef enum Status:
     NO_MEMORY = 5       # the coverage counters could not be allocated
 
 
+# rasterise()'s coverage checks (see the module's docstring)
+cpdef enum Check:
+    CHECK_SPANS = 0     # any mesh: every row's spans counted
+    CHECK_TOTAL = 1     # a mesh known to tile the image: the written pixels counted
+
+
+# how _triangles accounts for the pixels it writes
+cdef enum Mode:
+    MODE_TOTAL = 0      # count them
+    MODE_COUNTS = 1     # per-row span counters
+    MODE_COVER = 2      # each pixel's writes
+
+
 cdef inline int64_t _floor_div_fast(int64_t a, int64_t b) noexcept nogil:
     """floor(a / b) for b > 0 and |a| < 2**53: the float64 quotient truncated (no
     integer division, which costs several times more), then corrected without a
@@ -47,19 +92,37 @@ cdef inline int64_t _floor_div_fast(int64_t a, int64_t b) noexcept nogil:
     return q
 
 
-cdef inline void _edge_step(int64_t den, int64_t step, int64_t* dq, int64_t* dr) noexcept nogil:
-    """An edge's step per row, `step` columns over `den` rows, as whole columns dq and
-    remainder dr in [0, den)."""
-    dq[0] = _floor_div_fast(step, den)
-    dr[0] = step - dq[0] * den
+cdef struct Edge:
+    # the edge's x on the current row, q + r/den with 0 <= r < den (den: its rows), and
+    # its step per row the same way
+    int64_t q, r, den, dq, dr
 
 
-cdef inline void _sort3(int64_t* i, const int64_t[:, ::1] v, int64_t w) noexcept nogil:
+cdef inline void _edge_start(Edge* e, int64_t x0, int64_t dx, int64_t dy) noexcept nogil:
+    """An edge from column x0 that moves dx columns over dy > 0 rows."""
+    e.q = x0
+    e.r = 0
+    e.den = dy
+    e.dq = _floor_div_fast(dx, dy)
+    e.dr = dx - e.dq * dy
+
+
+cdef inline void _edge_next(Edge* e) noexcept nogil:
+    """One row down: the whole step, and a carry from the remainder."""
+    cdef int64_t carry
+    e.q += e.dq
+    e.r += e.dr
+    carry = e.r >= e.den
+    e.r -= carry * e.den
+    e.q += carry
+
+
+cdef inline void _sort3(int64_t* i, const int64_t* v, int64_t w) noexcept nogil:
     """Order three vertex indices by raster position (row, then column): a sorting
     network of conditional moves on their pixel keys, as the order is different from
     triangle to triangle."""
     cdef int64_t a = i[0], b = i[1], c = i[2], t, kt
-    cdef int64_t ka = v[a, 1] * w + v[a, 0], kb = v[b, 1] * w + v[b, 0], kc = v[c, 1] * w + v[c, 0]
+    cdef int64_t ka = v[2 * a + 1] * w + v[2 * a], kb = v[2 * b + 1] * w + v[2 * b], kc = v[2 * c + 1] * w + v[2 * c]
     cdef bint s
     s = kb < ka
     t = b if s else a; b = a if s else b; a = t
@@ -72,62 +135,287 @@ cdef inline void _sort3(int64_t* i, const int64_t[:, ::1] v, int64_t w) noexcept
     i[0] = a; i[1] = b; i[2] = c
 
 
-cdef struct Plane:
-    # one channel's value on the triangle: the numerator ga*x + gb*y + gc over d2 = 2D
-    # at the left end of the current row's span as floor q and remainder r, its step
-    # per column (qa, ra) and per row along the left edge (qs, rs: one row down and the
-    # edge's whole columns dq across; one column more costs (qa, ra) again)
-    int64_t q, r, qa, ra, qs, rs, ga, gb
+cdef struct Planes:
+    # per channel (at most 4): the plane's value numerator N at column 0 of the current
+    # row, its step per row and per column; fixed point (each times M, modulo 2**64)
+    # when `fast`, else N itself (int64 bits)
+    uint64_t row[4]
+    uint64_t dy[4]
+    uint64_t dx[4]
+    int64_t d2          # the denominator, 2 |D|
+    int shift           # s
+    bint fast
 
 
-cdef inline void _plane_row_step(Plane* p, int64_t extra, int64_t d2) noexcept nogil:
-    """The value one row down the left edge, which moved its whole step plus `extra`
-    (0 or 1) columns: two steps below d2 each, so two carries at most."""
-    cdef int64_t carry
-    p.q += p.qs + extra * p.qa
-    p.r += p.rs + extra * p.ra
-    carry = p.r >= d2
-    p.r -= carry * d2
-    p.q += carry
-    carry = p.r >= d2
-    p.r -= carry * d2
-    p.q += carry
+cdef inline void _write1(sample_t* p, uint64_t a, uint64_t step, int64_t lo, int64_t hi) noexcept nogil:
+    """Pixels lo .. hi - 1 of one channel from the fixed-point value `a` at lo, `step`
+    per pixel; the shift is a constant of the sample type (a variable one costs more)."""
+    cdef int64_t x
+    for x in range(lo, hi):
+        if sample_t is uint8_t:
+            p[x] = <sample_t>(a >> 54)
+        else:
+            p[x] = <sample_t>(a >> 46)
+        a += step
 
 
-cdef inline void _plane_edge(Plane* p, int64_t dq, int64_t d2) noexcept nogil:
-    """(qs, rs) for a left edge whose whole step per row is dq columns."""
-    cdef int64_t n = p.gb + p.ga * dq
-    p.qs = _floor_div_fast(n, d2)
-    p.rs = n - p.qs * d2
+cdef inline void _span(sample_t* p, const Planes* pl, int64_t c, int64_t lo, int64_t hi) noexcept nogil:
+    """Write pixels lo .. hi - 1 of the row starting at p (C channels each)."""
+    cdef int64_t ch, x, q, r, d2 = pl.d2, qa, ra
+    cdef uint64_t a, step
+    if pl.fast:
+        if c == 1:
+            _write1(p, pl.row[0] + pl.dx[0] * <uint64_t>lo, pl.dx[0], lo, hi)
+        else:
+            for ch in range(c):
+                a = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
+                step = pl.dx[ch]
+                for x in range(lo, hi):
+                    if sample_t is uint8_t:
+                        p[x * c + ch] = <sample_t>(a >> 54)
+                    else:
+                        p[x * c + ch] = <sample_t>(a >> 46)
+                    a += step
+        return
+    # a large triangle: N / d2 as quotient and remainder, stepped with a carry
+    for ch in range(c):
+        q = <int64_t>(pl.row[ch] + pl.dx[ch] * <uint64_t>lo)  # N, exact (below 2**53)
+        r = q
+        q = _floor_div_fast(r, d2)
+        r -= q * d2
+        qa = _floor_div_fast(<int64_t>pl.dx[ch], d2)
+        ra = <int64_t>pl.dx[ch] - qa * d2
+        for x in range(lo, hi):
+            p[x * c + ch] = <sample_t>q
+            q += qa
+            r += ra - d2
+            q += r >= 0
+            r = r if r >= 0 else r + d2
 
 
-cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
-                    const int64_t[:, ::1] tris, sample_t* pixels, uint16_t* counts,
-                    int64_t* spans, uint8_t* cover, int64_t w, int64_t h) noexcept nogil:
-    """Write every triangle's pixels into `pixels` and account for its spans: in
-    `counts` (a row of W + 1 counters per image row, see the module's docstring) and
-    `spans` (non-empty spans per row), or, when `cover` is given instead, by counting
-    each pixel's writes (capped at 2). Vertices and corners are checked by the
-    caller. The walks are plain locals: a sample store may alias any memory, and
-    through a pointer they would be reloaded after each one."""
-    cdef int64_t m = tris.shape[0], c = vals.shape[1]
-    cdef int64_t k, ch, y, x, last, lo, hi, d, d2, half, q, r, carry, stop, extra, qa, ra, row
-    cdef int64_t tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl, vt, vm, vb
-    # the left and right edges' x on the current row as floor and remainder over their
-    # rows (den), and their steps per row the same way
-    cdef int64_t lq, lr, lden, ldq, ldr, rq, rr, rden, rdq, rdr
-    cdef int64_t corner[3]
-    cdef Plane pl[4]   # per channel (at most 4)
-    cdef bint long_left, turns
+cdef inline int64_t _rows(sample_t* pixels, Planes* pl, Edge* left, Edge* right, int64_t y, int64_t stop,
+                          int64_t c, int64_t w, bint border, int mode, uint16_t* counts, int64_t* spans,
+                          uint8_t* cover) noexcept nogil:
+    """Rows y .. stop - 1 of a triangle between two edges; the pixels written. The
+    edges are walked in locals (through the pointers they would be stored and
+    reloaded around every sample store, which may alias them)."""
+    cdef int64_t lo, hi, ch, carry, written = 0
+    cdef int64_t lq = left.q, lr = left.r, lden = left.den, ldq = left.dq, ldr = left.dr
+    cdef int64_t rq = right.q, rr = right.r, rden = right.den, rdq = right.dq, rdr = right.dr
+    cdef sample_t* row = pixels + y * w * c
+    while y < stop:
+        # [xl, xr]: the two edges' exact x on this row. Column x is the triangle's if
+        # xl <= x < xr, or xl < x = xr = W - 1: from ceil(xl) to ceil(xr) - 1, and
+        # W - 1 when the right edge is exactly there and the left one is not (only a
+        # triangle with a corner in the last column can reach it)
+        lo = lq + (lr != 0)
+        hi = rq + (rr != 0)
+        if border:
+            hi += (rr == 0) & (hi == w - 1) & ((lr != 0) | (lo != w - 1))
+        _span(row, pl, c, lo, hi)
+        written += hi - lo  # lo <= hi: the left edge is left of the right one
+        if mode != MODE_TOTAL:
+            _account(mode, y, lo, hi, w, counts, spans, cover)
+        # one row down: each edge's whole step, and a carry from its remainder
+        # (without a branch: a carry's direction cannot be predicted)
+        lq += ldq
+        lr += ldr
+        carry = lr >= lden
+        lr -= carry * lden
+        lq += carry
+        rq += rdq
+        rr += rdr
+        carry = rr >= rden
+        rr -= carry * rden
+        rq += carry
+        for ch in range(c):
+            pl.row[ch] += pl.dy[ch]
+        row += w * c
+        y += 1
+    left.q = lq
+    left.r = lr
+    right.q = rq
+    right.r = rr
+    return written
+
+
+cdef inline void _account(int mode, int64_t y, int64_t lo, int64_t hi, int64_t w, uint16_t* counts, int64_t* spans,
+                   uint8_t* cover) noexcept nogil:
+    """A span's coverage bookkeeping under MODE_COUNTS or MODE_COVER."""
+    cdef int64_t x
     cdef uint8_t seen
-    cdef int64_t stride = w + 1
-    cdef sample_t* p
+    if mode == MODE_COUNTS:
+        if lo < hi:
+            counts[y * (w + 1) + lo] += 1
+            counts[y * (w + 1) + hi] -= 1
+            if spans != NULL:
+                spans[y] += 1
+    else:
+        for x in range(y * w + lo, y * w + hi):
+            seen = cover[x]
+            cover[x] = seen + 1 if seen < 2 else 2
+
+
+cdef inline uint64_t _reciprocal(int64_t d, int shift) noexcept nogil:
+    """ceil(2**shift / d) for 2 <= d and shift <= 54 (the quotient then below 2**53):
+    the float64 quotient is correctly rounded and the integers around it are
+    representable, so truncated it is the ceiling or one less."""
+    cdef int64_t one = <int64_t>1 << shift
+    cdef int64_t m = <int64_t>(<double>one / <double>d)
+    m += m * d < one
+    return <uint64_t>m
+
+
+cdef inline void _fixed_edge(int64_t x0, int64_t dx, int64_t dy, const uint64_t* recip, uint64_t* e,
+                             uint64_t* step) noexcept nogil:
+    """An edge from column x0 moving dx columns over dy rows in _triangle1's fixed
+    point: (n * E) at its first row, and E * dx per row."""
+    cdef uint64_t m = recip[dy]
+    e[0] = <uint64_t>(x0 * dy + dy - 1) * m
+    step[0] = <uint64_t>dx * m
+
+
+cdef inline int64_t _fixed_edges(int64_t tx, int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by,
+                                 int64_t last, const uint64_t* recip, uint64_t* ea, uint64_t* sa, uint64_t* eb,
+                                 uint64_t* sb) noexcept nogil:
+    """The long edge T -> B (ea, sa) and the short one of the first rows (eb, sb): T -> M,
+    or M -> B for a flat top; the row where the short one ends (turns at M, or the
+    triangle's end)."""
+    _fixed_edge(tx, bx - tx, by - ty, recip, ea, sa)
+    if my > ty:
+        _fixed_edge(tx, mx - tx, my - ty, recip, eb, sb)
+        return my if by > my else last + 1
+    _fixed_edge(mx, bx - mx, by - my, recip, eb, sb)
+    return last + 1
+
+
+cdef inline void _ends(uint64_t ea, uint64_t eb, bint long_left, int64_t* lo, int64_t* hi) noexcept nogil:
+    """A row's span from the two edges' ceilings (the long edge's first), ordered by
+    the triangle's orientation."""
+    cdef int64_t ca = <int64_t>(ea >> 40), cb = <int64_t>(eb >> 40)
+    lo[0] = ca if long_left else cb
+    hi[0] = cb if long_left else ca
+
+
+cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, uint64_t ady, int64_t tx,
+                               int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by, int64_t last,
+                               bint long_left, const uint64_t* recip, int64_t w, int mode, uint16_t* counts,
+                               int64_t* spans, uint8_t* cover) noexcept nogil:
+    """A triangle of one channel in fixed point, its edges too (most triangles of a
+    gray image; none with a corner in the last column, nor a plane too large for the
+    fixed point), its rows walked in locals: the
+    long edge T -> B and the short one, T -> M above M's row and M -> B from there on,
+    each edge's ceiling taken alike and the two ordered by the triangle's orientation
+    (a select, not a call per run of rows). An edge from column x0 moving dx columns
+    over dy rows has ceil(x) = floor(n / dy) on its k-th row, n = x0*dy + dx*k + dy - 1,
+    with 0 <= n < W*dy, read as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when
+    W*dy*dy <= 2**40, as for the planes: see the module's docstring). The pixels
+    written."""
+    cdef int64_t lo, hi, y = ty, stop, written = 0
+    cdef uint64_t ea, sa, eb, sb
+    cdef sample_t* row = pixels + ty * w
+    stop = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb)
+    while True:
+        while y < stop:
+            _ends(ea, eb, long_left, &lo, &hi)
+            _write1(row, arow + adx * <uint64_t>lo, adx, lo, hi)
+            written += hi - lo
+            if mode != MODE_TOTAL:
+                _account(mode, y, lo, hi, w, counts, spans, cover)
+            ea += sa
+            eb += sb
+            arow += ady
+            row += w
+            y += 1
+        if y > last:
+            return written
+        # M's row: the short edge turns there
+        _fixed_edge(mx, bx - mx, by - my, recip, &eb, &sb)
+        stop = last + 1
+
+
+cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t tx, int64_t ty, int64_t mx,
+                              int64_t my, int64_t bx, int64_t by, int64_t last, bint long_left,
+                              const uint64_t* recip, int64_t w, int mode, uint16_t* counts, int64_t* spans,
+                              uint8_t* cover) noexcept nogil:
+    """_triangle1 for C > 1 channels (kept apart: the gray walk keeps its plane in
+    registers)."""
+    cdef int64_t lo, hi, ch, x, y = ty, stop, written = 0
+    cdef uint64_t a, ea, sa, eb, sb
+    cdef sample_t* row = pixels + ty * w * c
+    stop = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb)
+    while True:
+        while y < stop:
+            _ends(ea, eb, long_left, &lo, &hi)
+            for ch in range(c):
+                a = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
+                for x in range(lo, hi):
+                    if sample_t is uint8_t:
+                        row[x * c + ch] = <sample_t>(a >> 54)
+                    else:
+                        row[x * c + ch] = <sample_t>(a >> 46)
+                    a += pl.dx[ch]
+                pl.row[ch] += pl.dy[ch]
+            written += hi - lo
+            if mode != MODE_TOTAL:
+                _account(mode, y, lo, hi, w, counts, spans, cover)
+            ea += sa
+            eb += sb
+            row += w * c
+            y += 1
+        if y > last:
+            return written
+        _fixed_edge(mx, bx - mx, by - my, recip, &eb, &sb)
+        stop = last + 1
+
+
+cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* tris, int64_t m, int64_t c,
+                        sample_t* pixels, int mode, uint16_t* counts, int64_t* spans, uint8_t* cover,
+                        int64_t w, int64_t h) noexcept nogil:
+    """Write every triangle's pixels into `pixels` and account for them as `mode`
+    says: MODE_COUNTS in `counts` (a row of W + 1 counters per image row, see the
+    module's docstring) and `spans` (non-empty spans per row, or NULL), MODE_COVER by
+    counting each pixel's writes in `cover` (capped at 2). Returns the number of pixels
+    written. Vertices and corners are checked by the caller."""
+    cdef int64_t k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
+    cdef int64_t tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl, vt, vm, vb, mult
+    cdef int64_t corner[3]
+    cdef Edge lng, top, bottom
+    cdef Planes pl
+    cdef bint long_left, border
+    cdef int bits
+    cdef int64_t edge_lim
+    cdef uint64_t* recip
+    # s = 62 - log2 V; the fixed point is exact for d2 up to 2**((s - log2 V) / 2)
+    if sample_t is uint8_t:
+        pl.shift = 54
+        lim = 1 << 23
+    else:
+        pl.shift = 46
+        lim = 1 << 15
+    # the edges' fixed point (shift 40) is exact for edges over up to
+    # 2**((40 - bits(W)) / 2) rows, in images below 2**22 wide (n * E < 2**64)
+    bits = 0
+    while (<int64_t>1 << bits) <= w:
+        bits += 1
+    edge_lim = <int64_t>1 << ((40 - bits) // 2) if bits <= 22 else 0
+    # (a table of at most 2**16 entries, whatever the band's height)
+    edge_lim = min(edge_lim, h - 1, 1 << 16)
+    # E for every edge height the fixed point takes (an edge spans 1 .. H - 1 rows):
+    # one division per height and call instead of three per triangle
+    recip = <uint64_t*>malloc(<size_t>(edge_lim + 1) * sizeof(uint64_t))
+    if recip != NULL:
+        recip[0] = 0
+        if edge_lim >= 1:
+            recip[1] = <uint64_t>1 << 40
+        for k in range(2, edge_lim + 1):
+            recip[k] = _reciprocal(k, 40)
     for k in range(m):
-        corner[0] = tris[k, 0]; corner[1] = tris[k, 1]; corner[2] = tris[k, 2]
+        corner[0] = tris[3 * k]; corner[1] = tris[3 * k + 1]; corner[2] = tris[3 * k + 2]
         _sort3(corner, v, w)  # T, M, B
-        tx = v[corner[0], 0]; ty = v[corner[0], 1]
-        mx = v[corner[1], 0]; my = v[corner[1], 1]
-        bx = v[corner[2], 0]; by = v[corner[2], 1]
+        tx = v[2 * corner[0]]; ty = v[2 * corner[0] + 1]
+        mx = v[2 * corner[1]]; my = v[2 * corner[1] + 1]
+        bx = v[2 * corner[2]]; by = v[2 * corner[2] + 1]
         dxm = mx - tx; dym = my - ty; dxb = bx - tx; dyb = by - ty
         dxl = bx - mx; dyl = by - my
         d = dxm * dyb - dxb * dym
@@ -137,120 +425,58 @@ cdef int _triangles(const int64_t[:, ::1] v, const int64_t[:, ::1] vals,
         # weights and D of the corners in the order T, M, B; |ga| <= 4 H vmax,
         # |gb| <= 4 W vmax, |gc| < 14 W H (vmax + 1): below 2**53. Either orientation:
         # negating the plane and D together leaves a pixel's value floor(plane / 2D)
-        # as it is. At a corner the plane is (2 v + 1) D: quotient v, remainder D.
+        # as it is. At T the plane is (2 vt + 1) |D|.
         half = d if d > 0 else -d
         d2 = 2 * half
+        pl.d2 = d2
+        pl.fast = d2 <= lim
+        mult = 1
+        if pl.fast:
+            mult = <int64_t>_reciprocal(d2, pl.shift)
         for ch in range(c):
-            vt = vals[corner[0], ch]; vm = vals[corner[1], ch]; vb = vals[corner[2], ch]
-            pl[ch].ga = 2 * (dyb * vm - dyl * vt - dym * vb)
-            pl[ch].gb = 2 * (dxl * vt - dxb * vm + dxm * vb)
+            vt = vals[corner[0] * c + ch]; vm = vals[corner[1] * c + ch]; vb = vals[corner[2] * c + ch]
+            ga = 2 * (dyb * vm - dyl * vt - dym * vb)
+            gb = 2 * (dxl * vt - dxb * vm + dxm * vb)
             if d < 0:
-                pl[ch].ga = -pl[ch].ga; pl[ch].gb = -pl[ch].gb
-            pl[ch].qa = _floor_div_fast(pl[ch].ga, d2)
-            pl[ch].ra = pl[ch].ga - pl[ch].qa * d2
-            pl[ch].q = vt
-            pl[ch].r = half
+                ga = -ga; gb = -gb
+            # N at column 0 of row ty (exact: |ga * tx| < 2**53)
+            pl.row[ch] = <uint64_t>((2 * vt + 1) * half - ga * tx) * <uint64_t>mult
+            pl.dx[ch] = <uint64_t>ga * <uint64_t>mult
+            pl.dy[ch] = <uint64_t>gb * <uint64_t>mult
         # Rows ty .. by - 1, and by too on the image's last row. The long edge T -> B
-        # (dyb > 0, as the triangle has area); the short one T -> M above M's row (and
-        # on it if the bottom is flat), M -> B from there on. M lies right of the long
+        # (dyb > 0, as the triangle has area); the short one T -> M above M's row, M -> B
+        # from there on (a flat top or bottom has one of them). M lies right of the long
         # edge when d > 0: the long edge is then the left one on every row, else the
-        # short one. The span starts at the left edge, where the value is walked.
+        # short one.
         last = by if by == h - 1 else by - 1
         long_left = d > 0
-        turns = dym > 0 and dyl > 0
-        if long_left:
-            lq = tx; lr = 0; lden = dyb
-            _edge_step(dyb, dxb, &ldq, &ldr)
-            rq = tx if dym > 0 else mx
-            rr = 0
-            rden = dym if dym > 0 else dyl
-            _edge_step(rden, dxm if dym > 0 else dxl, &rdq, &rdr)
-        else:  # then dym > 0: a flat top has M right of T
-            lq = tx; lr = 0; lden = dym
-            _edge_step(dym, dxm, &ldq, &ldr)
-            rq = tx; rr = 0; rden = dyb
-            _edge_step(dyb, dxb, &rdq, &rdr)
-        for ch in range(c):
-            _plane_edge(&pl[ch], ldq, d2)
+        border = tx == w - 1 or mx == w - 1 or bx == w - 1
+        if pl.fast and not border and dyb <= edge_lim and recip != NULL:
+            if c == 1:
+                written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last,
+                                      long_left, recip, w, mode, counts, spans, cover)
+            else:
+                written += _triangle_colour(pixels, &pl, c, tx, ty, mx, my, bx, by, last, long_left, recip, w,
+                                            mode, counts, spans, cover)
+            continue
+        _edge_start(&lng, tx, dxb, dyb)
         y = ty
-        # at most two runs of rows: above M's row, then from it (the short edge turns
-        # at M unless the bottom is flat)
-        while y <= last:
-            if y == my and turns:
-                if long_left:
-                    rq = mx; rr = 0; rden = dyl
-                    _edge_step(dyl, dxl, &rdq, &rdr)
-                else:
-                    lq = mx; lr = 0; lden = dyl
-                    _edge_step(dyl, dxl, &ldq, &ldr)
-                    for ch in range(c):
-                        pl[ch].q = vals[corner[1], ch]
-                        pl[ch].r = half
-                        _plane_edge(&pl[ch], ldq, d2)
-            stop = my if (y < my and turns) else last + 1
-            while y < stop:
-                # [xl, xr]: the two edges' exact x on this row. Column x is the
-                # triangle's if xl <= x < xr, or xl < x = xr = W - 1: from ceil(xl)
-                # to ceil(xr) - 1, and W - 1 when the right edge is exactly there and
-                # the left one is not.
-                lo = lq + (lr != 0)
-                hi = rq + (rr != 0)
-                hi += (rr == 0) & (hi == w - 1) & ((lr != 0) | (lo != w - 1))
-                if lo < hi:
-                    row = y * w
-                    if c == 1:
-                        q = pl[0].q
-                        r = pl[0].r
-                        qa = pl[0].qa
-                        ra = pl[0].ra
-                        p = pixels + row
-                        # stepped along the row without a branch to mispredict
-                        for x in range(lo, hi):
-                            p[x] = <sample_t>q
-                            # a conditional move, not a multiply, on the carry chain
-                            q += qa
-                            r += ra - d2
-                            q += r >= 0
-                            r = r if r >= 0 else r + d2
-                    else:
-                        p = pixels + (row + lo) * c
-                        for ch in range(c):
-                            q = pl[ch].q
-                            r = pl[ch].r
-                            qa = pl[ch].qa
-                            ra = pl[ch].ra
-                            for x in range(hi - lo):
-                                p[x * c + ch] = <sample_t>q
-                                q += qa
-                                r += ra - d2
-                                q += r >= 0
-                                r = r if r >= 0 else r + d2
-                    if cover == NULL:
-                        counts[y * stride + lo] += 1
-                        counts[y * stride + hi] -= 1
-                        if spans != NULL:
-                            spans[y] += 1
-                    else:
-                        for x in range(row + lo, row + hi):
-                            seen = cover[x]
-                            cover[x] = seen + 1 if seen < 2 else 2
-                # one row down: each edge's x by its step, with a carry
-                lq += ldq
-                lr += ldr
-                carry = lr >= lden
-                lr -= carry * lden
-                lq += carry
-                rq += rdq
-                rr += rdr
-                carry = rr >= rden
-                rr -= carry * rden
-                rq += carry
-                # the left end moved its edge's whole step, or one column more
-                extra = lq + (lr != 0) - lo - ldq
-                for ch in range(c):
-                    _plane_row_step(&pl[ch], extra, d2)
-                y += 1
-    return OK
+        if dym > 0:
+            _edge_start(&top, tx, dxm, dym)
+            stop = my if dyl > 0 else last + 1
+            if long_left:
+                written += _rows(pixels, &pl, &lng, &top, y, stop, c, w, border, mode, counts, spans, cover)
+            else:
+                written += _rows(pixels, &pl, &top, &lng, y, stop, c, w, border, mode, counts, spans, cover)
+            y = stop
+        if dyl > 0:
+            _edge_start(&bottom, mx, dxl, dyl)
+            if long_left:
+                written += _rows(pixels, &pl, &lng, &bottom, y, last + 1, c, w, border, mode, counts, spans, cover)
+            else:
+                written += _rows(pixels, &pl, &bottom, &lng, y, last + 1, c, w, border, mode, counts, spans, cover)
+    free(recip)
+    return written
 
 
 cdef int _check_counts(const uint16_t* counts, const int64_t* spans, int64_t w, int64_t h) noexcept nogil:
@@ -271,43 +497,47 @@ cdef int _check_counts(const uint16_t* counts, const int64_t* spans, int64_t w, 
     return 1
 
 
-cdef int _render(const int64_t[:, ::1] v, const int64_t[:, ::1] vals, const int64_t[:, ::1] tris,
-                 sample_t* pixels, int64_t w, int64_t h, int64_t* detail) noexcept nogil:
+cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, const int64_t* tris, int64_t m,
+                 sample_t* pixels, int64_t w, int64_t h, int check, int64_t* detail) noexcept nogil:
     """Check the indices, rasterise, check the coverage; the status code, with
     `detail` set on an error."""
-    cdef int64_t nv = v.shape[0], m = tris.shape[0], k, p, npix = w * h
-    cdef uint16_t* counts
-    cdef int64_t* spans
+    cdef int64_t k, p, npix = w * h
+    cdef uint16_t* counts = NULL
+    cdef int64_t* spans = NULL
     cdef uint8_t* cover
     cdef int status = OK
     for k in range(nv):
-        if not (0 <= v[k, 0] < w and 0 <= v[k, 1] < h):
+        if not (0 <= v[2 * k] < w and 0 <= v[2 * k + 1] < h):
             detail[0] = k
             return BAD_VERTEX
     for k in range(m):
         # unsigned: a negative index is beyond too
-        if (<uint64_t>tris[k, 0] >= <uint64_t>nv) | (<uint64_t>tris[k, 1] >= <uint64_t>nv) | (<uint64_t>tris[k, 2] >= <uint64_t>nv):
+        if (<uint64_t>tris[3 * k] >= <uint64_t>nv) | (<uint64_t>tris[3 * k + 1] >= <uint64_t>nv) | (<uint64_t>tris[3 * k + 2] >= <uint64_t>nv):
             detail[0] = k
             return BAD_INDEX
-    counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
-    # a triangle gives a row one span at most: with fewer than 2**15 triangles no row
-    # can have more spans, and they need no count
-    spans = <int64_t*>calloc(<size_t>h, sizeof(int64_t)) if m >= 1 << 15 else NULL
-    if counts == NULL or (spans == NULL and m >= 1 << 15):
+    if check == CHECK_TOTAL:
+        if _triangles(v, vals, tris, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h) == npix:
+            return OK
+    else:
+        counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
+        # a triangle gives a row one span at most: with fewer than 2**15 triangles no
+        # row can have more spans, and they need no count
+        spans = <int64_t*>calloc(<size_t>h, sizeof(int64_t)) if m >= 1 << 15 else NULL
+        if counts == NULL or (spans == NULL and m >= 1 << 15):
+            free(counts)
+            free(spans)
+            return NO_MEMORY
+        _triangles(v, vals, tris, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h)
+        status = _check_counts(counts, spans, w, h)
         free(counts)
         free(spans)
-        return NO_MEMORY
-    _triangles(v, vals, tris, pixels, counts, spans, NULL, w, h)
-    status = _check_counts(counts, spans, w, h)
-    free(counts)
-    free(spans)
-    if status:
-        return OK
+        if status:
+            return OK
     # not a tiling: again, counting every pixel's writes, to name the first bad one
     cover = <uint8_t*>calloc(<size_t>npix, 1)
     if cover == NULL:
         return NO_MEMORY
-    _triangles(v, vals, tris, pixels, NULL, NULL, cover, w, h)
+    _triangles(v, vals, tris, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h)
     status = OK
     for p in range(npix):
         if cover[p] != 1:
@@ -318,22 +548,30 @@ cdef int _render(const int64_t[:, ::1] v, const int64_t[:, ::1] vals, const int6
     return status
 
 
-def rasterise(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
+def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
               const int64_t[:, ::1] triangles, sample_t[:, ::1] out,
-              int64_t width, int64_t height):
-    """Rasterise the triangles into `out` (H*W x C, C <= 4), checking that every pixel
-    is written exactly once. Checks every index it reads: returns (status, detail)
-    with status OK or one of the codes above. Releases the GIL."""
-    cdef int64_t detail = 0
+              int64_t width, int64_t height, int check=CHECK_SPANS):
+    """Rasterise the triangles into `out` (H*W x C, C <= 4; the samples' type),
+    checking that every pixel is written exactly once (`check`: CHECK_SPANS for any
+    mesh, CHECK_TOTAL only for one known to tile the image). Checks every index it
+    reads: returns (status, detail) with status OK or one of the codes above.
+    Releases the GIL."""
+    cdef int64_t detail = 0, nv = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
     cdef int status
-    if values.shape[1] > 4 or values.shape[1] < 1 or values.shape[0] != vertices.shape[0] or vertices.shape[1] != 2:
+    if c > 4 or c < 1 or values.shape[0] != nv or vertices.shape[1] != 2:
         raise ValueError("rasterise: 1 to 4 channels, one row of values per vertex")
-    if triangles.shape[1] != 3 or out.shape[0] != width * height or out.shape[1] != values.shape[1]:
+    if triangles.shape[1] != 3 or out.shape[0] != width * height or out.shape[1] != c:
         raise ValueError("rasterise: M x 3 triangles and an H*W x C output")
     if width < 1 or height < 1:
         raise ValueError("rasterise: an image of at least one pixel")
+    if check != CHECK_SPANS and check != CHECK_TOTAL:
+        raise ValueError(f"rasterise: unknown coverage check {check}")
+    # the first element's address, read only where there are elements
+    cdef const int64_t* v = &vertices[0, 0] if nv else NULL
+    cdef const sample_t* vals = &values[0, 0] if nv else NULL
+    cdef const int64_t* tris = &triangles[0, 0] if m else NULL
     with nogil:
-        status = _render(vertices, values, triangles, &out[0, 0], width, height, &detail)
+        status = _render(v, nv, vals, c, tris, m, &out[0, 0], width, height, check, &detail)
     if status == NO_MEMORY:
         raise MemoryError(f"rasterise: no memory for the coverage counters of a {width}x{height} image")
     return status, detail

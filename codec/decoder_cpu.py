@@ -25,7 +25,8 @@ with [xl, xr] the triangle's exact cross-section on row y:
 For a mesh that tiles the image (what mesh.validate checks) every pixel is thus written
 exactly once. The decoder still checks that every pixel is written exactly once,
 for meshes handed to it unvalidated, and raises CorruptError otherwise (a pixel
-uncovered, or covered twice).
+uncovered, or covered twice); for a mesh the caller knows to tile the image (render's
+`tiles`: a file's bands, which the Reader validated) it only counts the pixels written.
 
 The rasteriser is a compiled kernel (codec/_rasterise.pyx, built by the package's
 own build), exact integer arithmetic throughout, that releases the GIL: threads
@@ -42,6 +43,8 @@ import numpy as np
 from .errors import CorruptError, UnsupportedError
 from .mesh import Mesh
 from .native import _rasterise
+
+_TOTAL, _SPANS = _rasterise.Check.CHECK_TOTAL, _rasterise.Check.CHECK_SPANS
 
 #: The sample types the kernel writes (ATM.md §3: the stored sample types).
 _SAMPLES = (np.dtype(np.uint8), np.dtype(np.uint16))
@@ -77,8 +80,11 @@ def render_line(mesh: Mesh) -> np.ndarray:
     return _finish(out, mesh.dtype).reshape(shape)
 
 
-def render(mesh: Mesh) -> np.ndarray:
-    """Decode a validated mesh to an image of its dtype and channel count."""
+def render(mesh: Mesh, *, tiles: bool = False) -> np.ndarray:
+    """Decode a mesh to an image of its dtype and channel count. tiles=True: the caller
+    knows the triangles tile the image (mesh.validate passed: a decoder's band meshes,
+    and bands stacked by stream.stack_bands), so the kernel checks only the count of
+    the pixels it writes, not each row's spans (ATM.md §4.2.3; codec/_rasterise.pyx)."""
     if len(mesh.triangles) == 0:
         return render_line(mesh)
     w, h, c = mesh.width, mesh.height, mesh.channels
@@ -91,21 +97,28 @@ def render(mesh: Mesh) -> np.ndarray:
             f"{c} channel(s) of {mesh.dtype}"
         )
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.int64)
-    values = np.ascontiguousarray(mesh.values, dtype=np.int64).reshape(len(vertices), c)
+    values = np.ascontiguousarray(mesh.values).reshape(len(vertices), c)
     triangles = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
     out = np.empty((h * w, c), dtype=mesh.dtype)
-    status, detail = _rasterise.rasterise(vertices, values, triangles, out, w, h)
+    check = _TOTAL if tiles else _SPANS
+    status, detail = _rasterise.rasterise(vertices, values, triangles, out, w, h, check)
+    if status:
+        _refuse(status, detail, w, h, len(vertices))
+    # no clipping needed: in a triangle every value is a convex combination of values of
+    # the dtype, and round-half-up of such a mean stays within the dtype
+    return out.reshape((h, w) if c == 1 else (h, w, c))
+
+
+def _refuse(status: int, detail: int, w: int, h: int, n: int) -> None:
+    """Raise the CorruptError of the kernel's status."""
     if status == _rasterise.Status.BAD_VERTEX:
         raise CorruptError(f"vertex {detail} lies outside the {w}x{h} image")
     if status == _rasterise.Status.BAD_INDEX:
-        raise CorruptError(f"triangle {detail} refers to a vertex beyond the {len(vertices)} stored")
+        raise CorruptError(f"triangle {detail} refers to a vertex beyond the {n} stored")
     if status == _rasterise.Status.UNCOVERED:
         _fail(detail, w, "leaves it uncovered")
     if status == _rasterise.Status.TWICE:
         _fail(detail, w, "covers it twice")
-    # no clipping needed: in a triangle every value is a convex combination of values of
-    # the dtype, and round-half-up of such a mean stays within the dtype
-    return out.reshape((h, w) if c == 1 else (h, w, c))
 
 
 def _fail(pixel: int, width: int, what: str) -> None:

@@ -12,12 +12,13 @@ from .mesh import Mesh
 BACKENDS = ("cpu", "gl")
 
 
-def render(mesh: Mesh, backend: str = "cpu") -> np.ndarray:
-    """Rasterise a validated mesh with the named backend."""
+def render(mesh: Mesh, backend: str = "cpu", *, tiles: bool = False) -> np.ndarray:
+    """Rasterise a validated mesh with the named backend. tiles=True: mesh.validate
+    proved that its triangles tile the image (decoder_cpu.render)."""
     if backend == "cpu":
         from . import decoder_cpu
 
-        return decoder_cpu.render(mesh)
+        return decoder_cpu.render(mesh, tiles=tiles)
     if backend == "gl":
         from . import decoder_gl
 

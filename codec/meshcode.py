@@ -528,7 +528,10 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     # the encoder's _sample_order, from the parts known here: the positions along the
     # curve are already in its order
     if by_rows:
-        curve = free_index[np.argsort(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1], levels))]
+        # distinct keys below 4**levels, in one linear pass instead of a comparison sort
+        along = _fields.argsort_keys(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1], levels),
+                                     1 << 2 * levels)
+        curve = free_index[along]
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index

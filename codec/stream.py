@@ -401,7 +401,9 @@ class StreamDecoder:
         from . import decoding
 
         y0, mesh = group[0][0], stack_bands(group)
-        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend))
+        # the Reader's bands passed mesh.validate, so each tiles its rows, and so does
+        # their stack: the renderer need not count each row's spans
+        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend, tiles=True))
 
     def _layered_rows(self, layer: "residual.ResidualDecoder", y0: int, mesh: Mesh) -> tuple[int, np.ndarray]:
         """(y0, rows) of a band with a residual layer, which gives every row it emits."""

@@ -16,34 +16,39 @@ from hypothesis import strategies as st
 import codec
 from codec import decoder_cpu, decoder_gl
 from codec.errors import BackendError, CorruptError
-from codec.mesh import Mesh, doubled_areas, validate
+from codec.mesh import Mesh, doubled_areas, orient, validate
 from codec.triangulate import triangulate
 
 
-def reference(mesh: Mesh) -> np.ndarray:
-    """The normative rule by brute force: every pixel against every triangle (small
-    meshes only), the value from any triangle that contains the pixel centre."""
+def reference(mesh: Mesh, chunk: int = 1 << 16) -> np.ndarray:
+    """The normative rule by brute force: every pixel against every triangle (meshes
+    of few triangles only; pixels a chunk at a time), the value from any triangle that
+    contains the pixel centre."""
     if len(mesh.triangles) == 0:
         return decoder_cpu.render_line(mesh)
     w, h, c = mesh.width, mesh.height, mesh.channels
     v = mesh.vertices.astype(np.int64)
     t = mesh.triangles
     vals = mesh.values.astype(np.int64).reshape(len(v), c)
-    y, x = np.divmod(np.arange(w * h), w)
     px, py = v[t, 0], v[t, 1]  # M x 3
-    wts = []
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        wts.append((px[:, k] - px[:, j])[:, None] * (y[None, :] - py[:, j][:, None])
-                   - (py[:, k] - py[:, j])[:, None] * (x[None, :] - px[:, j][:, None]))
-    inside = (wts[0] >= 0) & (wts[1] >= 0) & (wts[2] >= 0)  # M x P
-    assert inside.any(axis=0).all(), "reference: a pixel lies in no triangle"
-    tri = inside.argmax(axis=0)
-    pix = np.arange(w * h)
-    ws = [wi[tri, pix] for wi in wts]
-    den = (ws[0] + ws[1] + ws[2])[:, None]
-    num = sum(ws[i][:, None] * vals[t[tri, i]] for i in range(3))
-    out = ((2 * num + den) // (2 * den)).astype(mesh.dtype)
+    out = np.empty((w * h, c), np.int64)
+    for start in range(0, w * h, chunk):
+        pix = np.arange(start, min(start + chunk, w * h))
+        y, x = np.divmod(pix, w)
+        wts = []
+        for i in range(3):
+            j, k = (i + 1) % 3, (i + 2) % 3
+            wts.append((px[:, k] - px[:, j])[:, None] * (y[None, :] - py[:, j][:, None])
+                       - (py[:, k] - py[:, j])[:, None] * (x[None, :] - px[:, j][:, None]))
+        inside = (wts[0] >= 0) & (wts[1] >= 0) & (wts[2] >= 0)  # M x P
+        assert inside.any(axis=0).all(), "reference: a pixel lies in no triangle"
+        tri = inside.argmax(axis=0)
+        at = np.arange(len(pix))
+        ws = [wi[tri, at] for wi in wts]
+        den = (ws[0] + ws[1] + ws[2])[:, None]
+        num = sum(ws[i][:, None] * vals[t[tri, i]] for i in range(3))
+        out[pix] = (2 * num + den) // (2 * den)
+    out = out.astype(mesh.dtype)
     return out.reshape(h, w) if c == 1 else out.reshape(h, w, c)
 
 
@@ -213,6 +218,56 @@ def test_cpu_refuses_indices_outside_the_mesh() -> None:
         tris[3, 1] = bad
         with pytest.raises(CorruptError, match="beyond the"):
             decoder_cpu.render(Mesh(m.vertices, m.values, tris, m.width, m.height))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(meshes())
+def test_cpu_tiles_path_matches_normative_rule(mesh: Mesh) -> None:
+    """render(tiles=True), what a decode runs on a file's validated bands (only the
+    written pixels counted), gives the rule's pixels."""
+    assert np.array_equal(decoder_cpu.render(mesh, tiles=True), reference(mesh))
+
+
+@pytest.mark.parametrize("dtype, w, h, strip, channels", [
+    # 16-bit samples: the planes' fixed point holds up to 2|D| = 2**15 (two triangles
+    # of legs n - 1 have 2|D| = 2 (n - 1)**2), the exact walk beyond
+    *[(np.uint16, n, n, strip, channels) for n in (128, 129, 130)
+      for strip, channels in ((False, 1), (True, 1), (True, 3))],
+    # 8-bit samples: up to 2|D| = 2**23 (the same arithmetic with other constants;
+    # 4 million pixels of brute force each)
+    (np.uint8, 4097, 1025, True, 1), (np.uint8, 4098, 1025, True, 1),
+])
+def test_cpu_fixed_point_at_its_bounds(dtype, w: int, h: int, strip: bool, channels: int) -> None:
+    """Triangles at the largest size the kernel reads in fixed point and just beyond,
+    with extreme and random samples: the rule's pixels either way. With a strip of one
+    more column on the right the two large triangles keep off the last column and take
+    the kernel's fixed-point walk (one channel's, or colour's), else its general one."""
+    corners = _corners(w, h)
+    vertices = np.array(corners + ([(w, 0), (w, h - 1)] if strip else []), np.int64)
+    triangles = orient(vertices, [[0, 1, 2], [1, 3, 2]] + ([[1, 4, 3], [4, 5, 3]] if strip else []))
+    top = int(np.iinfo(dtype).max)
+    rng = np.random.default_rng(w * h)
+    for values in ([0, top, top, 0], [top, 0, 1, top - 1], rng.integers(0, top + 1, 4)):
+        values = np.resize(np.array(values, dtype), len(vertices))
+        if channels == 3:  # the channels in different orders
+            values = np.stack([values, values[::-1], np.roll(values, 1)], 1)
+        mesh = Mesh(vertices, values, triangles, w + strip, h)
+        validate(mesh)
+        expected = reference(mesh)
+        assert np.array_equal(decoder_cpu.render(mesh, tiles=True), expected)
+        assert np.array_equal(decoder_cpu.render(mesh), expected)
+
+
+def test_cpu_tiles_path_still_counts_the_pixels() -> None:
+    """A mesh that does not tile the image, passed as one that does (tiles=True), is
+    refused all the same: a missing triangle leaves pixels unwritten and a repeated
+    one writes some twice, and the count of written pixels shows either."""
+    with pytest.raises(CorruptError, match="uncovered"):
+        decoder_cpu.render(_holed(_grid_mesh()), tiles=True)
+    m = _grid_mesh()
+    doubled = Mesh(m.vertices, m.values, np.concatenate([m.triangles, m.triangles[:1]]), m.width, m.height)
+    with pytest.raises(CorruptError, match="twice"):
+        decoder_cpu.render(doubled, tiles=True)
 
 
 def _holed(mesh: Mesh) -> Mesh:
@@ -440,3 +495,18 @@ def test_corpus_backends_through_the_api(gl, corpus) -> None:
     img = corpus["coins"]
     data = codec.encode(img)
     assert np.array_equal(codec.decode(data, backend="gl"), codec.decode(data, backend="cpu"))
+
+
+def test_a_decode_returns_an_array_of_its_own(corpus) -> None:
+    """A file of one band decodes to the render itself (no image to copy it into): each
+    decode's array is its own, writeable and C-contiguous, with the mesh's pixels."""
+    img = corpus["camera"]
+    one = codec.encode(img)
+    assert codec.info(one)["bands"] == 1
+    a, b = codec.decode(one), codec.decode(one)
+    assert not np.shares_memory(a, b)
+    assert a.flags.writeable and a.flags.c_contiguous and a.shape == img.shape and a.dtype == img.dtype
+    a[0, 0] ^= 1
+    assert not np.array_equal(a, b)
+    whole = codec.decode_mesh(one)
+    assert np.array_equal(b, decoder_cpu.render(whole))
