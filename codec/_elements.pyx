@@ -2,8 +2,9 @@
 the pixels it owns (codec.mesher.elements: the half-open rule, left and top edges
 inclusive), row by row as the rasteriser walks them, with no span arrays in between.
 
-triangle_sums: per triangle, the sums over its row spans of the geometric moments and
-of K prefix-summed planes (and of y times each), for codec.mesher.elements.Statistics;
+triangle_statistics: per triangle, the sums over its row spans of the geometric moments and
+of K prefix-summed planes (and of y times each), as codec.mesher.elements.Statistics
+keeps them, and its squared error against a plane through its corners;
 worst_pixels: per triangle, its pixel farthest from a plane through its corners.
 
 Both give the very numbers of the numpy code they replace: the spans' edge crossings
@@ -11,6 +12,7 @@ are the same float64 quotients of exact integers, and the sums are taken span by
 in row order, as a sparse row-sum adds them. The GIL is released while they work.
 """
 
+cimport cython
 from libc.math cimport ceil, fabs
 from libc.stdint cimport int32_t, int64_t
 
@@ -97,31 +99,69 @@ def _check(vertices, triangles, width, height):
         raise ValueError(f"image size {width} x {height} out of range")
 
 
-def triangle_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                  int64_t height, const table_t[:, ::1] table, const double[::1] power1,
-                  const double[::1] power2):
-    """M x (6 + 2K) float64: per triangle, summed over its spans (row y, columns
-    [x0, x1), n pixels) in row order: n, X1, y n, X2, y X1, y (y n) with Xk =
-    power_k[x1] - power_k[x0], then d_k = table[y s + x1, k] - table[y s + x0, k] for
-    each of the K planes (s = width + 1: a row's prefix sums, elements.Planes), then
-    y d_k. ValueError on an index or coordinate out of range."""
+@cython.cdivision(True)
+def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                        int64_t height, const table_t[:, ::1] table, const double[::1] power1,
+                        const double[::1] power2, const int64_t[::1] columns, const int64_t[::1] blocks,
+                        const double[::1] z):
+    """(M x C statistics, M squared errors or None) of the triangles: per triangle the sums
+    over its spans (row y, columns [x0, x1), n pixels) in row order of n, X1, y n, X2,
+    y X1, y (y n) (Xk = power_k[x1] - power_k[x0]), then of d_k = table[y s + x1, k] -
+    table[y s + x0, k] for each of the K planes (s = width + 1: a row's prefix sums,
+    elements.Planes), then of y d_k; of these, columns[c] is statistic c, moved to the
+    triangle's origin (its first corner in raster order) as
+    elements.Statistics._to_origin moves them (blocks: the first columns of the image
+    sums b, ub, vb). With z (a value per vertex; empty: none), also each triangle's
+    squared error against the plane through its corners' values, as
+    elements.element_sse gives it (the same float64 operations in the same order, so
+    the same numbers). ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], kk = table.shape[1], stride = width + 1
+    cdef int64_t nc = columns.shape[0], nb = blocks.shape[0], raw = 6 + 2 * kk
     if table.shape[0] != height * stride or power1.shape[0] <= width or power2.shape[0] <= width:
-        raise ValueError("triangle_sums: tables do not match the image size")
-    out = np.zeros((m, 6 + 2 * kk), dtype=np.float64)
+        raise ValueError("triangle_statistics: tables do not match the image size")
+    cdef int64_t q
+    if nc < 10:
+        raise ValueError("triangle_statistics: fewer than 10 statistics")
+    for q in range(nc):
+        if not 0 <= columns[q] < raw:
+            raise ValueError("triangle_statistics: a column out of range")
+    for q in range(nb):
+        if not 6 <= blocks[q] < nc - 2:
+            raise ValueError("triangle_statistics: a column out of range")
+    cdef bint errors = z.shape[0] > 0
+    if errors and z.shape[0] != vertices.shape[0]:
+        raise ValueError("triangle_statistics: z needs a value per vertex")
+    out = np.empty((m, nc), dtype=np.float64)
+    sse_out = np.empty(m if errors else 0, dtype=np.float64)
+    sums_buf = np.empty(raw, dtype=np.float64)
     cdef double[:, ::1] o = out
-    cdef int64_t t, dy, y, x0, n, lo, hi, k, up
+    cdef double[::1] e = sse_out
+    cdef double[::1] sums = sums_buf
+    cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy, best
     cdef int64_t ys[3]
     cdef int64_t xs[3]
-    cdef double yf, nf, x1s, x2s, yn, d
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef int64_t coef[3][3]
+    cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
+    cdef double a, b, cc, den, ff, bf
     cdef table_t dk
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _corners(vertices, triangles, t, width, height, py, px):
                 bad = True
                 break
+            for i in range(3):
+                ys[i] = py[i]
+                xs[i] = px[i]
+            _sort3(ys, xs)
+            up = ys[1] - ys[0] + 1
+            if up > ys[2] - ys[0]:
+                up = ys[2] - ys[0]
+            for k in range(raw):
+                sums[k] = 0.0
             for dy in range(ys[2] - ys[0]):
                 _span(ys, xs, dy, up, &x0, &n)
                 if n <= 0:
@@ -132,22 +172,81 @@ def triangle_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangle
                 x1s = power1[x0 + n] - power1[x0]
                 x2s = power2[x0 + n] - power2[x0]
                 yn = yf * nf
-                o[t, 0] += nf
-                o[t, 1] += x1s
-                o[t, 2] += yn
-                o[t, 3] += x2s
-                o[t, 4] += yf * x1s
-                o[t, 5] += yf * yn
+                sums[0] += nf
+                sums[1] += x1s
+                sums[2] += yn
+                sums[3] += x2s
+                sums[4] += yf * x1s
+                sums[5] += yf * yn
                 lo = y * stride + x0
                 hi = lo + n
                 for k in range(kk):
                     dk = table[hi, k] - table[lo, k]
                     d = <double>dk
-                    o[t, 6 + k] += d
-                    o[t, 6 + kk + k] += yf * d
+                    sums[6 + k] += d
+                    sums[6 + kk + k] += yf * d
+            for c in range(nc):
+                o[t, c] = sums[columns[c]]
+            # the origin: the first corner in raster order (elements.triangle_raster)
+            best = 0
+            for i in range(1, 3):
+                if py[i] * width + px[i] < py[best] * width + px[best]:
+                    best = i
+            ox = px[best]
+            oy = py[best]
+            fx = <double>ox
+            fy = <double>oy
+            # elements.Statistics._to_origin, operation for operation
+            sn = o[t, 0]; sx = o[t, 1]; sy = o[t, 2]; sxx = o[t, 3]; sxy = o[t, 4]; syy = o[t, 5]
+            o[t, 1] = sx - fx * sn
+            o[t, 2] = sy - fy * sn
+            o[t, 3] = sxx - 2 * fx * sx + fx * fx * sn
+            o[t, 4] = sxy - fx * sy - fy * sx + fx * fy * sn
+            o[t, 5] = syy - 2 * fy * sy + fy * fy * sn
+            for j in range(nb):
+                first = blocks[j]
+                sb = o[t, first]
+                o[t, first + 1] = o[t, first + 1] - fx * sb
+                o[t, first + 2] = o[t, first + 2] - fy * sb
+            if not errors:
+                continue
+            # elements._triangle_coefficients: w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj)
+            for i in range(3):
+                j = (i + 1) % 3
+                k = (i + 2) % 3
+                coef[i][0] = -(py[k] - py[j])
+                coef[i][1] = px[k] - px[j]
+                coef[i][2] = (px[k] - px[j]) * (oy - py[j]) - (py[k] - py[j]) * (ox - px[j])
+            den = <double>(coef[0][2] + coef[1][2] + coef[2][2])
+            # elements.Raster.affine: corner after corner, then / D
+            a = <double>coef[0][0] * z[triangles[t, 0]]
+            a = a + <double>coef[1][0] * z[triangles[t, 1]]
+            a = a + <double>coef[2][0] * z[triangles[t, 2]]
+            a = a / den
+            b = <double>coef[0][1] * z[triangles[t, 0]]
+            b = b + <double>coef[1][1] * z[triangles[t, 1]]
+            b = b + <double>coef[2][1] * z[triangles[t, 2]]
+            b = b / den
+            cc = <double>coef[0][2] * z[triangles[t, 0]]
+            cc = cc + <double>coef[1][2] * z[triangles[t, 1]]
+            cc = cc + <double>coef[2][2] * z[triangles[t, 2]]
+            cc = cc / den
+            # elements.squared_error, term by term from the left
+            ff = a * a * o[t, 3]
+            ff = ff + 2 * a * b * o[t, 4]
+            ff = ff + b * b * o[t, 5]
+            ff = ff + 2 * a * cc * o[t, 1]
+            ff = ff + 2 * b * cc * o[t, 2]
+            ff = ff + cc * cc * o[t, 0]
+            bf = a * o[t, 7]
+            bf = bf + b * o[t, 8]
+            bf = bf + cc * o[t, 6]
+            d = o[t, 9] - 2 * bf + ff
+            # np.maximum(d, 0.0): -0.0 and NaN stay as they are
+            e[t] = d if d >= 0.0 or d != d else 0.0
     if bad:
-        raise ValueError("triangle_sums: a corner index or coordinate out of range")
-    return out
+        raise ValueError("triangle_statistics: a corner index or coordinate out of range")
+    return out, (sse_out if errors else None)
 
 
 def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from codec import native
-from codec.mesher.elements import Statistics, triangle_pixels, triangle_raster, worst_pixels
+from codec.mesher.elements import Statistics, element_sse, triangle_pixels, triangle_raster, worst_pixels
 from codec.triangulate import triangulate
 
 
@@ -48,14 +48,21 @@ def test_triangle_statistics_are_those_of_the_spans(seed: int, grid: bool) -> No
         kinds.add(layout.planes.table.dtype)
         raster = triangle_raster(v, t, width, height)
         expected = layout(raster)
-        got = layout.of_triangles(v, t, raster.origin)
-        assert got.shape == expected.shape
+        got, none = layout.of_triangles(v, t)
+        assert got.shape == expected.shape and none is None
         # the same float64 numbers, not just close ones: the encoder's bytes depend on them
         assert np.array_equal(got, expected)
         # any subset, in any order
         pick = rng.permutation(len(t))[: len(t) // 2]
         sub = triangle_raster(v, t[pick], width, height)
-        assert np.array_equal(layout.of_triangles(v, t[pick], sub.origin), layout(sub))
+        assert np.array_equal(layout.of_triangles(v, t[pick])[0], layout(sub))
+        # and the squared errors element_sse gives, bit for bit, against vertex values
+        # of the image and off it
+        plane = structure.astype(np.float64)
+        for z in (plane[v[:, 1], v[:, 0]], rng.normal(100, 80, len(v))):
+            stats, sse = layout.of_triangles(v, t[pick], z)
+            assert np.array_equal(stats, layout(sub))
+            assert np.array_equal(sse, element_sse(sub, layout(sub), z))
     assert kinds == {np.dtype(np.int32), np.dtype(np.int64), np.dtype(np.float64)}
 
 
@@ -135,17 +142,23 @@ def test_the_kernels_refuse_what_is_out_of_range() -> None:
     rng = np.random.default_rng(3)
     v, t = _mesh(rng, 20, 10, 30, False)
     layout = Statistics(rng.integers(0, 256, (10, 20)).astype(np.uint8), "structure")
-    args = (layout.planes.table, layout._powers[1], layout._powers[2])
+    args = (layout.planes.table, layout._powers[1], layout._powers[2], layout._from_kernel, layout._blocks)
     bad = t.copy()
     bad[-1, 2] = len(v)
+    z = np.zeros(len(v))
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.triangle_sums(v, bad, 20, 10, *args)
+        native._elements.triangle_statistics(v, bad, 20, 10, *args, z)
     far = v.copy()
     far[-1] = [20, 0]  # one column past the image
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.triangle_sums(far, t, 20, 10, *args)
+        native._elements.triangle_statistics(far, t, 20, 10, *args, z)
     with pytest.raises(ValueError, match="do not match"):
-        native._elements.triangle_sums(v, t, 20, 11, *args)
+        native._elements.triangle_statistics(v, t, 20, 11, *args, z)
+    with pytest.raises(ValueError, match="a value per vertex"):
+        native._elements.triangle_statistics(v, t, 20, 10, *args, z[:-1])
+    for columns, blocks in ((np.r_[layout._from_kernel[:-1], 99], layout._blocks), (layout._from_kernel, np.array([8]))):
+        with pytest.raises(ValueError, match="column out of range"):
+            native._elements.triangle_statistics(v, t, 20, 10, *args[:3], columns, blocks, z)
     plane = np.zeros((10, 20), np.float32)
     f, origin = np.zeros((len(t), 3)), np.zeros((len(t), 2), np.int64)
     with pytest.raises(ValueError, match="out of range"):

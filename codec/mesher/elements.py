@@ -205,6 +205,8 @@ class Statistics:
         self._from_kernel = np.array(
             [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
         )
+        # the first columns (b, ub, vb) of each image's sums, which _to_origin moves
+        self._blocks = np.array([6] + [10 + 3 * c for c in range(len(self._fit) if self.own else 0)], np.int64)
         # sums of x^k over columns [0, x): a span's sums of x and xx in two look-ups
         # each (exact integers in float64 for widths up to about 180,000)
         cols = np.arange(w, dtype=np.float64)
@@ -232,18 +234,20 @@ class Statistics:
             np.multiply(y, d[3 + 2 * c], out=cols[12 + 3 * c])
         return self._to_origin(raster.reduce(cols), raster.origin)
 
-    def of_triangles(self, vertices: np.ndarray, triangles: np.ndarray, origin: np.ndarray) -> np.ndarray:
-        """M x width: the statistics of `triangles` (their origins `origin`, as
-        triangle_raster gives them), the numbers __call__ gives for their raster, from
-        one compiled walk over their pixels (codec._elements) instead of span arrays."""
+    def of_triangles(self, vertices: np.ndarray, triangles: np.ndarray,
+                     vertex_values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(M x width statistics of `triangles`, the numbers __call__ gives for their
+        triangle_raster; with vertex_values, also element_sse's squared error of each
+        against the mesh through them, else None), from one compiled walk over their
+        pixels (codec._elements.triangle_statistics) instead of span arrays."""
         from .. import native
 
         h, w = self.shape
-        sums = native._elements.triangle_sums(
+        z = np.zeros(0) if vertex_values is None else np.ascontiguousarray(vertex_values, dtype=np.float64)
+        return native._elements.triangle_statistics(
             np.ascontiguousarray(vertices, dtype=np.int64), np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
-            w, h, self.planes.table, self._powers[1], self._powers[2],
+            w, h, self.planes.table, self._powers[1], self._powers[2], self._from_kernel, self._blocks, z,
         )
-        return self._to_origin(sums[:, self._from_kernel], origin)
 
     def _to_origin(self, out: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """Sums in image coordinates (E x width) to coordinates relative to each

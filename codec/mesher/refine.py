@@ -89,9 +89,8 @@ class _Cache:
                 known = self.keys[found] == sorted_keys
         kept, fresh = np.flatnonzero(known), np.flatnonzero(~known)
         new = triangles[order[fresh]]
-        # the new triangles' weights (no spans: the kernel walks their pixels itself)
-        raster = triangle_raster(vertices, new, width, height, spans=False)
-        measured = self.layout.of_triangles(vertices, new, raster.origin)
+        # the new triangles' statistics and squared errors in one walk over their pixels
+        measured, fresh_sse = self.layout.of_triangles(vertices, new, None if last else z)
         stats = np.empty((m, self.layout.width))
         stats[fresh] = measured
         if len(kept):
@@ -100,7 +99,7 @@ class _Cache:
         if last:
             return None
         sse = np.empty(m)
-        sse[fresh] = element_sse(raster, measured, z)
+        sse[fresh] = fresh_sse
         if len(kept):
             sse[kept] = self.sse[found[kept]]
         if sorted_keys is not None:
