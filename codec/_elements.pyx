@@ -92,6 +92,59 @@ cdef bint _start(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     return True
 
 
+cdef inline void _origin(const int64_t* px, const int64_t* py, int64_t width, int64_t* ox,
+                         int64_t* oy) noexcept nogil:
+    """The triangle's origin: its first corner in raster order (elements.triangle_raster)."""
+    cdef int i, best = 0
+    for i in range(1, 3):
+        if py[i] * width + px[i] < py[best] * width + px[best]:
+            best = i
+    ox[0] = px[best]
+    oy[0] = py[best]
+
+
+@cython.cdivision(True)
+cdef inline void _affine(const int64_t* px, const int64_t* py, int64_t ox, int64_t oy, double z0,
+                         double z1, double z2, double* f) noexcept nogil:
+    """f = (a, b, c) of the plane a u + b v + c through the corners' values (listed order),
+    u, v relative to (ox, oy), with the float64 operations of
+    elements._triangle_coefficients and Raster.affine in their order: corner after
+    corner, then / D."""
+    cdef int64_t coef[3][3]
+    cdef int i, j, k
+    cdef double den
+    for i in range(3):
+        # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj)
+        j = (i + 1) % 3
+        k = (i + 2) % 3
+        coef[i][0] = -(py[k] - py[j])
+        coef[i][1] = px[k] - px[j]
+        coef[i][2] = (px[k] - px[j]) * (oy - py[j]) - (py[k] - py[j]) * (ox - px[j])
+    den = <double>(coef[0][2] + coef[1][2] + coef[2][2])
+    for k in range(3):
+        f[k] = <double>coef[0][k] * z0
+        f[k] = f[k] + <double>coef[1][k] * z1
+        f[k] = f[k] + <double>coef[2][k] * z2
+        f[k] = f[k] / den
+
+
+cdef bint _start_listed(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
+                        int64_t width, int64_t height, int64_t* py, int64_t* px, int64_t* ys, int64_t* xs,
+                        int64_t* up) noexcept nogil:
+    """_start, keeping the corners as listed too (py, px)."""
+    cdef int i
+    if not _corners(vertices, triangles, t, width, height, py, px):
+        return False
+    for i in range(3):
+        ys[i] = py[i]
+        xs[i] = px[i]
+    _sort3(ys, xs)
+    up[0] = ys[1] - ys[0] + 1
+    if up[0] > ys[2] - ys[0]:
+        up[0] = ys[2] - ys[0]
+    return True
+
+
 def _check(vertices, triangles, width, height):
     if vertices.shape[1] != 2 or triangles.shape[1] != 3:
         raise ValueError("vertices must be N x 2 and triangles M x 3")
@@ -138,28 +191,21 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef double[:, ::1] o = out
     cdef double[::1] e = sse_out
     cdef double[::1] sums = sums_buf
-    cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy, best
+    cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
     cdef int64_t py[3]
-    cdef int64_t coef[3][3]
+    cdef double f[3]
     cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
-    cdef double a, b, cc, den, ff, bf
+    cdef double a, b, cc, ff, bf
     cdef table_t dk
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _corners(vertices, triangles, t, width, height, py, px):
+            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
                 bad = True
                 break
-            for i in range(3):
-                ys[i] = py[i]
-                xs[i] = px[i]
-            _sort3(ys, xs)
-            up = ys[1] - ys[0] + 1
-            if up > ys[2] - ys[0]:
-                up = ys[2] - ys[0]
             for k in range(raw):
                 sums[k] = 0.0
             for dy in range(ys[2] - ys[0]):
@@ -187,13 +233,7 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                     sums[6 + kk + k] += yf * d
             for c in range(nc):
                 o[t, c] = sums[columns[c]]
-            # the origin: the first corner in raster order (elements.triangle_raster)
-            best = 0
-            for i in range(1, 3):
-                if py[i] * width + px[i] < py[best] * width + px[best]:
-                    best = i
-            ox = px[best]
-            oy = py[best]
+            _origin(px, py, width, &ox, &oy)
             fx = <double>ox
             fy = <double>oy
             # elements.Statistics._to_origin, operation for operation
@@ -210,27 +250,10 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                 o[t, first + 2] = o[t, first + 2] - fy * sb
             if not errors:
                 continue
-            # elements._triangle_coefficients: w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj)
-            for i in range(3):
-                j = (i + 1) % 3
-                k = (i + 2) % 3
-                coef[i][0] = -(py[k] - py[j])
-                coef[i][1] = px[k] - px[j]
-                coef[i][2] = (px[k] - px[j]) * (oy - py[j]) - (py[k] - py[j]) * (ox - px[j])
-            den = <double>(coef[0][2] + coef[1][2] + coef[2][2])
-            # elements.Raster.affine: corner after corner, then / D
-            a = <double>coef[0][0] * z[triangles[t, 0]]
-            a = a + <double>coef[1][0] * z[triangles[t, 1]]
-            a = a + <double>coef[2][0] * z[triangles[t, 2]]
-            a = a / den
-            b = <double>coef[0][1] * z[triangles[t, 0]]
-            b = b + <double>coef[1][1] * z[triangles[t, 1]]
-            b = b + <double>coef[2][1] * z[triangles[t, 2]]
-            b = b / den
-            cc = <double>coef[0][2] * z[triangles[t, 0]]
-            cc = cc + <double>coef[1][2] * z[triangles[t, 1]]
-            cc = cc + <double>coef[2][2] * z[triangles[t, 2]]
-            cc = cc / den
+            _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
+            a = f[0]
+            b = f[1]
+            cc = f[2]
             # elements.squared_error, term by term from the left
             ff = a * a * o[t, 3]
             ff = ff + 2 * a * b * o[t, 4]
@@ -250,16 +273,15 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
 
 
 def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                 int64_t height, const double[:, ::1] affine, const int64_t[:, ::1] origin,
-                 const plane_t[:, ::1] plane):
-    """Per triangle, its owned pixel farthest from the plane f = a u + b v + c (affine's
-    row, u and v relative to origin's row) against `plane` (H x W), the first in raster
-    order of those tied: (x, y, |error| (-1 where the triangle owns no pixel)).
-    ValueError on an index or coordinate out of range."""
+                 int64_t height, const double[::1] z, const plane_t[:, ::1] plane):
+    """Per triangle, its owned pixel farthest from the plane through its corners' values
+    z (elements.Raster.affine's plane, relative to its origin) against `plane` (H x W),
+    the first in raster order of those tied: (x, y, |error| (-1 where the triangle owns
+    no pixel)). ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0]
-    if affine.shape[0] != m or affine.shape[1] != 3 or origin.shape[0] != m or origin.shape[1] != 2:
-        raise ValueError("worst_pixels: affine and origin need a row per triangle")
+    if z.shape[0] != vertices.shape[0]:
+        raise ValueError("worst_pixels: z needs a value per vertex")
     if plane.shape[0] != height or plane.shape[1] != width:
         raise ValueError("worst_pixels: the plane does not match the image size")
     xs_out = np.zeros(m, dtype=np.int64)
@@ -267,26 +289,31 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     err_out = np.full(m, -1.0)
     cdef int64_t[::1] bx = xs_out, by = ys_out
     cdef double[::1] be = err_out
-    cdef int64_t t, dy, y, x0, n, x, up
+    cdef int64_t t, dy, y, x0, n, x, up, ox, oy, i
     cdef int64_t ys[3]
     cdef int64_t xs[3]
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef double f[3]
     cdef double a, row, c, mesh, e, best
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
                 bad = True
                 break
-            a = affine[t, 0]
-            c = affine[t, 2]
+            _origin(px, py, width, &ox, &oy)
+            _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
+            a = f[0]
+            c = f[2]
             best = -1.0
             for dy in range(ys[2] - ys[0]):
                 _span(ys, xs, dy, up, &x0, &n)
                 y = ys[0] + dy
                 # as elements.Raster.worst_pixels sums it: a u, then + b v, then + c
-                row = affine[t, 1] * <double>(y - origin[t, 1])
+                row = f[1] * <double>(y - oy)
                 for x in range(x0, x0 + n):
-                    mesh = a * <double>(x - origin[t, 0])
+                    mesh = a * <double>(x - ox)
                     mesh += row
                     mesh += c
                     e = fabs(<double>plane[y, x] - mesh)

@@ -162,9 +162,11 @@ def test_the_kernels_refuse_what_is_out_of_range() -> None:
     plane = np.zeros((10, 20), np.float32)
     f, origin = np.zeros((len(t), 3)), np.zeros((len(t), 2), np.int64)
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.worst_pixels(v, bad, 20, 10, f, origin, plane)
+        native._elements.worst_pixels(v, bad, 20, 10, z, plane)
     with pytest.raises(ValueError, match="does not match"):
-        native._elements.worst_pixels(v, t, 20, 10, f, origin, plane[:9])
+        native._elements.worst_pixels(v, t, 20, 10, z, plane[:9])
+    with pytest.raises(ValueError, match="a value per vertex"):
+        native._elements.worst_pixels(v, t, 20, 10, z[:-1], plane)
     with pytest.raises(ValueError, match="out of range"):
         native._elements.triangle_pixels(far, t, 20, 10)
     one = np.zeros(1, np.int64)

@@ -415,12 +415,10 @@ def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
 
     v = np.ascontiguousarray(vertices, dtype=np.int64)
     t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
-    weights = triangle_raster(v, t, width, height, spans=False)
     if plane.dtype != np.float32:
         plane = plane.astype(np.float64)
     x, y, err = native._elements.worst_pixels(
-        v, t, width, height, np.ascontiguousarray(weights.affine(vertex_values)),
-        np.ascontiguousarray(weights.origin), np.ascontiguousarray(plane),
+        v, t, width, height, np.ascontiguousarray(vertex_values, dtype=np.float64), np.ascontiguousarray(plane),
     )
     owns = np.flatnonzero(err >= 0)
     return owns, x[owns], y[owns], err[owns]
