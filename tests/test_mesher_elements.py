@@ -172,3 +172,40 @@ def test_the_kernels_refuse_what_is_out_of_range() -> None:
     one = np.zeros(1, np.int64)
     with pytest.raises(ValueError, match="out of range"):
         native._elements.evaluate(f, origin, np.array([len(t)]), one, one)
+
+
+def test_the_cache_finds_the_triangles_it_has_measured() -> None:
+    """#20: refinement's cache of triangle statistics is a hash table in the kernel
+    (codec._elements.cached) instead of a sort and binary searches of keys: a triangle
+    is found whichever corner it is listed from and however its vertices are numbered."""
+    rng = np.random.default_rng(8)
+    width, height = 60, 50
+    v, t = _mesh(rng, width, height, 150, False)
+    pixel = v[:, 1] * width + v[:, 0]
+    stats = rng.normal(size=(len(t), 10))
+    sse = rng.random(len(t))
+    keys, got, got_sse, fresh = native._elements.cached(pixel, t, width * height, np.zeros(0, np.int64),
+                                                        np.zeros((0, 10)), np.zeros(0))
+    assert np.array_equal(fresh, np.arange(len(t))) and len(np.unique(keys)) == len(t)
+    # the vertices renumbered, the triangles listed from another corner, reordered,
+    # and some of them new
+    perm = rng.permutation(len(v))
+    renumbered = np.empty_like(perm)
+    renumbered[perm] = np.arange(len(v))
+    order = rng.permutation(len(t))
+    later = np.roll(renumbered[t], 1, axis=1)[order]
+    new = np.array([[0, 1, 2], [3, 4, 5]], np.int64)
+    later = np.concatenate([later[:7], new, later[7:]])
+    k2, s2, e2, fresh = native._elements.cached(pixel[perm], later, width * height, keys, stats, sse)
+    assert np.array_equal(fresh, [7, 8])
+    kept = np.r_[0:7, 9:len(later)]
+    assert np.array_equal(s2[kept], stats[order]) and np.array_equal(e2[kept], sse[order])
+    assert len(k2) == len(later)
+    # no keys (they would overflow): everything is fresh
+    assert len(native._elements.cached(pixel, t, 0, keys, stats, sse)[3]) == len(t)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.cached(pixel, np.array([[0, 1, len(v)]]), width * height, keys, stats, sse)
+    with pytest.raises(ValueError, match="overflow"):
+        native._elements.cached(pixel, t, 2**21, keys, stats, sse)
+    with pytest.raises(ValueError, match="per old key"):
+        native._elements.cached(pixel, t, width * height, keys, stats[:-1], sse)

@@ -43,29 +43,25 @@ def run_breaks(segments: np.ndarray) -> np.ndarray:
     return np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1
 
 
-def _keys(pixel: np.ndarray, triangles: np.ndarray, base: int) -> np.ndarray | None:
-    """One integer per triangle from its corners' pixel numbers (`pixel`, below
-    `base`), whichever corner it is listed from and however the vertices are numbered,
-    or None when they would overflow int64."""
-    if base**3 >= 2**62:
-        return None
-    a, b, c = pixel[triangles].T
-    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-    return (low * base + (a + b + c - low - high)) * base + high
+def _key_base(width: int, height: int) -> int:
+    """The base of the triangles' keys (_elements.cached): the pixel count, or 0 (no
+    keys, nothing kept between rounds) where three pixel numbers would overflow int64."""
+    base = width * height
+    return base if base**3 < 2**62 else 0
 
 
 class _Cache:
     """Statistics and squared errors (against the mesh through the sampled values) of
-    the triangles of the last triangulation, kept in the order of their keys, so that
-    a triangle that survives a round is not measured again."""
+    the triangles of the last triangulation, kept in its order with a key per triangle
+    from its corners' pixels (codec._elements.cached), so that a triangle that
+    survives a round is not measured again."""
 
     def __init__(self, layout: Statistics):
         self.layout = layout
-        self.keys = np.zeros(0, np.int64)  # sorted
+        self.keys = np.zeros(0, np.int64)
         self.stats = np.zeros((0, layout.width))
         self.sse = np.zeros(0)
-        # the last measured triangulation's statistics, in key order, and that order
-        self._order = np.zeros(0, np.int64)
+        # the last measured triangulation's statistics, in its order
         self._stats = self.stats
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
@@ -73,46 +69,27 @@ class _Cache:
         """The squared error of every triangle (statistics() gives their statistics).
         last: no round follows, so the squared errors are not needed (None) and the
         cache is not updated."""
-        m = len(triangles)
-        keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
-        known = np.zeros(m, bool)
-        found = None
-        if keys is None:
-            order, sorted_keys = np.arange(m), None  # keys would overflow: nothing is kept
-        else:
-            # worked in key order: sorted queries make the binary searches cheap, and
-            # the cache for the next round comes out in its order
-            order = np.argsort(keys)
-            sorted_keys = keys[order]
-            if len(self.keys):
-                found = np.minimum(np.searchsorted(self.keys, sorted_keys), len(self.keys) - 1)
-                known = self.keys[found] == sorted_keys
-        kept, fresh = np.flatnonzero(known), np.flatnonzero(~known)
-        new = triangles[order[fresh]]
+        from ..native import _elements
+
+        pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
+        keys, stats, sse, fresh = _elements.cached(
+            pixel, np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), _key_base(width, height),
+            self.keys, self.stats, self.sse,
+        )
         # the new triangles' statistics and squared errors in one walk over their pixels
-        measured, fresh_sse = self.layout.of_triangles(vertices, new, None if last else z)
-        stats = np.empty((m, self.layout.width))
+        measured, fresh_sse = self.layout.of_triangles(vertices, triangles[fresh], None if last else z)
         stats[fresh] = measured
-        if len(kept):
-            stats[kept] = np.take(self.stats, found[kept], axis=0)
-        self._order, self._stats = order, stats
+        self._stats = stats
         if last:
             return None
-        sse = np.empty(m)
         sse[fresh] = fresh_sse
-        if len(kept):
-            sse[kept] = self.sse[found[kept]]
-        if sorted_keys is not None:
-            self.keys, self.stats, self.sse = sorted_keys, stats, sse
-        out = np.empty(m)
-        out[order] = sse
-        return out
+        if len(keys):
+            self.keys, self.stats, self.sse = keys, stats, sse
+        return sse
 
     def statistics(self) -> np.ndarray:
         """The statistics of the triangles last measured, in their order."""
-        out = np.empty_like(self._stats)
-        out[self._order] = self._stats
-        return out
+        return self._stats
 
 
 class _Growing:
