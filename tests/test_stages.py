@@ -5,6 +5,7 @@ to the budget, and the rows bands share."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from codec import banding
 from codec.mesh import Mesh
@@ -210,3 +211,57 @@ def test_last_row_gets_a_vertex_where_it_bends_and_none_where_it_is_straight():
     grown = banding.sample_last_row(mesh, band, 1.0)
     xs, vals = banding.bottom_row(grown)
     assert 6 in xs.tolist() and vals[xs.tolist().index(6)] == 250
+
+
+def _derivative_planes(rng: np.random.Generator, h: int, w: int) -> list[np.ndarray]:
+    """float32 planes as Sobel gives them, with what the rounding rules meet: halves
+    after scaling (Canny's fixed point rounds them to even), values past the int16
+    clip, exact zeros, negatives, tiny and huge numbers."""
+    plain = rng.normal(0, 40, (h, w)).astype(np.float32)
+    halves = (rng.integers(-200, 200, (h, w)) / 8 + 1 / 32).astype(np.float32) * 4  # dx * 16 = k + 0.5
+    wide = rng.normal(0, 20000, (h, w)).astype(np.float32)
+    odd = rng.choice(np.array([0, -0.0, 1e-30, -1e-30, 3e30, 8191.75, -8191.75, 8191.8, 0.125], np.float32), (h, w))
+    return [plain, halves, wide, odd.astype(np.float32)]
+
+
+def test_the_gradient_kernel_gives_numpys_numbers() -> None:
+    """#20: codec._gradients.edge_gradient replaced numpy's passes over the Sobel
+    derivatives (divide by 4, magnitude, clip, scale, round to even, int16): the same
+    float32 and int16 values, so the same thresholds, edges and bytes."""
+    from codec.native import _gradients
+
+    rng = np.random.default_rng(4)
+    planes = _derivative_planes(rng, 37, 53)
+    limit = 32767 / edges._SCALE
+    with np.errstate(over="ignore", invalid="ignore"):
+        _compare_gradients(_gradients, planes, limit)
+    with pytest.raises(ValueError, match="differ"):
+        _gradients.edge_gradient(planes[0], planes[1][:-1], limit, edges._SCALE)
+    with pytest.raises(ValueError, match="int16"):
+        _gradients.edge_gradient(planes[0], planes[1], 4096.0, edges._SCALE)
+
+
+def _compare_gradients(_gradients, planes: list[np.ndarray], limit: float) -> None:
+    for sx in planes:
+        for sy in planes:
+            mag, ix, iy = _gradients.edge_gradient(sx, sy, limit, edges._SCALE)
+            dx, dy = sx / 4, sy / 4
+            assert np.array_equal(mag, np.sqrt(dx * dx + dy * dy))
+            assert mag.dtype == np.float32
+            assert np.array_equal(ix, np.round(np.clip(dx, -limit, limit) * edges._SCALE).astype(np.int16))
+            assert np.array_equal(iy, np.round(np.clip(dy, -limit, limit) * edges._SCALE).astype(np.int16))
+
+
+def test_the_hessian_kernel_gives_numpys_numbers() -> None:
+    from codec.native import _gradients
+
+    rng = np.random.default_rng(5)
+    planes = _derivative_planes(rng, 29, 41)
+    dyy = planes[1]
+    with np.errstate(over="ignore"):
+        for dxx in planes:
+            for dxy in planes[::-1]:
+                assert np.array_equal(_gradients.hessian_norm(dxx, dyy, dxy),
+                                      np.sqrt(dxx * dxx + 2 * dxy * dxy + dyy * dyy))
+    with pytest.raises(ValueError, match="differ"):
+        _gradients.hessian_norm(planes[0], planes[1], np.ascontiguousarray(planes[2][:, :-1]))
