@@ -534,3 +534,42 @@ def cached(const int64_t[::1] pixel, const int64_t[:, ::1] triangles, int64_t ba
     if bad:
         raise ValueError("cached: a corner index out of range")
     return keys_out, stats_out, sse_out, fresh_out[:nf]
+
+
+def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                     int64_t height):
+    """(origin M x 2, coef M x 3 x 3, den M), int64, of elements.triangle_raster: each
+    triangle's first corner in raster order, the integer coefficients (alpha, beta,
+    gamma) of each listed corner's weight numerator relative to it, and their common
+    denominator (twice the area). Integers, so the very numbers numpy gave. ValueError
+    on an index or coordinate out of range."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0], t, i, j, k, ox, oy
+    origin_out = np.empty((m, 2), dtype=np.int64)
+    coef_out = np.empty((m, 3, 3), dtype=np.int64)
+    den_out = np.empty(m, dtype=np.int64)
+    cdef int64_t[:, ::1] origin = origin_out
+    cdef int64_t[:, :, ::1] coef = coef_out
+    cdef int64_t[::1] den = den_out
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _corners(vertices, triangles, t, width, height, py, px):
+                bad = True
+                break
+            _origin(px, py, width, &ox, &oy)
+            origin[t, 0] = ox
+            origin[t, 1] = oy
+            for i in range(3):
+                # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj)
+                j = (i + 1) % 3
+                k = (i + 2) % 3
+                coef[t, i, 0] = -(py[k] - py[j])
+                coef[t, i, 1] = px[k] - px[j]
+                coef[t, i, 2] = (px[k] - px[j]) * (oy - py[j]) - (py[k] - py[j]) * (ox - px[j])
+            den[t] = coef[t, 0, 2] + coef[t, 1, 2] + coef[t, 2, 2]
+    if bad:
+        raise ValueError("triangle_weights: a corner index or coordinate out of range")
+    return origin_out, coef_out, den_out

@@ -209,3 +209,34 @@ def test_the_cache_finds_the_triangles_it_has_measured() -> None:
         native._elements.cached(pixel, t, 2**21, keys, stats, sse)
     with pytest.raises(ValueError, match="per old key"):
         native._elements.cached(pixel, t, width * height, keys, stats[:-1], sse)
+
+
+def _weights_in_numpy(v: np.ndarray, t: np.ndarray, width: int):
+    """elements.triangle_raster's origins and coefficients as numpy computed them."""
+    p = np.take(v, t, axis=0)
+    first = (p[:, :, 1] * width + p[:, :, 0]).argmin(axis=1)
+    origin = np.take_along_axis(p, first[:, None, None], axis=1)[:, 0]
+    px, py = np.ascontiguousarray(p[:, :, 0].T), np.ascontiguousarray(p[:, :, 1].T)
+    ox, oy = origin[:, 0], origin[:, 1]
+    coef = np.empty((3, 3, len(p)), dtype=np.int64)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        ex, ey = px[k] - px[j], py[k] - py[j]
+        coef[i, 0], coef[i, 1], coef[i, 2] = -ey, ex, ex * (oy - py[j]) - ey * (ox - px[j])
+    return origin, coef.transpose(2, 0, 1), coef[:, 2].sum(axis=0)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_triangle_weights_kernel_gives_numpys_integers(seed: int) -> None:
+    """#20: triangle_raster's origins and weight coefficients come from a compiled pass
+    (codec._elements.triangle_weights) instead of numpy's gathers: the same integers,
+    whichever corner a triangle is listed from."""
+    rng = np.random.default_rng(20 + seed)
+    width, height = int(rng.integers(3, 300)), int(rng.integers(3, 200))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 400)), bool(seed % 2))
+    t = np.roll(t, int(rng.integers(0, 3)), axis=1)
+    raster = triangle_raster(v, t, width, height, spans=False)
+    for got, expected in zip((raster.origin, raster.coef, raster.den), _weights_in_numpy(v, t, width)):
+        assert got.dtype == np.int64 and np.array_equal(got, expected)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_weights(v, np.array([[0, 1, len(v)]]), width, height)

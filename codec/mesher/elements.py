@@ -368,24 +368,6 @@ def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, le
     return corners, origin, coef, den, elem[keep], span_y[keep], span_x[keep], span_n[keep]
 
 
-def _triangle_coefficients(p: np.ndarray, origin: np.ndarray):
-    """Weight coefficients and doubled area of triangles whose corner coordinates are
-    p (M x 3 x 2), relative to `origin` (M x 2)."""
-    # corner-major copies and output, so that every operation runs over plain arrays
-    px, py = np.ascontiguousarray(p[:, :, 0].T), np.ascontiguousarray(p[:, :, 1].T)
-    ox, oy = origin[:, 0], origin[:, 1]
-    coef = np.empty((3, 3, len(p)), dtype=np.int64)
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj), with x = u + x0, y = v + y0
-        ex = px[k] - px[j]
-        ey = py[k] - py[j]
-        np.negative(ey, out=coef[i, 0])
-        coef[i, 1] = ex
-        coef[i, 2] = ex * (oy - py[j]) - ey * (ox - px[j])
-    return coef.transpose(2, 0, 1), coef[:, 2].sum(axis=0)
-
-
 def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int,
                     *, spans: bool = True) -> Raster:
     """The triangles' elements alone (no border lines): what they own of the image.
@@ -393,12 +375,12 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
     the same statistics whichever corner it is listed from and however the vertices
     are numbered. spans=False: the weights only (no spans, for statistics measured
     before)."""
-    v = np.asarray(vertices, dtype=np.int64)
-    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    p = np.take(v, t, axis=0)
-    first = (p[:, :, 1] * width + p[:, :, 0]).argmin(axis=1)
-    origin = np.take_along_axis(p, first[:, None, None], axis=1)[:, 0]
-    coef, den = _triangle_coefficients(p, origin)
+    from .. import native
+
+    v = np.ascontiguousarray(vertices, dtype=np.int64)
+    t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    # origins and weight coefficients in one compiled pass (integers: the same numbers)
+    origin, coef, den = native._elements.triangle_weights(v, t, width, height)
     if spans and len(t):
         return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
     empty = np.zeros(0, np.int64)
