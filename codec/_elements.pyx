@@ -40,28 +40,77 @@ cdef inline void _sort3(int64_t* ys, int64_t* xs) noexcept nogil:
             t = xs[i]; xs[i] = xs[j]; xs[j] = t
 
 
-cdef inline void _span(const int64_t* ys, const int64_t* xs, int64_t dy, int64_t up,
-                       int64_t* left, int64_t* count) noexcept nogil:
-    """Columns [left, left + count) of row ya + dy of the triangle with corners sorted
-    by row (elements._triangle_spans: the long edge against the upper or lower short
-    edge, each crossing the ceiling of a float64 quotient of exact integers)."""
-    cdef int64_t tall = ys[2] - ys[0], upper = ys[1] - ys[0], lower = ys[2] - ys[1], den
-    cdef double c_long, c_short
-    c_long = ceil(<double>(xs[0] * tall + (xs[2] - xs[0]) * dy) / <double>tall)
-    if dy < up:
-        if upper == 0:
-            c_short = <double>xs[1]
-        else:
-            c_short = ceil(<double>(xs[0] * upper + (xs[1] - xs[0]) * dy) / <double>upper)
+cdef struct _Edge:
+    # ceil((n0 + s dy) / d) for dy = 0, 1, ..., d > 0: the quotient q and the
+    # remainder r = q d - n (0 <= r < d), stepped by s = sq d + sr (0 <= sr < d)
+    int64_t q, r, sq, sr, d
+
+
+cdef inline int64_t _floor_div(int64_t a, int64_t b) noexcept nogil:
+    # a // b rounded toward minus infinity, b > 0 (C division truncates)
+    cdef int64_t q = a / b
+    if a % b != 0 and a < 0:
+        q -= 1
+    return q
+
+
+cdef inline void _edge_start(_Edge* e, int64_t n0, int64_t s, int64_t d, int64_t dy) noexcept nogil:
+    cdef int64_t n = n0 + s * dy
+    e.d = d
+    e.q = -_floor_div(-n, d)
+    e.r = e.q * d - n
+    e.sq = _floor_div(s, d)
+    e.sr = s - e.sq * d
+
+
+cdef inline void _edge_step(_Edge* e) noexcept nogil:
+    e.q += e.sq
+    e.r -= e.sr
+    if e.r < 0:
+        e.r += e.d
+        e.q += 1
+
+
+cdef struct _Rows:
+    # a triangle's row spans (corners sorted by row, _sort3), row after row: the long
+    # edge (top to bottom corner) against the upper short edge down to row `up`, then
+    # the lower one (elements._triangle_spans' crossings, in exact integers: that
+    # function proves its float64 quotients' ceilings exact)
+    _Edge long_edge, short_edge
+    int64_t dy, up, lower_n0, lower_s, lower_d
+
+
+cdef inline void _rows_start(_Rows* w, const int64_t* ys, const int64_t* xs, int64_t up) noexcept nogil:
+    cdef int64_t tall = ys[2] - ys[0], upper = ys[1] - ys[0], lower = ys[2] - ys[1]
+    w.dy = 0
+    w.up = up
+    if tall > 0:
+        _edge_start(&w.long_edge, xs[0] * tall, xs[2] - xs[0], tall, 0)
+    if upper == 0:
+        _edge_start(&w.short_edge, xs[1], 0, 1, 0)  # a flat top: x = xb
     else:
-        den = lower if lower > 1 else 1
-        c_short = ceil(<double>(xs[1] * den - (xs[2] - xs[1]) * upper + (xs[2] - xs[1]) * dy) / <double>den)
-    if c_long < c_short:
-        left[0] = <int64_t>c_long
-        count[0] = <int64_t>(c_short - c_long)
+        _edge_start(&w.short_edge, xs[0] * upper, xs[1] - xs[0], upper, 0)
+    w.lower_d = lower if lower > 1 else 1
+    w.lower_n0 = xs[1] * w.lower_d - (xs[2] - xs[1]) * upper
+    w.lower_s = xs[2] - xs[1]
+
+
+cdef inline void _rows_next(_Rows* w, int64_t* left, int64_t* count) noexcept nogil:
+    """Columns [left, left + count) of the next row (row ya + dy, dy from 0)."""
+    cdef int64_t a, b
+    if w.dy == w.up:
+        _edge_start(&w.short_edge, w.lower_n0, w.lower_s, w.lower_d, w.dy)
+    a = w.long_edge.q
+    b = w.short_edge.q
+    if a < b:
+        left[0] = a
+        count[0] = b - a
     else:
-        left[0] = <int64_t>c_short
-        count[0] = <int64_t>(c_long - c_short)
+        left[0] = b
+        count[0] = a - b
+    _edge_step(&w.long_edge)
+    _edge_step(&w.short_edge)
+    w.dy += 1
 
 
 cdef bint _corners(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
@@ -192,6 +241,7 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef double[::1] e = sse_out
     cdef double[::1] sums = sums_buf
     cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy
+    cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
@@ -208,8 +258,9 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                 break
             for k in range(raw):
                 sums[k] = 0.0
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 if n <= 0:
                     continue  # an empty span adds nothing to any sum
                 y = ys[0] + dy
@@ -290,6 +341,7 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     cdef int64_t[::1] bx = xs_out, by = ys_out
     cdef double[::1] be = err_out
     cdef int64_t t, dy, y, x0, n, x, up, ox, oy, i
+    cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
@@ -307,8 +359,9 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
             a = f[0]
             c = f[2]
             best = -1.0
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 y = ys[0] + dy
                 # as elements.Raster.worst_pixels sums it: a u, then + b v, then + c
                 row = f[1] * <double>(y - oy)
@@ -334,6 +387,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], total = 0, t, dy, y, x0, n, x, up, j = 0
+    cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef bint bad = False
@@ -342,8 +396,9 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
             if not _start(vertices, triangles, t, width, height, ys, xs, &up):
                 bad = True
                 break
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 total += n
     if bad:
         raise ValueError("triangle_pixels: a corner index or coordinate out of range")
@@ -354,8 +409,9 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     with nogil:
         for t in range(m):
             _start(vertices, triangles, t, width, height, ys, xs, &up)
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 y = ys[0] + dy
                 for x in range(x0, x0 + n):
                     pe[j] = t
