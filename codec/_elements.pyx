@@ -518,30 +518,31 @@ cdef inline int64_t _slot(uint64_t key, int bits) noexcept nogil:
 
 
 def cached(const int64_t[::1] pixel, const int64_t[:, ::1] triangles, int64_t base,
-           const int64_t[::1] old_keys, const double[:, ::1] old_stats, const double[::1] old_sse):
+           const int64_t[::1] old_keys, const int64_t[::1] old_rows, const double[::1] old_sse,
+           int64_t next_row):
     """A refinement round's triangles against the last round's (codec.mesher.refine):
-    (keys, stats, sse, fresh). Each triangle's key is (low base + middle) base + high of
+    (keys, rows, sse, fresh). Each triangle's key is (low base + middle) base + high of
     its corners' pixel numbers `pixel` (below base; base**3 < 2**62; base 0: no keys,
     all fresh), so it names the same triangle however the vertices are numbered or the
-    corners listed; a triangle whose key is in old_keys gets that row of old_stats and
-    old_sse, the others are listed in fresh (ascending) and their rows left for the
-    caller. A hash table, not a sort: the cache is kept in triangle order. ValueError
-    on a corner index out of range or arrays that do not match."""
-    cdef int64_t m = triangles.shape[0], n_old = old_keys.shape[0], w = old_stats.shape[1]
-    cdef int64_t npix = pixel.shape[0], t, i, j, s, nf = 0, a, b, c, low, high, k
+    corners listed; a triangle whose key is in old_keys gets that key's row (where its
+    statistics are kept) and squared error, the others are listed in fresh (ascending)
+    and get the rows next_row, next_row + 1, ... in that order, their squared errors
+    left for the caller. A hash table, not a sort: the cache is kept in triangle order.
+    ValueError on a corner index out of range or arrays that do not match."""
+    cdef int64_t m = triangles.shape[0], n_old = old_keys.shape[0]
+    cdef int64_t npix = pixel.shape[0], t, j, s, nf = 0, a, b, c, low, high, k
     cdef int bits = 4
-    if triangles.shape[1] != 3 or old_stats.shape[0] != n_old or old_sse.shape[0] != n_old:
-        raise ValueError("cached: triangles M x 3, and a stats row and a squared error per old key")
+    if triangles.shape[1] != 3 or old_rows.shape[0] != n_old or old_sse.shape[0] != n_old:
+        raise ValueError("cached: triangles M x 3, and a row and a squared error per old key")
     if base < 0 or (<object>base) ** 3 >= 2 ** 62:
         raise ValueError("cached: a base of pixel numbers out of range (keys would overflow)")
     while (<int64_t>1 << bits) < 2 * n_old:
         bits += 1
     keys_out = np.empty(m if base else 0, dtype=np.int64)
-    stats_out = np.empty((m, w), dtype=np.float64)
+    rows_out = np.empty(m, dtype=np.int64)
     sse_out = np.empty(m, dtype=np.float64)
     fresh_out = np.empty(m, dtype=np.int64)
-    cdef int64_t[::1] keys = keys_out
-    cdef double[:, ::1] st = stats_out
+    cdef int64_t[::1] keys = keys_out, rows = rows_out
     cdef double[::1] se = sse_out
     cdef int64_t[::1] fresh = fresh_out
     cdef int64_t size = <int64_t>1 << bits
@@ -549,47 +550,46 @@ def cached(const int64_t[::1] pixel, const int64_t[:, ::1] triangles, int64_t ba
     cdef int64_t[::1] table = table_arr
     cdef bint bad = False
     with nogil:
-        if base == 0 or n_old == 0:
-            for t in range(m):
-                fresh[t] = t
-            nf = m
         for j in range(n_old if base else 0):
             s = _slot(<uint64_t>old_keys[j], bits)
             while table[s] >= 0:
                 s = (s + 1) & (size - 1)
             table[s] = j
-        for t in range(m if base else 0):
-            a = triangles[t, 0]
-            b = triangles[t, 1]
-            c = triangles[t, 2]
-            if a < 0 or a >= npix or b < 0 or b >= npix or c < 0 or c >= npix:
-                bad = True
-                break
-            a = pixel[a]
-            b = pixel[b]
-            c = pixel[c]
-            low = a if a < b else b
-            low = low if low < c else c
-            high = a if a > b else b
-            high = high if high > c else c
-            k = (low * base + (a + b + c - low - high)) * base + high
-            keys[t] = k
-            if n_old == 0:
-                continue
-            s = _slot(<uint64_t>k, bits)
-            while table[s] >= 0 and old_keys[table[s]] != k:
-                s = (s + 1) & (size - 1)
-            j = table[s]
+        for t in range(m):
+            if base == 0:
+                j = -1
+            else:
+                a = triangles[t, 0]
+                b = triangles[t, 1]
+                c = triangles[t, 2]
+                if a < 0 or a >= npix or b < 0 or b >= npix or c < 0 or c >= npix:
+                    bad = True
+                    break
+                a = pixel[a]
+                b = pixel[b]
+                c = pixel[c]
+                low = a if a < b else b
+                low = low if low < c else c
+                high = a if a > b else b
+                high = high if high > c else c
+                k = (low * base + (a + b + c - low - high)) * base + high
+                keys[t] = k
+                j = -1
+                if n_old:
+                    s = _slot(<uint64_t>k, bits)
+                    while table[s] >= 0 and old_keys[table[s]] != k:
+                        s = (s + 1) & (size - 1)
+                    j = table[s]
             if j < 0:
+                rows[t] = next_row + nf
                 fresh[nf] = t
                 nf += 1
-                continue
-            for i in range(w):
-                st[t, i] = old_stats[j, i]
-            se[t] = old_sse[j]
+            else:
+                rows[t] = old_rows[j]
+                se[t] = old_sse[j]
     if bad:
         raise ValueError("cached: a corner index out of range")
-    return keys_out, stats_out, sse_out, fresh_out[:nf]
+    return keys_out, rows_out, sse_out, fresh_out[:nf]
 
 
 def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,

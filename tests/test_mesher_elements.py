@@ -182,11 +182,11 @@ def test_the_cache_finds_the_triangles_it_has_measured() -> None:
     width, height = 60, 50
     v, t = _mesh(rng, width, height, 150, False)
     pixel = v[:, 1] * width + v[:, 0]
-    stats = rng.normal(size=(len(t), 10))
     sse = rng.random(len(t))
-    keys, got, got_sse, fresh = native._elements.cached(pixel, t, width * height, np.zeros(0, np.int64),
-                                                        np.zeros((0, 10)), np.zeros(0))
-    assert np.array_equal(fresh, np.arange(len(t))) and len(np.unique(keys)) == len(t)
+    keys, rows, _, fresh = native._elements.cached(pixel, t, width * height, np.zeros(0, np.int64),
+                                                   np.zeros(0, np.int64), np.zeros(0), 0)
+    assert np.array_equal(fresh, np.arange(len(t))) and np.array_equal(rows, np.arange(len(t)))
+    assert len(np.unique(keys)) == len(t)
     # the vertices renumbered, the triangles listed from another corner, reordered,
     # and some of them new
     perm = rng.permutation(len(v))
@@ -196,19 +196,19 @@ def test_the_cache_finds_the_triangles_it_has_measured() -> None:
     later = np.roll(renumbered[t], 1, axis=1)[order]
     new = np.array([[0, 1, 2], [3, 4, 5]], np.int64)
     later = np.concatenate([later[:7], new, later[7:]])
-    k2, s2, e2, fresh = native._elements.cached(pixel[perm], later, width * height, keys, stats, sse)
-    assert np.array_equal(fresh, [7, 8])
+    k2, r2, e2, fresh = native._elements.cached(pixel[perm], later, width * height, keys, rows, sse, len(t))
+    assert np.array_equal(fresh, [7, 8]) and np.array_equal(r2[fresh], [len(t), len(t) + 1])
     kept = np.r_[0:7, 9:len(later)]
-    assert np.array_equal(s2[kept], stats[order]) and np.array_equal(e2[kept], sse[order])
+    assert np.array_equal(r2[kept], rows[order]) and np.array_equal(e2[kept], sse[order])
     assert len(k2) == len(later)
     # no keys (they would overflow): everything is fresh
-    assert len(native._elements.cached(pixel, t, 0, keys, stats, sse)[3]) == len(t)
+    assert len(native._elements.cached(pixel, t, 0, keys, rows, sse, 0)[3]) == len(t)
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.cached(pixel, np.array([[0, 1, len(v)]]), width * height, keys, stats, sse)
+        native._elements.cached(pixel, np.array([[0, 1, len(v)]]), width * height, keys, rows, sse, 0)
     with pytest.raises(ValueError, match="overflow"):
-        native._elements.cached(pixel, t, 2**21, keys, stats, sse)
+        native._elements.cached(pixel, t, 2**21, keys, rows, sse, 0)
     with pytest.raises(ValueError, match="per old key"):
-        native._elements.cached(pixel, t, width * height, keys, stats[:-1], sse)
+        native._elements.cached(pixel, t, width * height, keys, rows[:-1], sse, 0)
 
 
 def _weights_in_numpy(v: np.ndarray, t: np.ndarray, width: int):

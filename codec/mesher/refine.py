@@ -54,15 +54,19 @@ class _Cache:
     """Statistics and squared errors (against the mesh through the sampled values) of
     the triangles of the last triangulation, kept in its order with a key per triangle
     from its corners' pixels (codec._elements.cached), so that a triangle that
-    survives a round is not measured again."""
+    survives a round is not measured again. The statistics of every triangle measured
+    are kept where they were put (rows of a growing store) and gathered once, for the
+    triangles of the last round: a round needs only the squared errors."""
 
     def __init__(self, layout: Statistics):
         self.layout = layout
         self.keys = np.zeros(0, np.int64)
-        self.stats = np.zeros((0, layout.width))
+        self.rows = np.zeros(0, np.int64)
         self.sse = np.zeros(0)
-        # the last measured triangulation's statistics, in its order
-        self._stats = self.stats
+        self._parts: list[np.ndarray] = []
+        self._stored = 0
+        # the last measured triangulation's rows in the store, in its order
+        self._last = self.rows
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
                 last: bool = False) -> np.ndarray | None:
@@ -72,24 +76,28 @@ class _Cache:
         from ..native import _elements
 
         pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
-        keys, stats, sse, fresh = _elements.cached(
+        keys, rows, sse, fresh = _elements.cached(
             pixel, np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), _key_base(width, height),
-            self.keys, self.stats, self.sse,
+            self.keys, self.rows, self.sse, self._stored,
         )
         # the new triangles' statistics and squared errors in one walk over their pixels
         measured, fresh_sse = self.layout.of_triangles(vertices, triangles[fresh], None if last else z)
-        stats[fresh] = measured
-        self._stats = stats
+        self._parts.append(measured)
+        self._stored += len(fresh)
+        self._last = rows
         if last:
             return None
         sse[fresh] = fresh_sse
         if len(keys):
-            self.keys, self.stats, self.sse = keys, stats, sse
+            self.keys, self.rows, self.sse = keys, rows, sse
         return sse
 
     def statistics(self) -> np.ndarray:
         """The statistics of the triangles last measured, in their order."""
-        return self._stats
+        if len(self._parts) > 1:
+            self._parts = [np.concatenate(self._parts)]
+        store = self._parts[0] if self._parts else np.zeros((0, self.layout.width))
+        return store[self._last]
 
 
 class _Growing:
