@@ -14,7 +14,7 @@ in row order, as a sparse row-sum adds them. The GIL is released while they work
 
 cimport cython
 from libc.math cimport ceil, fabs
-from libc.stdint cimport int32_t, int64_t, uint64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
 
 import numpy as np
 
@@ -629,3 +629,27 @@ def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     if bad:
         raise ValueError("triangle_weights: a corner index or coordinate out of range")
     return origin_out, coef_out, den_out
+
+
+def first_of_each(const int64_t[::1] keys):
+    """A mask of the entries of `keys` that are the first of their value (a hash table
+    of the keys seen: one pass, where np.unique sorts). For refinement's merge() of a
+    round's new vertices into the vertices there are."""
+    cdef int64_t n = keys.shape[0], i, s, size
+    cdef int bits = 4
+    while (<int64_t>1 << bits) < 2 * n:
+        bits += 1
+    size = <int64_t>1 << bits
+    first_out = np.zeros(n, dtype=bool)
+    table_arr = np.full(size, -1, dtype=np.int64)
+    cdef uint8_t[::1] first = first_out.view(np.uint8)
+    cdef int64_t[::1] table = table_arr
+    with nogil:
+        for i in range(n):
+            s = _slot(<uint64_t>keys[i], bits)
+            while table[s] >= 0 and keys[table[s]] != keys[i]:
+                s = (s + 1) & (size - 1)
+            if table[s] < 0:
+                table[s] = i
+                first[i] = 1
+    return first_out

@@ -240,3 +240,13 @@ def test_the_triangle_weights_kernel_gives_numpys_integers(seed: int) -> None:
         assert got.dtype == np.int64 and np.array_equal(got, expected)
     with pytest.raises(ValueError, match="out of range"):
         native._elements.triangle_weights(v, np.array([[0, 1, len(v)]]), width, height)
+
+
+def test_first_of_each_marks_the_first_of_every_value() -> None:
+    rng = np.random.default_rng(12)
+    for n in (0, 1, 7, 1000):
+        keys = rng.integers(-5, 40, n).astype(np.int64)
+        _, first = np.unique(keys, return_index=True)
+        expected = np.zeros(n, bool)
+        expected[first] = True
+        assert np.array_equal(native._elements.first_of_each(keys), expected)

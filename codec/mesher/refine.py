@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from ..errors import ATMError
-from ..native import _renumber
+from ..native import _elements, _renumber
 from ..triangulate import Triangulation, split_at_vertices, triangulate
 from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
@@ -34,8 +34,7 @@ def merge(width: int, *groups: np.ndarray) -> np.ndarray:
     """Concatenate point groups keeping the first of any points on the same pixel and
     the order of the groups (the first group's indices stay valid)."""
     pts = np.concatenate(groups)
-    _, first = np.unique(pts[:, 1] * width + pts[:, 0], return_index=True)
-    return pts[np.sort(first)]
+    return pts[_elements.first_of_each(np.ascontiguousarray(pts[:, 1] * width + pts[:, 0], dtype=np.int64))]
 
 
 def run_breaks(segments: np.ndarray) -> np.ndarray:
@@ -73,8 +72,6 @@ class _Cache:
         """The squared error of every triangle (statistics() gives their statistics).
         last: no round follows, so the squared errors are not needed (None) and the
         cache is not updated."""
-        from ..native import _elements
-
         pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
         keys, rows, sse, fresh = _elements.cached(
             pixel, np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), _key_base(width, height),
