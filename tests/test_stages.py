@@ -300,3 +300,22 @@ def test_dropping_vertices_splits_the_walls_as_the_loop_did() -> None:
         assert len(got.constraints) == len(expected)
         assert all(np.array_equal(a, b) for a, b in zip(got.constraints, expected))
         assert np.array_equal(got.vertices, vertices[keep])
+
+
+def test_region_sampling_sums_only_the_columns_it_samples() -> None:
+    """#20: sampling.sample takes each band's column sums and the cumulative sums of the
+    chosen columns only, where it summed every column down the band (half its time).
+    The same numbers, bit for bit: a sum over axis 0 adds the rows in turn, as the last
+    row of the cumulative sums does, and a column's cumulative sums do not depend on
+    the other columns. So the same samples."""
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        h, w = int(rng.integers(1, 120)), int(rng.integers(2, 600))
+        block = rng.gamma(0.5, 1.0, (h, w)) * (rng.random((h, w)) > 0.2) + 0.25 * (rng.random() > 0.5)
+        whole = np.cumsum(block, axis=0)
+        assert np.array_equal(block.sum(axis=0), whole[-1])
+        cols = np.unique(rng.integers(0, w, int(rng.integers(1, 20))))
+        assert np.array_equal(np.cumsum(block[:, cols], axis=0), whole[:, cols])
+    # one column: cumsum itself
+    dens = rng.gamma(0.5, 1.0, (50, 1))
+    assert len(sampling.sample(dens, (1, 3), (1, 5))) > 0
