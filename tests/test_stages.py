@@ -319,3 +319,35 @@ def test_region_sampling_sums_only_the_columns_it_samples() -> None:
     # one column: cumsum itself
     dens = rng.gamma(0.5, 1.0, (50, 1))
     assert len(sampling.sample(dens, (1, 3), (1, 5))) > 0
+
+
+def test_walls_through_vertices_are_regrouped_as_the_loop_did() -> None:
+    """#20: triangulate.through_vertices (a band's sampled last row, holes' rims)
+    regroups the cut steps into walls all at once; a loop over a 2048² band's walls took
+    16 ms. The same walls, in the same order."""
+    from codec.mesh import segments
+    from codec.triangulate import split_at_vertices, through_vertices
+
+    rng = np.random.default_rng(10)
+    for _ in range(100):
+        n = int(rng.integers(2, 40))
+        xy = rng.choice(20 * 20, n, replace=False)
+        vertices = np.stack([xy % 20, xy // 20], 1).astype(np.int64)
+        walls = [rng.choice(n, int(rng.integers(2, min(6, n + 1))), replace=False).astype(np.int64)
+                 for _ in range(int(rng.integers(0, 5)))]
+        # vertices put on the walls' steps, so that they are cut
+        for wall in walls[:2]:
+            a, b = vertices[wall[0]], vertices[wall[1]]
+            middle = (a + b) // 2
+            if (2 * middle == a + b).all() and not (vertices == middle).all(axis=1).any():
+                vertices = np.vstack([vertices, middle])
+        got = through_vertices(vertices, walls)
+        expected = []
+        if walls:
+            pieces, source = split_at_vertices(vertices, segments(walls), int(vertices[:, 0].max()) + 1, origin=True)
+            owner = np.repeat(np.arange(len(walls)), [len(c) - 1 for c in walls])[source]
+            for run in np.split(np.arange(len(pieces)), np.flatnonzero(np.diff(owner)) + 1):
+                if len(run):
+                    expected.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
+        assert len(got) == len(expected)
+        assert all(np.array_equal(a, b) for a, b in zip(got, expected))
