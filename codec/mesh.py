@@ -290,7 +290,9 @@ def without_vertices(mesh: Mesh, keep: np.ndarray) -> Mesh:
         take = np.zeros(len(mapped), bool)
         take[kept] = sizes[run[kept]] >= 2
         if take.any():
-            constraints = np.split(mapped[take], np.cumsum(sizes[sizes >= 2])[:-1])
+            bounds = np.r_[0, np.cumsum(sizes[sizes >= 2])].tolist()
+            pieces = mapped[take]
+            constraints = [pieces[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
     return Mesh(
         mesh.vertices[keep], mesh.values[keep], np.zeros((0, 3), np.int64),
         mesh.width, mesh.height, constraints, mesh.holes,

@@ -228,4 +228,5 @@ def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[
     # over a 2048² band's thousands of walls took 16 ms)
     ends = np.r_[np.flatnonzero(np.diff(owner)) + 1, len(pieces)]
     flat = np.insert(pieces[:, 0], ends, pieces[ends - 1, 1])
-    return np.split(flat, (ends + np.arange(1, len(ends) + 1))[:-1])
+    bounds = np.r_[0, ends + np.arange(1, len(ends) + 1)].tolist()
+    return [flat[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
