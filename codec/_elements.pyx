@@ -2,8 +2,9 @@
 the pixels it owns (codec.mesher.elements: the half-open rule, left and top edges
 inclusive), row by row as the rasteriser walks them, with no span arrays in between.
 
-triangle_sums: per triangle, the sums over its row spans of the geometric moments and
-of K prefix-summed planes (and of y times each), for codec.mesher.elements.Statistics;
+triangle_statistics: per triangle, the sums over its row spans of the geometric moments and
+of K prefix-summed planes (and of y times each), as codec.mesher.elements.Statistics
+keeps them, and its squared error against a plane through its corners;
 worst_pixels: per triangle, its pixel farthest from a plane through its corners.
 
 Both give the very numbers of the numpy code they replace: the spans' edge crossings
@@ -11,8 +12,9 @@ are the same float64 quotients of exact integers, and the sums are taken span by
 in row order, as a sparse row-sum adds them. The GIL is released while they work.
 """
 
+cimport cython
 from libc.math cimport ceil, fabs
-from libc.stdint cimport int32_t, int64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
 
 import numpy as np
 
@@ -38,28 +40,77 @@ cdef inline void _sort3(int64_t* ys, int64_t* xs) noexcept nogil:
             t = xs[i]; xs[i] = xs[j]; xs[j] = t
 
 
-cdef inline void _span(const int64_t* ys, const int64_t* xs, int64_t dy, int64_t up,
-                       int64_t* left, int64_t* count) noexcept nogil:
-    """Columns [left, left + count) of row ya + dy of the triangle with corners sorted
-    by row (elements._triangle_spans: the long edge against the upper or lower short
-    edge, each crossing the ceiling of a float64 quotient of exact integers)."""
-    cdef int64_t tall = ys[2] - ys[0], upper = ys[1] - ys[0], lower = ys[2] - ys[1], den
-    cdef double c_long, c_short
-    c_long = ceil(<double>(xs[0] * tall + (xs[2] - xs[0]) * dy) / <double>tall)
-    if dy < up:
-        if upper == 0:
-            c_short = <double>xs[1]
-        else:
-            c_short = ceil(<double>(xs[0] * upper + (xs[1] - xs[0]) * dy) / <double>upper)
+cdef struct _Edge:
+    # ceil((n0 + s dy) / d) for dy = 0, 1, ..., d > 0: the quotient q and the
+    # remainder r = q d - n (0 <= r < d), stepped by s = sq d + sr (0 <= sr < d)
+    int64_t q, r, sq, sr, d
+
+
+cdef inline int64_t _floor_div(int64_t a, int64_t b) noexcept nogil:
+    # a // b rounded toward minus infinity, b > 0 (C division truncates)
+    cdef int64_t q = a / b
+    if a % b != 0 and a < 0:
+        q -= 1
+    return q
+
+
+cdef inline void _edge_start(_Edge* e, int64_t n0, int64_t s, int64_t d, int64_t dy) noexcept nogil:
+    cdef int64_t n = n0 + s * dy
+    e.d = d
+    e.q = -_floor_div(-n, d)
+    e.r = e.q * d - n
+    e.sq = _floor_div(s, d)
+    e.sr = s - e.sq * d
+
+
+cdef inline void _edge_step(_Edge* e) noexcept nogil:
+    e.q += e.sq
+    e.r -= e.sr
+    if e.r < 0:
+        e.r += e.d
+        e.q += 1
+
+
+cdef struct _Rows:
+    # a triangle's row spans (corners sorted by row, _sort3), row after row: the long
+    # edge (top to bottom corner) against the upper short edge down to row `up`, then
+    # the lower one (elements._triangle_spans' crossings, in exact integers: that
+    # function proves its float64 quotients' ceilings exact)
+    _Edge long_edge, short_edge
+    int64_t dy, up, lower_n0, lower_s, lower_d
+
+
+cdef inline void _rows_start(_Rows* w, const int64_t* ys, const int64_t* xs, int64_t up) noexcept nogil:
+    cdef int64_t tall = ys[2] - ys[0], upper = ys[1] - ys[0], lower = ys[2] - ys[1]
+    w.dy = 0
+    w.up = up
+    if tall > 0:
+        _edge_start(&w.long_edge, xs[0] * tall, xs[2] - xs[0], tall, 0)
+    if upper == 0:
+        _edge_start(&w.short_edge, xs[1], 0, 1, 0)  # a flat top: x = xb
     else:
-        den = lower if lower > 1 else 1
-        c_short = ceil(<double>(xs[1] * den - (xs[2] - xs[1]) * upper + (xs[2] - xs[1]) * dy) / <double>den)
-    if c_long < c_short:
-        left[0] = <int64_t>c_long
-        count[0] = <int64_t>(c_short - c_long)
+        _edge_start(&w.short_edge, xs[0] * upper, xs[1] - xs[0], upper, 0)
+    w.lower_d = lower if lower > 1 else 1
+    w.lower_n0 = xs[1] * w.lower_d - (xs[2] - xs[1]) * upper
+    w.lower_s = xs[2] - xs[1]
+
+
+cdef inline void _rows_next(_Rows* w, int64_t* left, int64_t* count) noexcept nogil:
+    """Columns [left, left + count) of the next row (row ya + dy, dy from 0)."""
+    cdef int64_t a, b
+    if w.dy == w.up:
+        _edge_start(&w.short_edge, w.lower_n0, w.lower_s, w.lower_d, w.dy)
+    a = w.long_edge.q
+    b = w.short_edge.q
+    if a < b:
+        left[0] = a
+        count[0] = b - a
     else:
-        left[0] = <int64_t>c_short
-        count[0] = <int64_t>(c_long - c_short)
+        left[0] = b
+        count[0] = a - b
+    _edge_step(&w.long_edge)
+    _edge_step(&w.short_edge)
+    w.dy += 1
 
 
 cdef bint _corners(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
@@ -90,6 +141,59 @@ cdef bint _start(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     return True
 
 
+cdef inline void _origin(const int64_t* px, const int64_t* py, int64_t width, int64_t* ox,
+                         int64_t* oy) noexcept nogil:
+    """The triangle's origin: its first corner in raster order (elements.triangle_raster)."""
+    cdef int i, best = 0
+    for i in range(1, 3):
+        if py[i] * width + px[i] < py[best] * width + px[best]:
+            best = i
+    ox[0] = px[best]
+    oy[0] = py[best]
+
+
+@cython.cdivision(True)
+cdef inline void _affine(const int64_t* px, const int64_t* py, int64_t ox, int64_t oy, double z0,
+                         double z1, double z2, double* f) noexcept nogil:
+    """f = (a, b, c) of the plane a u + b v + c through the corners' values (listed order),
+    u, v relative to (ox, oy), with the float64 operations of
+    elements._triangle_coefficients and Raster.affine in their order: corner after
+    corner, then / D."""
+    cdef int64_t coef[3][3]
+    cdef int i, j, k
+    cdef double den
+    for i in range(3):
+        # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj)
+        j = (i + 1) % 3
+        k = (i + 2) % 3
+        coef[i][0] = -(py[k] - py[j])
+        coef[i][1] = px[k] - px[j]
+        coef[i][2] = (px[k] - px[j]) * (oy - py[j]) - (py[k] - py[j]) * (ox - px[j])
+    den = <double>(coef[0][2] + coef[1][2] + coef[2][2])
+    for k in range(3):
+        f[k] = <double>coef[0][k] * z0
+        f[k] = f[k] + <double>coef[1][k] * z1
+        f[k] = f[k] + <double>coef[2][k] * z2
+        f[k] = f[k] / den
+
+
+cdef bint _start_listed(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
+                        int64_t width, int64_t height, int64_t* py, int64_t* px, int64_t* ys, int64_t* xs,
+                        int64_t* up) noexcept nogil:
+    """_start, keeping the corners as listed too (py, px)."""
+    cdef int i
+    if not _corners(vertices, triangles, t, width, height, py, px):
+        return False
+    for i in range(3):
+        ys[i] = py[i]
+        xs[i] = px[i]
+    _sort3(ys, xs)
+    up[0] = ys[1] - ys[0] + 1
+    if up[0] > ys[2] - ys[0]:
+        up[0] = ys[2] - ys[0]
+    return True
+
+
 def _check(vertices, triangles, width, height):
     if vertices.shape[1] != 2 or triangles.shape[1] != 3:
         raise ValueError("vertices must be N x 2 and triangles M x 3")
@@ -97,33 +201,66 @@ def _check(vertices, triangles, width, height):
         raise ValueError(f"image size {width} x {height} out of range")
 
 
-def triangle_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                  int64_t height, const table_t[:, ::1] table, const double[::1] power1,
-                  const double[::1] power2):
-    """M x (6 + 2K) float64: per triangle, summed over its spans (row y, columns
-    [x0, x1), n pixels) in row order: n, X1, y n, X2, y X1, y (y n) with Xk =
-    power_k[x1] - power_k[x0], then d_k = table[y s + x1, k] - table[y s + x0, k] for
-    each of the K planes (s = width + 1: a row's prefix sums, elements.Planes), then
-    y d_k. ValueError on an index or coordinate out of range."""
+@cython.cdivision(True)
+def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                        int64_t height, const table_t[:, ::1] table, const double[::1] power1,
+                        const double[::1] power2, const int64_t[::1] columns, const int64_t[::1] blocks,
+                        const double[::1] z):
+    """(M x C statistics, M squared errors or None) of the triangles: per triangle the sums
+    over its spans (row y, columns [x0, x1), n pixels) in row order of n, X1, y n, X2,
+    y X1, y (y n) (Xk = power_k[x1] - power_k[x0]), then of d_k = table[y s + x1, k] -
+    table[y s + x0, k] for each of the K planes (s = width + 1: a row's prefix sums,
+    elements.Planes), then of y d_k; of these, columns[c] is statistic c, moved to the
+    triangle's origin (its first corner in raster order) as
+    elements.Statistics._to_origin moves them (blocks: the first columns of the image
+    sums b, ub, vb). With z (a value per vertex; empty: none), also each triangle's
+    squared error against the plane through its corners' values, as
+    elements.element_sse gives it (the same float64 operations in the same order, so
+    the same numbers). ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], kk = table.shape[1], stride = width + 1
+    cdef int64_t nc = columns.shape[0], nb = blocks.shape[0], raw = 6 + 2 * kk
     if table.shape[0] != height * stride or power1.shape[0] <= width or power2.shape[0] <= width:
-        raise ValueError("triangle_sums: tables do not match the image size")
-    out = np.zeros((m, 6 + 2 * kk), dtype=np.float64)
+        raise ValueError("triangle_statistics: tables do not match the image size")
+    cdef int64_t q
+    if nc < 10:
+        raise ValueError("triangle_statistics: fewer than 10 statistics")
+    for q in range(nc):
+        if not 0 <= columns[q] < raw:
+            raise ValueError("triangle_statistics: a column out of range")
+    for q in range(nb):
+        if not 6 <= blocks[q] < nc - 2:
+            raise ValueError("triangle_statistics: a column out of range")
+    cdef bint errors = z.shape[0] > 0
+    if errors and z.shape[0] != vertices.shape[0]:
+        raise ValueError("triangle_statistics: z needs a value per vertex")
+    out = np.empty((m, nc), dtype=np.float64)
+    sse_out = np.empty(m if errors else 0, dtype=np.float64)
+    sums_buf = np.empty(raw, dtype=np.float64)
     cdef double[:, ::1] o = out
-    cdef int64_t t, dy, y, x0, n, lo, hi, k, up
+    cdef double[::1] e = sse_out
+    cdef double[::1] sums = sums_buf
+    cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy
+    cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
-    cdef double yf, nf, x1s, x2s, yn, d
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef double f[3]
+    cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
+    cdef double a, b, cc, ff, bf
     cdef table_t dk
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
                 bad = True
                 break
+            for k in range(raw):
+                sums[k] = 0.0
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 if n <= 0:
                     continue  # an empty span adds nothing to any sum
                 y = ys[0] + dy
@@ -132,35 +269,70 @@ def triangle_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangle
                 x1s = power1[x0 + n] - power1[x0]
                 x2s = power2[x0 + n] - power2[x0]
                 yn = yf * nf
-                o[t, 0] += nf
-                o[t, 1] += x1s
-                o[t, 2] += yn
-                o[t, 3] += x2s
-                o[t, 4] += yf * x1s
-                o[t, 5] += yf * yn
+                sums[0] += nf
+                sums[1] += x1s
+                sums[2] += yn
+                sums[3] += x2s
+                sums[4] += yf * x1s
+                sums[5] += yf * yn
                 lo = y * stride + x0
                 hi = lo + n
                 for k in range(kk):
                     dk = table[hi, k] - table[lo, k]
                     d = <double>dk
-                    o[t, 6 + k] += d
-                    o[t, 6 + kk + k] += yf * d
+                    sums[6 + k] += d
+                    sums[6 + kk + k] += yf * d
+            for c in range(nc):
+                o[t, c] = sums[columns[c]]
+            _origin(px, py, width, &ox, &oy)
+            fx = <double>ox
+            fy = <double>oy
+            # elements.Statistics._to_origin, operation for operation
+            sn = o[t, 0]; sx = o[t, 1]; sy = o[t, 2]; sxx = o[t, 3]; sxy = o[t, 4]; syy = o[t, 5]
+            o[t, 1] = sx - fx * sn
+            o[t, 2] = sy - fy * sn
+            o[t, 3] = sxx - 2 * fx * sx + fx * fx * sn
+            o[t, 4] = sxy - fx * sy - fy * sx + fx * fy * sn
+            o[t, 5] = syy - 2 * fy * sy + fy * fy * sn
+            for j in range(nb):
+                first = blocks[j]
+                sb = o[t, first]
+                o[t, first + 1] = o[t, first + 1] - fx * sb
+                o[t, first + 2] = o[t, first + 2] - fy * sb
+            if not errors:
+                continue
+            _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
+            a = f[0]
+            b = f[1]
+            cc = f[2]
+            # elements.squared_error, term by term from the left
+            ff = a * a * o[t, 3]
+            ff = ff + 2 * a * b * o[t, 4]
+            ff = ff + b * b * o[t, 5]
+            ff = ff + 2 * a * cc * o[t, 1]
+            ff = ff + 2 * b * cc * o[t, 2]
+            ff = ff + cc * cc * o[t, 0]
+            bf = a * o[t, 7]
+            bf = bf + b * o[t, 8]
+            bf = bf + cc * o[t, 6]
+            d = o[t, 9] - 2 * bf + ff
+            # np.maximum(d, 0.0): -0.0 and NaN stay as they are
+            e[t] = d if d >= 0.0 or d != d else 0.0
     if bad:
-        raise ValueError("triangle_sums: a corner index or coordinate out of range")
-    return out
+        raise ValueError("triangle_statistics: a corner index or coordinate out of range")
+    return out, (sse_out if errors else None)
 
 
 def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                 int64_t height, const double[:, ::1] affine, const int64_t[:, ::1] origin,
-                 const plane_t[:, ::1] plane):
-    """Per triangle, its owned pixel farthest from the plane f = a u + b v + c (affine's
-    row, u and v relative to origin's row) against `plane` (H x W), the first in raster
-    order of those tied: (x, y, |error| (-1 where the triangle owns no pixel)).
-    ValueError on an index or coordinate out of range."""
+                 int64_t height, const double[::1] z, const plane_t[:, ::1] plane):
+    """Per triangle, its owned pixel farthest from the plane through its corners' values
+    z (elements.Raster.affine's plane, relative to its origin) against `plane` (H x W),
+    the first in raster order of those tied: (x, y, |error| (-1 where the triangle owns
+    no pixel)). ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0]
-    if affine.shape[0] != m or affine.shape[1] != 3 or origin.shape[0] != m or origin.shape[1] != 2:
-        raise ValueError("worst_pixels: affine and origin need a row per triangle")
+    if z.shape[0] != vertices.shape[0]:
+        raise ValueError("worst_pixels: z needs a value per vertex")
     if plane.shape[0] != height or plane.shape[1] != width:
         raise ValueError("worst_pixels: the plane does not match the image size")
     xs_out = np.zeros(m, dtype=np.int64)
@@ -168,26 +340,33 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     err_out = np.full(m, -1.0)
     cdef int64_t[::1] bx = xs_out, by = ys_out
     cdef double[::1] be = err_out
-    cdef int64_t t, dy, y, x0, n, x, up
+    cdef int64_t t, dy, y, x0, n, x, up, ox, oy, i
+    cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef double f[3]
     cdef double a, row, c, mesh, e, best
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
                 bad = True
                 break
-            a = affine[t, 0]
-            c = affine[t, 2]
+            _origin(px, py, width, &ox, &oy)
+            _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
+            a = f[0]
+            c = f[2]
             best = -1.0
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 y = ys[0] + dy
                 # as elements.Raster.worst_pixels sums it: a u, then + b v, then + c
-                row = affine[t, 1] * <double>(y - origin[t, 1])
+                row = f[1] * <double>(y - oy)
                 for x in range(x0, x0 + n):
-                    mesh = a * <double>(x - origin[t, 0])
+                    mesh = a * <double>(x - ox)
                     mesh += row
                     mesh += c
                     e = fabs(<double>plane[y, x] - mesh)
@@ -208,6 +387,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], total = 0, t, dy, y, x0, n, x, up, j = 0
+    cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef bint bad = False
@@ -216,8 +396,9 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
             if not _start(vertices, triangles, t, width, height, ys, xs, &up):
                 bad = True
                 break
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 total += n
     if bad:
         raise ValueError("triangle_pixels: a corner index or coordinate out of range")
@@ -228,8 +409,9 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     with nogil:
         for t in range(m):
             _start(vertices, triangles, t, width, height, ys, xs, &up)
+            _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
-                _span(ys, xs, dy, up, &x0, &n)
+                _rows_next(&rows, &x0, &n)
                 y = ys[0] + dy
                 for x in range(x0, x0 + n):
                     pe[j] = t
@@ -328,3 +510,146 @@ def span_totals(const double[:, ::1] per_span, const int64_t[::1] bounds):
                 for k in range(kk):
                     o[i, k] += per_span[k, j]
     return out
+
+
+cdef inline int64_t _slot(uint64_t key, int bits) noexcept nogil:
+    # Fibonacci hashing: the high bits of the key times 2^64 / golden ratio
+    return <int64_t>((key * <uint64_t>0x9E3779B97F4A7C15) >> (64 - bits))
+
+
+def cached(const int64_t[::1] pixel, const int64_t[:, ::1] triangles, int64_t base,
+           const int64_t[::1] old_keys, const int64_t[::1] old_rows, const double[::1] old_sse,
+           int64_t next_row):
+    """A refinement round's triangles against the last round's (codec.mesher.refine):
+    (keys, rows, sse, fresh). Each triangle's key is (low base + middle) base + high of
+    its corners' pixel numbers `pixel` (below base; base**3 < 2**62; base 0: no keys,
+    all fresh), so it names the same triangle however the vertices are numbered or the
+    corners listed; a triangle whose key is in old_keys gets that key's row (where its
+    statistics are kept) and squared error, the others are listed in fresh (ascending)
+    and get the rows next_row, next_row + 1, ... in that order, their squared errors
+    left for the caller. A hash table, not a sort: the cache is kept in triangle order.
+    ValueError on a corner index out of range or arrays that do not match."""
+    cdef int64_t m = triangles.shape[0], n_old = old_keys.shape[0]
+    cdef int64_t npix = pixel.shape[0], t, j, s, nf = 0, a, b, c, low, high, k
+    cdef int bits = 4
+    if triangles.shape[1] != 3 or old_rows.shape[0] != n_old or old_sse.shape[0] != n_old:
+        raise ValueError("cached: triangles M x 3, and a row and a squared error per old key")
+    if base < 0 or (<object>base) ** 3 >= 2 ** 62:
+        raise ValueError("cached: a base of pixel numbers out of range (keys would overflow)")
+    while (<int64_t>1 << bits) < 2 * n_old:
+        bits += 1
+    keys_out = np.empty(m if base else 0, dtype=np.int64)
+    rows_out = np.empty(m, dtype=np.int64)
+    sse_out = np.empty(m, dtype=np.float64)
+    fresh_out = np.empty(m, dtype=np.int64)
+    cdef int64_t[::1] keys = keys_out, rows = rows_out
+    cdef double[::1] se = sse_out
+    cdef int64_t[::1] fresh = fresh_out
+    cdef int64_t size = <int64_t>1 << bits
+    table_arr = np.full(size, -1, dtype=np.int64)
+    cdef int64_t[::1] table = table_arr
+    cdef bint bad = False
+    with nogil:
+        for j in range(n_old if base else 0):
+            s = _slot(<uint64_t>old_keys[j], bits)
+            while table[s] >= 0:
+                s = (s + 1) & (size - 1)
+            table[s] = j
+        for t in range(m):
+            if base == 0:
+                j = -1
+            else:
+                a = triangles[t, 0]
+                b = triangles[t, 1]
+                c = triangles[t, 2]
+                if a < 0 or a >= npix or b < 0 or b >= npix or c < 0 or c >= npix:
+                    bad = True
+                    break
+                a = pixel[a]
+                b = pixel[b]
+                c = pixel[c]
+                low = a if a < b else b
+                low = low if low < c else c
+                high = a if a > b else b
+                high = high if high > c else c
+                k = (low * base + (a + b + c - low - high)) * base + high
+                keys[t] = k
+                j = -1
+                if n_old:
+                    s = _slot(<uint64_t>k, bits)
+                    while table[s] >= 0 and old_keys[table[s]] != k:
+                        s = (s + 1) & (size - 1)
+                    j = table[s]
+            if j < 0:
+                rows[t] = next_row + nf
+                fresh[nf] = t
+                nf += 1
+            else:
+                rows[t] = old_rows[j]
+                se[t] = old_sse[j]
+    if bad:
+        raise ValueError("cached: a corner index out of range")
+    return keys_out, rows_out, sse_out, fresh_out[:nf]
+
+
+def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                     int64_t height):
+    """(origin M x 2, coef M x 3 x 3, den M), int64, of elements.triangle_raster: each
+    triangle's first corner in raster order, the integer coefficients (alpha, beta,
+    gamma) of each listed corner's weight numerator relative to it, and their common
+    denominator (twice the area). Integers, so the very numbers numpy gave. ValueError
+    on an index or coordinate out of range."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0], t, i, j, k, ox, oy
+    origin_out = np.empty((m, 2), dtype=np.int64)
+    coef_out = np.empty((m, 3, 3), dtype=np.int64)
+    den_out = np.empty(m, dtype=np.int64)
+    cdef int64_t[:, ::1] origin = origin_out
+    cdef int64_t[:, :, ::1] coef = coef_out
+    cdef int64_t[::1] den = den_out
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _corners(vertices, triangles, t, width, height, py, px):
+                bad = True
+                break
+            _origin(px, py, width, &ox, &oy)
+            origin[t, 0] = ox
+            origin[t, 1] = oy
+            for i in range(3):
+                # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj)
+                j = (i + 1) % 3
+                k = (i + 2) % 3
+                coef[t, i, 0] = -(py[k] - py[j])
+                coef[t, i, 1] = px[k] - px[j]
+                coef[t, i, 2] = (px[k] - px[j]) * (oy - py[j]) - (py[k] - py[j]) * (ox - px[j])
+            den[t] = coef[t, 0, 2] + coef[t, 1, 2] + coef[t, 2, 2]
+    if bad:
+        raise ValueError("triangle_weights: a corner index or coordinate out of range")
+    return origin_out, coef_out, den_out
+
+
+def first_of_each(const int64_t[::1] keys):
+    """A mask of the entries of `keys` that are the first of their value (a hash table
+    of the keys seen: one pass, where np.unique sorts). For refinement's merge() of a
+    round's new vertices into the vertices there are."""
+    cdef int64_t n = keys.shape[0], i, s, size
+    cdef int bits = 4
+    while (<int64_t>1 << bits) < 2 * n:
+        bits += 1
+    size = <int64_t>1 << bits
+    first_out = np.zeros(n, dtype=bool)
+    table_arr = np.full(size, -1, dtype=np.int64)
+    cdef uint8_t[::1] first = first_out.view(np.uint8)
+    cdef int64_t[::1] table = table_arr
+    with nogil:
+        for i in range(n):
+            s = _slot(<uint64_t>keys[i], bits)
+            while table[s] >= 0 and keys[table[s]] != keys[i]:
+                s = (s + 1) & (size - 1)
+            if table[s] < 0:
+                table[s] = i
+                first[i] = 1
+    return first_out

@@ -71,15 +71,17 @@ def _sample(data: bytes) -> bytes:
     return b"".join(data[i * step : i * step + TRIAL_PIECE] for i in range(TRIAL_PIECES))
 
 
-def _compressors(size: int) -> list[zstandard.ZstdCompressor]:
-    """A compressor per entry of PARAMETERS, for a payload of `size` bytes."""
+def _compressors(size: int, strategy: int | None = None) -> list[zstandard.ZstdCompressor]:
+    """A compressor per entry of PARAMETERS, for a payload of `size` bytes; strategy:
+    instead of each entry's own (its minimum match kept), for a quick trial."""
     return [
         zstandard.ZstdCompressor(
             compression_params=zstandard.ZstdCompressionParameters.from_level(
-                ZSTD_LEVEL, source_size=size, write_content_size=True, strategy=strategy, min_match=min_match
+                ZSTD_LEVEL, source_size=size, write_content_size=True, strategy=own if strategy is None else strategy,
+                min_match=min_match,
             )
         )
-        for strategy, min_match in PARAMETERS
+        for own, min_match in PARAMETERS
     ]
 
 
@@ -108,14 +110,30 @@ def _blocks(zc: zstandard.ZstdCompressor, parts: list[bytes], cuts: set[int]) ->
 SEARCH_BELOW = 1 << 16
 #: The parameters (indices into PARAMETERS) tried from SEARCH_BELOW on.
 LARGE = (0, 1)
+#: From TRIAL_FROM bytes (below SEARCH_BELOW) fewer level-19 frames are made: the
+#: optimal parser of btultra2/btopt is what a frame costs (a trial at a lower search
+#: depth costs as much), and the nine took 6-9 ms of a 60 ms encode of a 512² photo at
+#: 2.8 % vertices. Level 19's own parameters (PARAMETERS[0]: matches of 3 bytes, which
+#: no quick strategy finds, 15-19 % smaller on RGB meshes) are made in both block
+#: layouts; of the others (TRIED) a quick TRIAL_STRATEGY frame of each layout ranks
+#: them and the first is made. On 50 payloads of 4-64 KiB (gray corpus at 1/2.8/6 %
+#: vertices and quality 30-80, RGB at 256-768² and quality 40-80, range data meshed
+#: and under max_error) the smallest of the three is 0.015 % larger in all than the
+#: smallest of the nine, at most 0.20 % (coins at 2.8 %, 9 B); the quick frames alone
+#: chose up to 19 % worse on RGB. Smaller payloads (a quick trial lost up to 4 % there)
+#: keep the whole search, which costs little at their size.
+TRIAL_FROM = 4096
+TRIAL_STRATEGY = zstandard.STRATEGY_DFAST
+TRIED = (1, 2)
 
 
 def compress_parts(parts: list[bytes]) -> bytes:
     """One zstd frame holding the parts one after another: the smallest, over the
     parameter sets of PARAMETERS, of a plain frame, one that ends a block after each
     part, and one that does so except after (or, for the last, before) parts of fewer
-    than SMALL_PART bytes (from SEARCH_BELOW bytes on, only the last of these, with
-    LARGE's parameters). Each block has its own entropy tables, which suits parts
+    than SMALL_PART bytes (from TRIAL_FROM bytes on, level 19's own parameters in the
+    block layouts and of the others only the one a quick trial ranks first; from
+    SEARCH_BELOW bytes on, only the last layout, with LARGE's parameters). Each block has its own entropy tables, which suits parts
     whose numbers have different statistics (5-7 % smaller for a large mesh); a small
     mesh does better with shared tables. Ties go to the earlier candidate, so the
     choice, like each frame, depends on the parts alone."""
@@ -127,14 +145,24 @@ def compress_parts(parts: list[bytes]) -> bytes:
     if len(whole) >= SEARCH_BELOW:
         compressors = _compressors(len(whole))
         return min((_blocks(compressors[k], parts, merged) for k in LARGE), key=len)
-    candidates = []
-    for zc in _compressors(len(whole)):
-        candidates.append(zc.compress(whole))
-        if len(parts) >= 2:
-            candidates.append(_blocks(zc, parts, every))
-            if merged != every:
-                candidates.append(_blocks(zc, parts, merged))
-    return min(candidates, key=len)
+    layouts = [None] + ([every] if len(parts) >= 2 else []) + ([merged] if len(parts) >= 2 and merged != every else [])
+    full = _compressors(len(whole))
+    if len(whole) >= TRIAL_FROM:
+        # level 19's own parameters in its block layouts, and of the others the one
+        # whose quick frame is smallest (ties to the earlier); the smallest of these
+        quick = _compressors(len(whole), TRIAL_STRATEGY)
+        tried = [(k, cuts) for k in TRIED for cuts in layouts]
+        sizes = [len(_frame(quick[k], whole, parts, cuts)) for k, cuts in tried]
+        k, cuts = tried[sizes.index(min(sizes))]
+        own = [_frame(full[0], whole, parts, cuts) for cuts in layouts[1:] or layouts]
+        return min(own + [_frame(full[k], whole, parts, cuts)], key=len)
+    return min((_frame(zc, whole, parts, cuts) for zc in full for cuts in layouts), key=len)
+
+
+def _frame(zc: zstandard.ZstdCompressor, whole: bytes, parts: list[bytes], cuts: set[int] | None) -> bytes:
+    """A plain frame of `whole` (cuts None), or one of its parts with blocks ending
+    after those in `cuts`."""
+    return zc.compress(whole) if cuts is None else _blocks(zc, parts, cuts)
 
 
 def declared_size(frame: bytes, what: str) -> int:

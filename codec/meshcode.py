@@ -35,7 +35,7 @@ from .coding import (
 )
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, Polylines, chain_steps, doubled_areas
-from .native import _fields, _renumber
+from .native import _fields, _renumber, _samples
 from .triangulate import delaunay, triangulate
 
 
@@ -316,26 +316,12 @@ def quantise(mesh: Mesh, step: int, top_pinned: bool, lay: Layout | None = None)
         return mesh
     lay = layout(mesh) if lay is None else lay
     order, inverse, seq = lay.order, lay.inverse, lay.seq
-    steps = lay.steps(step, top_pinned)[seq].tolist()
-    parents = lay.parents.tolist()
+    steps = np.ascontiguousarray(lay.steps(step, top_pinned)[seq], dtype=np.int64)
     top = int(np.iinfo(mesh.dtype).max)
     values = mesh.values[order].reshape(len(order), -1)[seq].astype(np.int64)
-    out = np.empty_like(values)
-    halves = [2 * s for s in steps]
-    for c in range(values.shape[1]):
-        rebuilt = [0]  # at -1: the prediction of a sample with no parent
-        append = rebuilt.append
-        # sequential by nature (each residual is taken against the parent's sample as
-        # rebuilt); the decoder's side is a sum along the tree
-        for v, s, s2, p in zip(values[:, c].tolist(), steps, halves, parents):
-            prev = rebuilt[p + 1]
-            prev += ((2 * (v - prev) + s) // s2) * s
-            if prev > top:
-                prev -= -(-(prev - top) // s) * s
-            elif prev < 0:
-                prev -= (prev // s) * s
-            append(prev)
-        out[:, c] = rebuilt[1:]
+    # sequential by nature (each residual is taken against the parent's sample as
+    # rebuilt): a compiled loop; the decoder's side is a sum along the tree
+    out = _samples.quantised(values, steps, np.ascontiguousarray(lay.parents, dtype=np.int64), top)
     values = np.empty_like(out)
     values[seq] = out
     values = values[inverse].reshape(mesh.values.shape).astype(mesh.dtype)

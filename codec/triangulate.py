@@ -222,8 +222,11 @@ def through_vertices(vertices: np.ndarray, polylines: list[np.ndarray]) -> list[
     )
     # each step came from one polyline: regroup the pieces by it
     owner = np.repeat(np.arange(len(polylines)), [len(c) - 1 for c in polylines])[source]
-    out = []
-    for run in np.split(np.arange(len(pieces)), np.flatnonzero(np.diff(owner)) + 1):
-        if len(run):
-            out.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
-    return out
+    if not len(pieces):
+        return []
+    # each run's first vertices, then its last step's end, split all at once (a loop
+    # over a 2048² band's thousands of walls took 16 ms)
+    ends = np.r_[np.flatnonzero(np.diff(owner)) + 1, len(pieces)]
+    flat = np.insert(pieces[:, 0], ends, pieces[ends - 1, 1])
+    bounds = np.r_[0, ends + np.arange(1, len(ends) + 1)].tolist()
+    return [flat[a:b] for a, b in zip(bounds[:-1], bounds[1:])]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from codec import native
-from codec.mesher.elements import Statistics, triangle_pixels, triangle_raster, worst_pixels
+from codec.mesher.elements import Statistics, element_sse, triangle_pixels, triangle_raster, worst_pixels
 from codec.triangulate import triangulate
 
 
@@ -48,14 +48,21 @@ def test_triangle_statistics_are_those_of_the_spans(seed: int, grid: bool) -> No
         kinds.add(layout.planes.table.dtype)
         raster = triangle_raster(v, t, width, height)
         expected = layout(raster)
-        got = layout.of_triangles(v, t, raster.origin)
-        assert got.shape == expected.shape
+        got, none = layout.of_triangles(v, t)
+        assert got.shape == expected.shape and none is None
         # the same float64 numbers, not just close ones: the encoder's bytes depend on them
         assert np.array_equal(got, expected)
         # any subset, in any order
         pick = rng.permutation(len(t))[: len(t) // 2]
         sub = triangle_raster(v, t[pick], width, height)
-        assert np.array_equal(layout.of_triangles(v, t[pick], sub.origin), layout(sub))
+        assert np.array_equal(layout.of_triangles(v, t[pick])[0], layout(sub))
+        # and the squared errors element_sse gives, bit for bit, against vertex values
+        # of the image and off it
+        plane = structure.astype(np.float64)
+        for z in (plane[v[:, 1], v[:, 0]], rng.normal(100, 80, len(v))):
+            stats, sse = layout.of_triangles(v, t[pick], z)
+            assert np.array_equal(stats, layout(sub))
+            assert np.array_equal(sse, element_sse(sub, layout(sub), z))
     assert kinds == {np.dtype(np.int32), np.dtype(np.int64), np.dtype(np.float64)}
 
 
@@ -135,25 +142,111 @@ def test_the_kernels_refuse_what_is_out_of_range() -> None:
     rng = np.random.default_rng(3)
     v, t = _mesh(rng, 20, 10, 30, False)
     layout = Statistics(rng.integers(0, 256, (10, 20)).astype(np.uint8), "structure")
-    args = (layout.planes.table, layout._powers[1], layout._powers[2])
+    args = (layout.planes.table, layout._powers[1], layout._powers[2], layout._from_kernel, layout._blocks)
     bad = t.copy()
     bad[-1, 2] = len(v)
+    z = np.zeros(len(v))
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.triangle_sums(v, bad, 20, 10, *args)
+        native._elements.triangle_statistics(v, bad, 20, 10, *args, z)
     far = v.copy()
     far[-1] = [20, 0]  # one column past the image
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.triangle_sums(far, t, 20, 10, *args)
+        native._elements.triangle_statistics(far, t, 20, 10, *args, z)
     with pytest.raises(ValueError, match="do not match"):
-        native._elements.triangle_sums(v, t, 20, 11, *args)
+        native._elements.triangle_statistics(v, t, 20, 11, *args, z)
+    with pytest.raises(ValueError, match="a value per vertex"):
+        native._elements.triangle_statistics(v, t, 20, 10, *args, z[:-1])
+    for columns, blocks in ((np.r_[layout._from_kernel[:-1], 99], layout._blocks), (layout._from_kernel, np.array([8]))):
+        with pytest.raises(ValueError, match="column out of range"):
+            native._elements.triangle_statistics(v, t, 20, 10, *args[:3], columns, blocks, z)
     plane = np.zeros((10, 20), np.float32)
     f, origin = np.zeros((len(t), 3)), np.zeros((len(t), 2), np.int64)
     with pytest.raises(ValueError, match="out of range"):
-        native._elements.worst_pixels(v, bad, 20, 10, f, origin, plane)
+        native._elements.worst_pixels(v, bad, 20, 10, z, plane)
     with pytest.raises(ValueError, match="does not match"):
-        native._elements.worst_pixels(v, t, 20, 10, f, origin, plane[:9])
+        native._elements.worst_pixels(v, t, 20, 10, z, plane[:9])
+    with pytest.raises(ValueError, match="a value per vertex"):
+        native._elements.worst_pixels(v, t, 20, 10, z[:-1], plane)
     with pytest.raises(ValueError, match="out of range"):
         native._elements.triangle_pixels(far, t, 20, 10)
     one = np.zeros(1, np.int64)
     with pytest.raises(ValueError, match="out of range"):
         native._elements.evaluate(f, origin, np.array([len(t)]), one, one)
+
+
+def test_the_cache_finds_the_triangles_it_has_measured() -> None:
+    """#20: refinement's cache of triangle statistics is a hash table in the kernel
+    (codec._elements.cached) instead of a sort and binary searches of keys: a triangle
+    is found whichever corner it is listed from and however its vertices are numbered."""
+    rng = np.random.default_rng(8)
+    width, height = 60, 50
+    v, t = _mesh(rng, width, height, 150, False)
+    pixel = v[:, 1] * width + v[:, 0]
+    sse = rng.random(len(t))
+    keys, rows, _, fresh = native._elements.cached(pixel, t, width * height, np.zeros(0, np.int64),
+                                                   np.zeros(0, np.int64), np.zeros(0), 0)
+    assert np.array_equal(fresh, np.arange(len(t))) and np.array_equal(rows, np.arange(len(t)))
+    assert len(np.unique(keys)) == len(t)
+    # the vertices renumbered, the triangles listed from another corner, reordered,
+    # and some of them new
+    perm = rng.permutation(len(v))
+    renumbered = np.empty_like(perm)
+    renumbered[perm] = np.arange(len(v))
+    order = rng.permutation(len(t))
+    later = np.roll(renumbered[t], 1, axis=1)[order]
+    new = np.array([[0, 1, 2], [3, 4, 5]], np.int64)
+    later = np.concatenate([later[:7], new, later[7:]])
+    k2, r2, e2, fresh = native._elements.cached(pixel[perm], later, width * height, keys, rows, sse, len(t))
+    assert np.array_equal(fresh, [7, 8]) and np.array_equal(r2[fresh], [len(t), len(t) + 1])
+    kept = np.r_[0:7, 9:len(later)]
+    assert np.array_equal(r2[kept], rows[order]) and np.array_equal(e2[kept], sse[order])
+    assert len(k2) == len(later)
+    # no keys (they would overflow): everything is fresh
+    assert len(native._elements.cached(pixel, t, 0, keys, rows, sse, 0)[3]) == len(t)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.cached(pixel, np.array([[0, 1, len(v)]]), width * height, keys, rows, sse, 0)
+    with pytest.raises(ValueError, match="overflow"):
+        native._elements.cached(pixel, t, 2**21, keys, rows, sse, 0)
+    with pytest.raises(ValueError, match="per old key"):
+        native._elements.cached(pixel, t, width * height, keys, rows[:-1], sse, 0)
+
+
+def _weights_in_numpy(v: np.ndarray, t: np.ndarray, width: int):
+    """elements.triangle_raster's origins and coefficients as numpy computed them."""
+    p = np.take(v, t, axis=0)
+    first = (p[:, :, 1] * width + p[:, :, 0]).argmin(axis=1)
+    origin = np.take_along_axis(p, first[:, None, None], axis=1)[:, 0]
+    px, py = np.ascontiguousarray(p[:, :, 0].T), np.ascontiguousarray(p[:, :, 1].T)
+    ox, oy = origin[:, 0], origin[:, 1]
+    coef = np.empty((3, 3, len(p)), dtype=np.int64)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        ex, ey = px[k] - px[j], py[k] - py[j]
+        coef[i, 0], coef[i, 1], coef[i, 2] = -ey, ex, ex * (oy - py[j]) - ey * (ox - px[j])
+    return origin, coef.transpose(2, 0, 1), coef[:, 2].sum(axis=0)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_triangle_weights_kernel_gives_numpys_integers(seed: int) -> None:
+    """#20: triangle_raster's origins and weight coefficients come from a compiled pass
+    (codec._elements.triangle_weights) instead of numpy's gathers: the same integers,
+    whichever corner a triangle is listed from."""
+    rng = np.random.default_rng(20 + seed)
+    width, height = int(rng.integers(3, 300)), int(rng.integers(3, 200))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 400)), bool(seed % 2))
+    t = np.roll(t, int(rng.integers(0, 3)), axis=1)
+    raster = triangle_raster(v, t, width, height, spans=False)
+    for got, expected in zip((raster.origin, raster.coef, raster.den), _weights_in_numpy(v, t, width)):
+        assert got.dtype == np.int64 and np.array_equal(got, expected)
+    with pytest.raises(ValueError, match="out of range"):
+        native._elements.triangle_weights(v, np.array([[0, 1, len(v)]]), width, height)
+
+
+def test_first_of_each_marks_the_first_of_every_value() -> None:
+    rng = np.random.default_rng(12)
+    for n in (0, 1, 7, 1000):
+        keys = rng.integers(-5, 40, n).astype(np.int64)
+        _, first = np.unique(keys, return_index=True)
+        expected = np.zeros(n, bool)
+        expected[first] = True
+        assert np.array_equal(native._elements.first_of_each(keys), expected)

@@ -28,7 +28,21 @@ def test_the_cache_of_triangle_statistics_changes_nothing(monkeypatch) -> None:
     # (what happens where the keys would overflow) every triangle is measured anew
     image = range_scene(160, 120, seed=5)
     cached = adaptive.build(image, 900).mesh
-    monkeypatch.setattr(refine, "_keys", lambda *args: None)
+    monkeypatch.setattr(refine, "_key_base", lambda *args: 0)
     fresh = adaptive.build(image, 900).mesh
     for a, b in ((cached.vertices, fresh.vertices), (cached.triangles, fresh.triangles), (cached.values, fresh.values)):
         assert np.array_equal(a, b)
+
+
+def test_merging_keeps_the_first_point_of_each_pixel_in_group_order() -> None:
+    """#20: merge() finds repeated pixels with a hash table in one pass
+    (codec._elements.first_of_each) where np.unique sorted all the keys: the same
+    points, in the same order."""
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        width = int(rng.integers(1, 50))
+        groups = [np.stack([rng.integers(0, width, n), rng.integers(0, 40, n)], 1).astype(np.int64)
+                  for n in rng.integers(0, 300, int(rng.integers(1, 4)))]
+        pts = np.concatenate(groups)
+        _, first = np.unique(pts[:, 1] * width + pts[:, 0], return_index=True)
+        assert np.array_equal(refine.merge(width, *groups), pts[np.sort(first)])

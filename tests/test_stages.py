@@ -5,6 +5,7 @@ to the budget, and the rows bands share."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from codec import banding
 from codec.mesh import Mesh
@@ -210,3 +211,143 @@ def test_last_row_gets_a_vertex_where_it_bends_and_none_where_it_is_straight():
     grown = banding.sample_last_row(mesh, band, 1.0)
     xs, vals = banding.bottom_row(grown)
     assert 6 in xs.tolist() and vals[xs.tolist().index(6)] == 250
+
+
+def _derivative_planes(rng: np.random.Generator, h: int, w: int) -> list[np.ndarray]:
+    """float32 planes as Sobel gives them, with what the rounding rules meet: halves
+    after scaling (Canny's fixed point rounds them to even), values past the int16
+    clip, exact zeros, negatives, tiny and huge numbers."""
+    plain = rng.normal(0, 40, (h, w)).astype(np.float32)
+    halves = (rng.integers(-200, 200, (h, w)) / 8 + 1 / 32).astype(np.float32) * 4  # dx * 16 = k + 0.5
+    wide = rng.normal(0, 20000, (h, w)).astype(np.float32)
+    odd = rng.choice(np.array([0, -0.0, 1e-30, -1e-30, 3e30, 8191.75, -8191.75, 8191.8, 0.125], np.float32), (h, w))
+    return [plain, halves, wide, odd.astype(np.float32)]
+
+
+def test_the_gradient_kernel_gives_numpys_numbers() -> None:
+    """#20: codec._gradients.edge_gradient replaced numpy's passes over the Sobel
+    derivatives (divide by 4, magnitude, clip, scale, round to even, int16): the same
+    float32 and int16 values, so the same thresholds, edges and bytes."""
+    from codec.native import _gradients
+
+    rng = np.random.default_rng(4)
+    planes = _derivative_planes(rng, 37, 53)
+    limit = 32767 / edges._SCALE
+    with np.errstate(over="ignore", invalid="ignore"):
+        _compare_gradients(_gradients, planes, limit)
+    with pytest.raises(ValueError, match="differ"):
+        _gradients.edge_gradient(planes[0], planes[1][:-1], limit, edges._SCALE)
+    with pytest.raises(ValueError, match="int16"):
+        _gradients.edge_gradient(planes[0], planes[1], 4096.0, edges._SCALE)
+
+
+def _compare_gradients(_gradients, planes: list[np.ndarray], limit: float) -> None:
+    for sx in planes:
+        for sy in planes:
+            mag, ix, iy = _gradients.edge_gradient(sx, sy, limit, edges._SCALE)
+            dx, dy = sx / 4, sy / 4
+            assert np.array_equal(mag, np.sqrt(dx * dx + dy * dy))
+            assert mag.dtype == np.float32
+            assert np.array_equal(ix, np.round(np.clip(dx, -limit, limit) * edges._SCALE).astype(np.int16))
+            assert np.array_equal(iy, np.round(np.clip(dy, -limit, limit) * edges._SCALE).astype(np.int16))
+
+
+def test_the_hessian_kernel_gives_numpys_numbers() -> None:
+    from codec.native import _gradients
+
+    rng = np.random.default_rng(5)
+    planes = _derivative_planes(rng, 29, 41)
+    dyy = planes[1]
+    with np.errstate(over="ignore"):
+        for dxx in planes:
+            for dxy in planes[::-1]:
+                assert np.array_equal(_gradients.hessian_norm(dxx, dyy, dxy),
+                                      np.sqrt(dxx * dxx + 2 * dxy * dxy + dyy * dyy))
+    with pytest.raises(ValueError, match="differ"):
+        _gradients.hessian_norm(planes[0], planes[1], np.ascontiguousarray(planes[2][:, :-1]))
+
+
+def _without_in_a_loop(mesh: Mesh, keep: np.ndarray) -> list[np.ndarray]:
+    """codec.mesh.without_vertices' walls as its loop over the polylines made them."""
+    remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
+    remap[keep] = np.arange(int(np.count_nonzero(keep)))
+    out = []
+    for line in mesh.constraints:
+        mapped = remap[line]
+        for piece in np.split(mapped, np.flatnonzero(mapped < 0)):
+            piece = piece[piece >= 0]
+            if len(piece) >= 2:
+                out.append(piece)
+    return out
+
+
+def test_dropping_vertices_splits_the_walls_as_the_loop_did() -> None:
+    """#20: mesh.without_vertices (a band's pinned first row, holes) finds the runs of
+    kept wall vertices for all walls at once; a loop over a 2048² band's walls took
+    20 ms. The same pieces in the same order, also where every vertex of a wall goes."""
+    from codec.mesh import without_vertices
+
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        n = int(rng.integers(3, 60))
+        vertices = np.stack([rng.permutation(1000)[:n], rng.integers(0, 30, n)], 1).astype(np.int64)
+        walls = [rng.choice(n, int(rng.integers(2, min(8, n + 1))), replace=False).astype(np.int64)
+                 for _ in range(int(rng.integers(0, 6)))]
+        mesh = Mesh(vertices, np.zeros(n, np.uint8), np.zeros((0, 3), np.int64), 1000, 30, walls)
+        keep = rng.random(n) < rng.random()
+        got = without_vertices(mesh, keep)
+        expected = _without_in_a_loop(mesh, keep)
+        assert len(got.constraints) == len(expected)
+        assert all(np.array_equal(a, b) for a, b in zip(got.constraints, expected))
+        assert np.array_equal(got.vertices, vertices[keep])
+
+
+def test_region_sampling_sums_only_the_columns_it_samples() -> None:
+    """#20: sampling.sample takes each band's column sums and the cumulative sums of the
+    chosen columns only, where it summed every column down the band (half its time).
+    The same numbers, bit for bit: a sum over axis 0 adds the rows in turn, as the last
+    row of the cumulative sums does, and a column's cumulative sums do not depend on
+    the other columns. So the same samples."""
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        h, w = int(rng.integers(1, 120)), int(rng.integers(2, 600))
+        block = rng.gamma(0.5, 1.0, (h, w)) * (rng.random((h, w)) > 0.2) + 0.25 * (rng.random() > 0.5)
+        whole = np.cumsum(block, axis=0)
+        assert np.array_equal(block.sum(axis=0), whole[-1])
+        cols = np.unique(rng.integers(0, w, int(rng.integers(1, 20))))
+        assert np.array_equal(np.cumsum(block[:, cols], axis=0), whole[:, cols])
+    # one column: cumsum itself
+    dens = rng.gamma(0.5, 1.0, (50, 1))
+    assert len(sampling.sample(dens, (1, 3), (1, 5))) > 0
+
+
+def test_walls_through_vertices_are_regrouped_as_the_loop_did() -> None:
+    """#20: triangulate.through_vertices (a band's sampled last row, holes' rims)
+    regroups the cut steps into walls all at once; a loop over a 2048² band's walls took
+    16 ms. The same walls, in the same order."""
+    from codec.mesh import segments
+    from codec.triangulate import split_at_vertices, through_vertices
+
+    rng = np.random.default_rng(10)
+    for _ in range(100):
+        n = int(rng.integers(2, 40))
+        xy = rng.choice(20 * 20, n, replace=False)
+        vertices = np.stack([xy % 20, xy // 20], 1).astype(np.int64)
+        walls = [rng.choice(n, int(rng.integers(2, min(6, n + 1))), replace=False).astype(np.int64)
+                 for _ in range(int(rng.integers(0, 5)))]
+        # vertices put on the walls' steps, so that they are cut
+        for wall in walls[:2]:
+            a, b = vertices[wall[0]], vertices[wall[1]]
+            middle = (a + b) // 2
+            if (2 * middle == a + b).all() and not (vertices == middle).all(axis=1).any():
+                vertices = np.vstack([vertices, middle])
+        got = through_vertices(vertices, walls)
+        expected = []
+        if walls:
+            pieces, source = split_at_vertices(vertices, segments(walls), int(vertices[:, 0].max()) + 1, origin=True)
+            owner = np.repeat(np.arange(len(walls)), [len(c) - 1 for c in walls])[source]
+            for run in np.split(np.arange(len(pieces)), np.flatnonzero(np.diff(owner)) + 1):
+                if len(run):
+                    expected.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
+        assert len(got) == len(expected)
+        assert all(np.array_equal(a, b) for a, b in zip(got, expected))

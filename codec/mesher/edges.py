@@ -25,18 +25,22 @@ _SCALE = 16.0
 
 
 def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """dx, dy and magnitude (float32, 8-bit gray levels per step) of a float image
-    whose full scale is `peak`."""
+    """(magnitude, ix, iy) of a float image whose full scale is `peak`: the gradient
+    magnitude (float32, 8-bit gray levels per step) and the derivatives in Canny's
+    fixed point (int16, _SCALE per level, clipped to fit), from one compiled pass over
+    OpenCV's Sobel derivatives (codec._gradients.edge_gradient)."""
     import cv2
+
+    from .. import native
 
     g = gray.astype(np.float32) * np.float32(255.0 / peak)
     g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
-    dx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) / 4
-    dy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) / 4
+    sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
     # not cv2.magnitude: its result differs in the last bit with the arrays' memory
     # alignment (vector and scalar code paths), which made the thresholds and the wall
     # selection, and so the bytes, vary from run to run
-    return dx, dy, np.sqrt(dx * dx + dy * dy)
+    return native._gradients.edge_gradient(sx, sy, 32767 / _SCALE, _SCALE)
 
 
 def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
@@ -73,11 +77,8 @@ def detect(gray: np.ndarray, peak: float, canny: tuple[float, float] | None = No
     """
     import cv2
 
-    dx, dy, mag = gradient(gray, peak)
+    mag, ix, iy = gradient(gray, peak)
     low, high = canny if canny is not None else auto_thresholds(mag)
-    limit = 32767 / _SCALE
-    ix = np.round(np.clip(dx, -limit, limit) * _SCALE).astype(np.int16)
-    iy = np.round(np.clip(dy, -limit, limit) * _SCALE).astype(np.int16)
     # cv2.Canny on derivatives compares |(dx, dy)| (L2) against the thresholds
     edges = cv2.Canny(ix, iy, low * _SCALE, high * _SCALE, L2gradient=True) > 0
     return edges, mag, (low, high)

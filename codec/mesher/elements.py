@@ -205,6 +205,8 @@ class Statistics:
         self._from_kernel = np.array(
             [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
         )
+        # the first columns (b, ub, vb) of each image's sums, which _to_origin moves
+        self._blocks = np.array([6] + [10 + 3 * c for c in range(len(self._fit) if self.own else 0)], np.int64)
         # sums of x^k over columns [0, x): a span's sums of x and xx in two look-ups
         # each (exact integers in float64 for widths up to about 180,000)
         cols = np.arange(w, dtype=np.float64)
@@ -232,18 +234,20 @@ class Statistics:
             np.multiply(y, d[3 + 2 * c], out=cols[12 + 3 * c])
         return self._to_origin(raster.reduce(cols), raster.origin)
 
-    def of_triangles(self, vertices: np.ndarray, triangles: np.ndarray, origin: np.ndarray) -> np.ndarray:
-        """M x width: the statistics of `triangles` (their origins `origin`, as
-        triangle_raster gives them), the numbers __call__ gives for their raster, from
-        one compiled walk over their pixels (codec._elements) instead of span arrays."""
+    def of_triangles(self, vertices: np.ndarray, triangles: np.ndarray,
+                     vertex_values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(M x width statistics of `triangles`, the numbers __call__ gives for their
+        triangle_raster; with vertex_values, also element_sse's squared error of each
+        against the mesh through them, else None), from one compiled walk over their
+        pixels (codec._elements.triangle_statistics) instead of span arrays."""
         from .. import native
 
         h, w = self.shape
-        sums = native._elements.triangle_sums(
+        z = np.zeros(0) if vertex_values is None else np.ascontiguousarray(vertex_values, dtype=np.float64)
+        return native._elements.triangle_statistics(
             np.ascontiguousarray(vertices, dtype=np.int64), np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
-            w, h, self.planes.table, self._powers[1], self._powers[2],
+            w, h, self.planes.table, self._powers[1], self._powers[2], self._from_kernel, self._blocks, z,
         )
-        return self._to_origin(sums[:, self._from_kernel], origin)
 
     def _to_origin(self, out: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """Sums in image coordinates (E x width) to coordinates relative to each
@@ -364,24 +368,6 @@ def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, le
     return corners, origin, coef, den, elem[keep], span_y[keep], span_x[keep], span_n[keep]
 
 
-def _triangle_coefficients(p: np.ndarray, origin: np.ndarray):
-    """Weight coefficients and doubled area of triangles whose corner coordinates are
-    p (M x 3 x 2), relative to `origin` (M x 2)."""
-    # corner-major copies and output, so that every operation runs over plain arrays
-    px, py = np.ascontiguousarray(p[:, :, 0].T), np.ascontiguousarray(p[:, :, 1].T)
-    ox, oy = origin[:, 0], origin[:, 1]
-    coef = np.empty((3, 3, len(p)), dtype=np.int64)
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        # w_i = (xk - xj)(y - yj) - (yk - yj)(x - xj), with x = u + x0, y = v + y0
-        ex = px[k] - px[j]
-        ey = py[k] - py[j]
-        np.negative(ey, out=coef[i, 0])
-        coef[i, 1] = ex
-        coef[i, 2] = ex * (oy - py[j]) - ey * (ox - px[j])
-    return coef.transpose(2, 0, 1), coef[:, 2].sum(axis=0)
-
-
 def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int,
                     *, spans: bool = True) -> Raster:
     """The triangles' elements alone (no border lines): what they own of the image.
@@ -389,12 +375,12 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
     the same statistics whichever corner it is listed from and however the vertices
     are numbered. spans=False: the weights only (no spans, for statistics measured
     before)."""
-    v = np.asarray(vertices, dtype=np.int64)
-    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    p = np.take(v, t, axis=0)
-    first = (p[:, :, 1] * width + p[:, :, 0]).argmin(axis=1)
-    origin = np.take_along_axis(p, first[:, None, None], axis=1)[:, 0]
-    coef, den = _triangle_coefficients(p, origin)
+    from .. import native
+
+    v = np.ascontiguousarray(vertices, dtype=np.int64)
+    t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    # origins and weight coefficients in one compiled pass (integers: the same numbers)
+    origin, coef, den = native._elements.triangle_weights(v, t, width, height)
     if spans and len(t):
         return Raster(width, height, t, origin, coef, den, *_triangle_spans(v, t))
     empty = np.zeros(0, np.int64)
@@ -411,12 +397,10 @@ def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
 
     v = np.ascontiguousarray(vertices, dtype=np.int64)
     t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
-    weights = triangle_raster(v, t, width, height, spans=False)
     if plane.dtype != np.float32:
         plane = plane.astype(np.float64)
     x, y, err = native._elements.worst_pixels(
-        v, t, width, height, np.ascontiguousarray(weights.affine(vertex_values)),
-        np.ascontiguousarray(weights.origin), np.ascontiguousarray(plane),
+        v, t, width, height, np.ascontiguousarray(vertex_values, dtype=np.float64), np.ascontiguousarray(plane),
     )
     owns = np.flatnonzero(err >= 0)
     return owns, x[owns], y[owns], err[owns]

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from ..errors import ATMError
-from ..native import _renumber
+from ..native import _elements, _renumber
 from ..triangulate import Triangulation, split_at_vertices, triangulate
 from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
@@ -34,8 +34,7 @@ def merge(width: int, *groups: np.ndarray) -> np.ndarray:
     """Concatenate point groups keeping the first of any points on the same pixel and
     the order of the groups (the first group's indices stay valid)."""
     pts = np.concatenate(groups)
-    _, first = np.unique(pts[:, 1] * width + pts[:, 0], return_index=True)
-    return pts[np.sort(first)]
+    return pts[_elements.first_of_each(np.ascontiguousarray(pts[:, 1] * width + pts[:, 0], dtype=np.int64))]
 
 
 def run_breaks(segments: np.ndarray) -> np.ndarray:
@@ -43,77 +42,59 @@ def run_breaks(segments: np.ndarray) -> np.ndarray:
     return np.flatnonzero(segments[1:, 0] != segments[:-1, 1]) + 1
 
 
-def _keys(pixel: np.ndarray, triangles: np.ndarray, base: int) -> np.ndarray | None:
-    """One integer per triangle from its corners' pixel numbers (`pixel`, below
-    `base`), whichever corner it is listed from and however the vertices are numbered,
-    or None when they would overflow int64."""
-    if base**3 >= 2**62:
-        return None
-    a, b, c = pixel[triangles].T
-    low, high = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
-    return (low * base + (a + b + c - low - high)) * base + high
+def _key_base(width: int, height: int) -> int:
+    """The base of the triangles' keys (_elements.cached): the pixel count, or 0 (no
+    keys, nothing kept between rounds) where three pixel numbers would overflow int64."""
+    base = width * height
+    return base if base**3 < 2**62 else 0
 
 
 class _Cache:
     """Statistics and squared errors (against the mesh through the sampled values) of
-    the triangles of the last triangulation, kept in the order of their keys, so that
-    a triangle that survives a round is not measured again."""
+    the triangles of the last triangulation, kept in its order with a key per triangle
+    from its corners' pixels (codec._elements.cached), so that a triangle that
+    survives a round is not measured again. The statistics of every triangle measured
+    are kept where they were put (rows of a growing store) and gathered once, for the
+    triangles of the last round: a round needs only the squared errors."""
 
     def __init__(self, layout: Statistics):
         self.layout = layout
-        self.keys = np.zeros(0, np.int64)  # sorted
-        self.stats = np.zeros((0, layout.width))
+        self.keys = np.zeros(0, np.int64)
+        self.rows = np.zeros(0, np.int64)
         self.sse = np.zeros(0)
-        # the last measured triangulation's statistics, in key order, and that order
-        self._order = np.zeros(0, np.int64)
-        self._stats = self.stats
+        self._parts: list[np.ndarray] = []
+        self._stored = 0
+        # the last measured triangulation's rows in the store, in its order
+        self._last = self.rows
 
     def measure(self, vertices: np.ndarray, triangles: np.ndarray, z: np.ndarray, width: int, height: int,
                 last: bool = False) -> np.ndarray | None:
         """The squared error of every triangle (statistics() gives their statistics).
         last: no round follows, so the squared errors are not needed (None) and the
         cache is not updated."""
-        m = len(triangles)
-        keys = _keys(vertices[:, 1] * width + vertices[:, 0], triangles, width * height)
-        known = np.zeros(m, bool)
-        found = None
-        if keys is None:
-            order, sorted_keys = np.arange(m), None  # keys would overflow: nothing is kept
-        else:
-            # worked in key order: sorted queries make the binary searches cheap, and
-            # the cache for the next round comes out in its order
-            order = np.argsort(keys)
-            sorted_keys = keys[order]
-            if len(self.keys):
-                found = np.minimum(np.searchsorted(self.keys, sorted_keys), len(self.keys) - 1)
-                known = self.keys[found] == sorted_keys
-        kept, fresh = np.flatnonzero(known), np.flatnonzero(~known)
-        new = triangles[order[fresh]]
-        # the new triangles' weights (no spans: the kernel walks their pixels itself)
-        raster = triangle_raster(vertices, new, width, height, spans=False)
-        measured = self.layout.of_triangles(vertices, new, raster.origin)
-        stats = np.empty((m, self.layout.width))
-        stats[fresh] = measured
-        if len(kept):
-            stats[kept] = np.take(self.stats, found[kept], axis=0)
-        self._order, self._stats = order, stats
+        pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
+        keys, rows, sse, fresh = _elements.cached(
+            pixel, np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), _key_base(width, height),
+            self.keys, self.rows, self.sse, self._stored,
+        )
+        # the new triangles' statistics and squared errors in one walk over their pixels
+        measured, fresh_sse = self.layout.of_triangles(vertices, triangles[fresh], None if last else z)
+        self._parts.append(measured)
+        self._stored += len(fresh)
+        self._last = rows
         if last:
             return None
-        sse = np.empty(m)
-        sse[fresh] = element_sse(raster, measured, z)
-        if len(kept):
-            sse[kept] = self.sse[found[kept]]
-        if sorted_keys is not None:
-            self.keys, self.stats, self.sse = sorted_keys, stats, sse
-        out = np.empty(m)
-        out[order] = sse
-        return out
+        sse[fresh] = fresh_sse
+        if len(keys):
+            self.keys, self.rows, self.sse = keys, rows, sse
+        return sse
 
     def statistics(self) -> np.ndarray:
         """The statistics of the triangles last measured, in their order."""
-        out = np.empty_like(self._stats)
-        out[self._order] = self._stats
-        return out
+        if len(self._parts) > 1:
+            self._parts = [np.concatenate(self._parts)]
+        store = self._parts[0] if self._parts else np.zeros((0, self.layout.width))
+        return store[self._last]
 
 
 class _Growing:

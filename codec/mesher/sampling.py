@@ -26,14 +26,17 @@ FLOOR = 0.25
 
 
 def curvature(gray: np.ndarray) -> np.ndarray:
-    """Frobenius norm of the Hessian of the Gaussian-smoothed image (float32)."""
+    """Frobenius norm of the Hessian of the Gaussian-smoothed image (float32; the norm
+    in one compiled pass, codec._gradients.hessian_norm)."""
     import cv2
+
+    from .. import native
 
     g = cv2.GaussianBlur(gray.astype(np.float32), (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
     dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REPLICATE)
     dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    return np.sqrt(dxx * dxx + 2 * dxy * dxy + dyy * dyy)
+    return native._gradients.hessian_norm(dxx, dyy, dxy)
 
 
 def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor: float = FLOOR) -> np.ndarray:
@@ -82,8 +85,10 @@ def sample(dens: np.ndarray, tiles: tuple[int, int], per_tile: tuple[int, int]) 
     yb = np.round(np.linspace(0, h, nv + 1)).astype(np.int64)
     out = []
     for y0, y1 in zip(yb[:-1], yb[1:]):
-        band = np.cumsum(dens[y0:y1], axis=0)  # down each column, within the band
-        colsum = band[-1]
+        block = dens[y0:y1]
+        # each column's sum down the band, row after row (the last row of its cumsum;
+        # a sum over axis 0 adds whole rows in turn, unless a row is a single number)
+        colsum = block.sum(axis=0) if block.shape[1] > 1 else np.cumsum(block, axis=0)[-1]
         _, cols = _inverse_cdf(np.cumsum(colsum), xb[:-1], xb[1:], r)
         cols = cols[colsum[cols] > 0]
         if len(cols) == 0:
@@ -91,7 +96,7 @@ def sample(dens: np.ndarray, tiles: tuple[int, int], per_tile: tuple[int, int]) 
         # a column chosen m times carries m * z samples
         cols, mult = np.unique(cols, return_counts=True)
         height = y1 - y0
-        col_cum = band[:, cols].T  # C x height
+        col_cum = np.cumsum(block[:, cols], axis=0).T  # C x height: down the chosen columns
         # stack the columns' cumulative sums into one increasing sequence
         offset = np.cumsum(np.concatenate([[0.0], col_cum[:-1, -1] + 1.0]))
         lo = np.arange(len(cols)) * height

@@ -1,0 +1,49 @@
+"""Encoder kernel: a band's samples quantised closed-loop along the sample tree
+(codec.meshcode.quantise): each sample is rounded to a multiple of its step away from
+its parent's sample as the decoder rebuilds it, so rounding errors do not add up. The
+decoder's side is a sum along the tree (codec._fields.tree_sums). Sequential by
+nature, so a compiled loop (a Python loop over the vertices took 1-1.5 ms of a 50 ms
+encode of a 512² image). The GIL is released while it works."""
+
+from libc.stdint cimport int64_t
+
+import numpy as np
+
+
+cdef inline int64_t _floordiv(int64_t a, int64_t b) noexcept nogil:
+    """Python's a // b for b > 0 (rounds toward minus infinity)."""
+    cdef int64_t q = a // b
+    if a % b != 0 and a < 0:
+        q -= 1
+    return q
+
+
+def quantised(const int64_t[:, ::1] values, const int64_t[::1] steps, const int64_t[::1] parents, int64_t top):
+    """N x C int64: values (N x C, in sample order) as rebuilt from residuals coded
+    against their parents' rebuilt samples (parents[i] < i; -1: predicted from 0) with
+    steps[i] > 0: prev + round-half-up((v - prev) / s) * s, then moved by whole steps
+    into 0 .. top, exactly as meshcode.quantise's Python loop did. ValueError on a step
+    below 1, a parent that is not an earlier sample, or sizes that do not match."""
+    cdef int64_t n = values.shape[0], ch = values.shape[1], i, c, p, s, prev
+    if steps.shape[0] != n or parents.shape[0] != n:
+        raise ValueError("quantised: a step and a parent per sample")
+    for i in range(n):
+        if steps[i] < 1:
+            raise ValueError("quantised: a step below 1")
+        if not -1 <= parents[i] < i:
+            raise ValueError("quantised: a parent that is not an earlier sample")
+    out = np.empty((n, ch), dtype=np.int64)
+    cdef int64_t[:, ::1] o = out
+    with nogil:
+        for c in range(ch):
+            for i in range(n):
+                p = parents[i]
+                prev = 0 if p < 0 else o[p, c]
+                s = steps[i]
+                prev += _floordiv(2 * (values[i, c] - prev) + s, 2 * s) * s
+                if prev > top:
+                    prev -= (prev - top + s - 1) // s * s
+                elif prev < 0:
+                    prev -= _floordiv(prev, s) * s
+                o[i, c] = prev
+    return out
