@@ -9,7 +9,7 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 
 #: The kernels, each a module of its own.
-KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber", "codec._mask", "codec._elements", "codec._polylines", "codec._lsq", "codec._samples", "codec._gradients"]
+KERNELS = ["codec._rasterise", "codec._fields", "codec._cdt", "codec._residual", "codec._renumber", "codec._mask", "codec._elements", "codec._polylines", "codec._lsq", "codec._samples", "codec._gradients", "codec._bound"]
 
 # MSVC spells optimisation its own way; gcc and clang take -O2. No fused multiply-add
 # contraction (gcc and clang contract by default where the target has FMA, e.g. ARM):

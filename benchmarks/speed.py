@@ -22,7 +22,8 @@ the median over the rounds of each round's own ratio, a time the median time.
    by process CPU time (steadier where others load the machine).
 4. Encode at equal max error: codec.encode(dem, max_error=E, residual=False) (the mesh) of a float DEM against
    Delatin(dem, max_error=E), for each E (a synthetic DEM, or --dem-file's GeoTIFF as
-   float32), with the .atm bytes and both vertex counts.
+   float32), with the .atm bytes and both vertex counts, by wall time and process CPU
+   time.
 5. Encode to a quality: codec.encode(image, quality=Q) of each gray corpus image
    against a JPEG XL encode at level 90 (imagecodecs; JPEG quality 90 without it).
 
@@ -271,16 +272,20 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
         terrain = tifffile.imread(dem_file).astype(np.float32)
     rows = []
     for e in errors:
-        times = interleaved({"atm": lambda: codec.encode(terrain, max_error=e, residual=False),
-                             "delatin": lambda: Delatin(terrain, max_error=e)}, repeat)
+        cpu = {"atm": [], "delatin": []}
+        times = interleaved({"atm": _cpu_timed(cpu["atm"], lambda: codec.encode(terrain, max_error=e, residual=False)),
+                             "delatin": _cpu_timed(cpu["delatin"], lambda: Delatin(terrain, max_error=e))}, repeat)
         data = codec.encode(terrain, max_error=e, residual=False)
         h, w = terrain.shape
         rows.append([f"{w}x{h}", f"{e:g}", f"{len(data):,}", f"{codec.info(data)['vertices']:,}",
                      f"{len(Delatin(terrain, max_error=e).vertices):,}", f"{statistics.median(times['atm']):.0f}",
-                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}"])
+                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}",
+                     f"{statistics.median(cpu['atm']):.0f}", f"{statistics.median(cpu['delatin']):.0f}",
+                     f"{ratio(cpu, 'atm', 'delatin'):.1f}"])
     print()
     print_table(["float DEM", "max error (m)", "atm bytes", "atm vertices", "delatin vertices",
-                 "atm encode ms", "delatin ms", "atm / delatin"], rows)
+                 "atm encode ms", "delatin ms", "atm / delatin", "atm CPU ms", "delatin CPU ms",
+                 "CPU atm / delatin"], rows)
 
 
 def main(argv: list[str] | None = None) -> int:

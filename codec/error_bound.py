@@ -21,7 +21,7 @@ from .mesher import values as vertex_values
 from .errors import ATMError, OptionError
 from . import meshcode
 from .mesh import Mesh, segments
-from .native import _renumber
+from .native import _bound, _renumber
 from .triangulate import Triangulation
 
 
@@ -139,6 +139,52 @@ def _squared_errors(mesh: Mesh, image: np.ndarray) -> np.ndarray:
     return (diff * diff).reshape(mesh.height, mesh.width, -1)
 
 
+class _Errors:
+    """The decoded mesh's squared error per pixel (the decoder's exact rule), kept
+    between refinement rounds: a round measures again only the triangles that have a
+    vertex it added or whose value it changed (inserting vertices into the unique
+    triangulation replaces only triangles that come to have one of them as a corner, so
+    every other pixel decodes as before). Owns its buffers."""
+
+    def __init__(self, image: np.ndarray, valid: np.ndarray | None, height: int, width: int) -> None:
+        self.height, self.width, self.shape = height, width, image.shape
+        # in the stored samples' own type where the kernel takes it (a quarter or an
+        # eighth of float64's size: triangles are measured in no spatial order)
+        keep = image.dtype in (np.uint8, np.uint16)
+        self.reference = np.ascontiguousarray(image, dtype=None if keep else np.float64).reshape(height * width, -1)
+        channels = self.reference.shape[1]
+        self.valid = None if valid is None else np.ascontiguousarray(valid, dtype=np.uint8).reshape(-1)
+        self.worst = np.zeros(height * width)
+        # per channel only where the largest is not all of it
+        self.squared = np.zeros((height * width, channels)) if channels > 1 else None
+
+    def measure(self, mesh: Mesh, changed: np.ndarray | None = None) -> None:
+        """Measure the triangles of `mesh` that have a corner marked in `changed` (per
+        vertex; None: all of them)."""
+        h, w = self.height, self.width
+        if len(mesh.triangles) == 0 or h * w > 1 << 32:
+            # a one-pixel-wide image (no triangles), or one the decoder refuses
+            sq = _squared_errors(mesh, self.reference.reshape(self.shape)).reshape(h * w, -1)
+            if self.valid is not None:
+                sq[self.valid == 0] = 0.0
+            self.worst[:] = sq.max(axis=1)
+            if self.squared is not None:
+                self.squared[:] = sq
+            return
+        _bound.measure(
+            np.ascontiguousarray(mesh.vertices, dtype=np.int64),
+            np.ascontiguousarray(mesh.values, dtype=np.int64).reshape(len(mesh.vertices), -1),
+            np.ascontiguousarray(mesh.triangles, dtype=np.int64),
+            None if changed is None else np.ascontiguousarray(changed, dtype=np.uint8),
+            self.reference, self.valid, self.worst, self.squared, w, h,
+        )
+
+    def per_channel(self) -> np.ndarray:
+        """H x W x C squared errors (holes 0)."""
+        sq = self.worst if self.squared is None else self.squared
+        return sq.reshape(self.height, self.width, -1)
+
+
 def refine_to_bound(
     mesh: Mesh,
     image: np.ndarray,
@@ -176,63 +222,67 @@ def refine_to_bound(
     if not last_band and h > 1:
         counted[-1] = False
     fixed = mesh.vertices[:, 1] < pinned_rows
-    walls = _segments_mask(mesh)
+    walls = _segments_mask(mesh).view(np.uint8) if mesh.constraints else None
     sampled = np.zeros(len(mesh.vertices), bool)
     first_bad, done = None, 0.0
     layout = None
     # the triangulation kept between rounds (None: not made, or its walls changed;
     # False: the kernel refused the mesh, so each round triangulates in full)
     growing: _Growing | None | bool = None
-    reference = image.astype(np.float64)  # what each round's decode is measured against
+    errors = _Errors(image, valid, h, w)
+    changed = None  # per vertex: its triangles are measured again (None: all are)
+    is_vertex = np.zeros((h, w), np.uint8)
+    is_vertex[mesh.vertices[:, 1], mesh.vertices[:, 0]] = 1
+    over_limit = np.inf if sq_limit is None else sq_limit + 1e-9
     while True:
-        sq = _squared_errors(mesh, reference)
-        if valid is not None:
-            sq[~valid] = 0.0
-        worst = sq[:, :, 0] if sq.shape[2] == 1 else sq.max(axis=2)
-        bad = np.zeros((h, w), bool)
-        if sq_limit is not None:
-            bad |= worst > sq_limit + 1e-9
-            over = int(bad.sum())
+        errors.measure(mesh, changed)
+        worst = errors.worst.reshape(h, w)
+        # a pixel is bad over its row's limit: the max_error bound's, and the RMS
+        # bound's where the RMS of the rows it belongs to is over it
+        row_limit = np.full(h, over_limit)
         if rms_sq is not None:
+            sq = errors.per_channel()
             for rows in ([counted], [~counted]) if not last_band else ([counted],):
                 sel = rows[0]
                 count = sel.sum() * w if valid is None else valid[sel].sum()
                 if count and (sq[sel].sum(axis=(0, 1)) / count > rms_sq + 1e-9).any():
-                    bad[sel] |= worst[sel] > rms_sq
-        bad[:pinned_rows] = False
-        if not bad.any():
+                    row_limit[sel] = np.minimum(row_limit[sel], rms_sq)
+        row_limit[:pinned_rows] = np.inf
+        over, bad_count, candidates, on_walls = _bound.count(worst, row_limit, over_limit, is_vertex, walls)
+        if not bad_count:
             return mesh, delaunay
         if progress is not None:
-            count = int(bad.sum())
-            first_bad = first_bad or count
-            done = max(done, 1.0 - count / first_bad)
+            first_bad = first_bad or bad_count
+            done = max(done, 1.0 - bad_count / first_bad)
             progress(done)
         # a bad pixel that is already a vertex (fitted, not sampled) gets its own value
         vx, vy = mesh.vertices[:, 0], mesh.vertices[:, 1]
-        at_vertex = bad[vy, vx] & ~fixed
-        is_vertex = np.zeros((h, w), bool)
-        is_vertex[vy, vx] = True
-        candidates = bad & ~is_vertex & ~walls
+        at_vertex = (worst[vy, vx] > row_limit[vy]) & ~fixed
         count = max(8, int(len(mesh.vertices) * GROWTH))
         if sq_limit is not None and bound.max_error < 1:
             count = max(count, int(FAR * over))
-        new = _spread(np.where(candidates, worst, 0.0), count)
-        on_walls = int((bad & walls & ~is_vertex).sum())
+        cell = max(1, int(math.sqrt(h * w / max(count, 1))))
         # the triangles before this round are the unique triangulation of ATM.md §4.2.5
         # of their vertices and of the walls the new one keeps (so inserting vertices
         # changes only triangles that come to touch one: see below)
         unique_before = delaunay
-        if on_walls and (len(new) == 0 and not at_vertex.any() or WALL_TAIL * int(candidates.sum()) < on_walls):
+        if on_walls and (candidates == 0 and not at_vertex.any() or WALL_TAIL * candidates < on_walls):
             # (almost) only wall pixels are left: take them, splitting walls is better
             # than failing; once the walls are gone their pixels are like any other
             # (waiting for the last few others first took a round each: 15 of 41
             # rounds on the SRTM DEM at max_error=2)
-            new = _spread(np.where(bad & ~is_vertex, worst, 0.0), count)
+            new = _bound.spread(worst, row_limit, is_vertex, None, cell)
             mesh = Mesh(mesh.vertices, mesh.values, mesh.triangles, w, h, [], mesh.holes)
-            walls = np.zeros((h, w), bool)
+            walls = None
             unique_before = False
             if growing:
                 growing = None
+        else:
+            new = _bound.spread(worst, row_limit, is_vertex, walls, cell)
+        # the pixels that decode differently after this round: those of triangles with
+        # a new vertex or a vertex whose value changes, if the triangles before the
+        # round were the unique triangulation and the kernel kept it (else all)
+        incremental = len(new) == 0
         # per vertex: sampled (its own pixel value from now on; so far, or now), its
         # value so far (new ones: their pixel's), fixed
         old_sampled, old_triangles = sampled, mesh.triangles
@@ -256,6 +306,7 @@ def refine_to_bound(
             if growing:
                 try:
                     grown = growing.grow(grown, len(mesh.vertices))
+                    incremental = unique_before
                 except ATMError:  # a vertex outside the first ones' hull
                     growing = False
             if not growing:
@@ -286,17 +337,24 @@ def refine_to_bound(
                 # against the new cost 1.8 s of 16 on a 512² DEM at max_error=2)
                 marked = became.copy()
                 marked[renumber[len(old_sampled):]] = True
-                touched = marked[triangles].any(axis=1)
+                free = _bound.around(np.ascontiguousarray(triangles, dtype=np.int64), marked.view(np.uint8))
             else:
                 touched = _new_triangles(renumber[old_triangles], triangles, len(vertices))
                 touched |= became[triangles].any(axis=1)
-            free = np.zeros(len(vertices), bool)
-            free[triangles[touched]] = True
+                free = np.zeros(len(vertices), bool)
+                free[triangles[touched]] = True
             free &= ~was_sampled & ~fixed
             if layout is None:
                 layout = vertex_values.layout_for(image)
             vals = vertex_values.refit(image, vertices, triangles, previous, free, layout)
         vals[fixed] = grown.values[fixed]
+        if incremental:
+            old = len(mesh.vertices)
+            changed = np.ones(len(vertices), bool)
+            changed[:old] = (vals[:old] != mesh.values).reshape(old, -1).any(axis=1)
+        else:
+            changed = None
+        is_vertex[new[:, 1], new[:, 0]] = 1
         mesh = Mesh(vertices, vals, triangles, w, h, grown.constraints, mesh.holes)
 
 
@@ -318,22 +376,3 @@ def _new_triangles(old_triangles: np.ndarray, triangles: np.ndarray, n: int) -> 
     new = keys(triangles)
     at = np.minimum(np.searchsorted(old, new), len(old) - 1)
     return old[at] != new
-
-
-def _spread(score: np.ndarray, count: int) -> np.ndarray:
-    """About `count` pixels with the highest positive scores, at most one per cell of a
-    grid whose cells are sized so there are about `count` of them: new vertices spread
-    over the image instead of crowding one spot. Returns K x 2 (x, y)."""
-    h, w = score.shape
-    cell = max(1, int(math.sqrt(h * w / max(count, 1))))
-    ph, pw = -(-h // cell) * cell, -(-w // cell) * cell
-    padded = np.zeros((ph, pw))
-    padded[:h, :w] = score
-    blocks = padded.reshape(ph // cell, cell, pw // cell, cell).transpose(0, 2, 1, 3).reshape(-1, cell * cell)
-    best = blocks.argmax(axis=1)
-    keep = blocks[np.arange(len(blocks)), best] > 0
-    cells = np.flatnonzero(keep)
-    by, bx = np.divmod(cells, pw // cell)
-    oy, ox = np.divmod(best[keep], cell)
-    return np.stack([bx * cell + ox, by * cell + oy], 1).astype(np.int64)
-

@@ -37,7 +37,7 @@ CC="$cc" CFLAGS="$sanitize" CXXFLAGS="$sanitize" LDFLAGS="-fsanitize=address" \
 # detect_leaks=0: CPython keeps objects until exit, which LeakSanitizer reports.
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_init_order=1"
 kernels=$(cd / && LD_PRELOAD="$runtime" "$venv/bin/python" -c \
-  "import codec._rasterise as r, codec._fields as f, codec._cdt as c, codec._residual as e, codec._renumber as n, codec._mask as m, codec._elements as l, codec._polylines as p, codec._lsq as q, codec._samples as s, codec._gradients as g; print(r.__file__, f.__file__, c.__file__, e.__file__, n.__file__, m.__file__, l.__file__, p.__file__, q.__file__, s.__file__, g.__file__)")
+  "import codec._rasterise as r, codec._fields as f, codec._cdt as c, codec._residual as e, codec._renumber as n, codec._mask as m, codec._elements as l, codec._polylines as p, codec._lsq as q, codec._samples as s, codec._gradients as g, codec._bound as b; print(r.__file__, f.__file__, c.__file__, e.__file__, n.__file__, m.__file__, l.__file__, p.__file__, q.__file__, s.__file__, g.__file__, b.__file__)")
 [ -n "$kernels" ] || { echo "fuzz/asan.sh: the kernels do not import" >&2; exit 1; }
 for kernel in $kernels; do
   case $kernel in "$venv"/*) ;; *) echo "fuzz/asan.sh: $kernel is not the venv's" >&2; exit 1 ;; esac
@@ -59,4 +59,4 @@ done
 cd /
 LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
   --rootdir="$src" -c "$src/pyproject.toml" \
-  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual,refit,lossless_float,holes,holemask,mesher_elements,mesher_polylines,stages}.py "$@"
+  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual,refit,lossless_float,holes,holemask,mesher_elements,mesher_polylines,stages,bound}.py "$@"

@@ -130,8 +130,8 @@ def test_a_float_dems_max_error_takes_few_rounds(monkeypatch):
                                 interpolation=cv2.INTER_CUBIC)
         cells, amp = cells * 2, amp / 2
     rounds = []
-    measure = error_bound._squared_errors
-    monkeypatch.setattr(error_bound, "_squared_errors", lambda *a: rounds.append(1) or measure(*a))
+    measure = error_bound._Errors.measure
+    monkeypatch.setattr(error_bound._Errors, "measure", lambda *a: rounds.append(1) or measure(*a))
     out = codec.decode(codec.encode(dem, max_error=2.0))
     assert np.abs(out.astype(np.float64) - dem).max() <= 2.0
     assert len(rounds) <= 16

@@ -74,8 +74,8 @@ def test_a_max_error_bound_takes_fewer_rounds(corpus, monkeypatch):
     # camera's top-left corner at max_error=6 took 76 rounds when the last pixels
     # beside walls waited a round each (60 now)
     rounds = []
-    measure = error_bound._squared_errors
-    monkeypatch.setattr(error_bound, "_squared_errors", lambda *a: rounds.append(1) or measure(*a))
+    measure = error_bound._Errors.measure
+    monkeypatch.setattr(error_bound._Errors, "measure", lambda *a: rounds.append(1) or measure(*a))
     image = corpus["camera"][:200, :200]
     out = codec.decode(codec.encode(image, max_error=6, residual=False))  # the mesh's refinement
     assert np.abs(out.astype(int) - image).max() <= 6
@@ -116,8 +116,8 @@ def test_refinement_finds_a_rounds_new_triangles_by_their_new_corners(corpus, mo
     real = error_bound._new_triangles
     monkeypatch.setattr(error_bound, "_new_triangles", lambda *a: matched.append(1) or real(*a))
     rounds = []
-    measure = error_bound._squared_errors
-    monkeypatch.setattr(error_bound, "_squared_errors", lambda *a: rounds.append(1) or measure(*a))
+    measure = error_bound._Errors.measure
+    monkeypatch.setattr(error_bound._Errors, "measure", lambda *a: rounds.append(1) or measure(*a))
     out = codec.decode(codec.encode(image, max_error=8, residual=False))
     assert np.abs(out.astype(int) - image).max() <= 8 and len(rounds) > 5
     assert len(matched) <= 1  # at most the round that gives up the walls

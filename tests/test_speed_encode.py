@@ -30,6 +30,7 @@ def test_speed_benchmark_prints_its_encode_tables() -> None:
     assert all(float(r[-1]) > 0 for r in budget[2:])
     head, _, row = bound
     assert head[2:5] == ["atm bytes", "atm vertices", "delatin vertices"] and row[:2] == ["32x32", "20"]
+    assert head[-1] == "CPU atm / delatin"
     assert int(row[2].replace(",", "")) > 0 and float(row[-1]) > 0
     head, _, row = quality
     assert head[2] == "atm quality=40 ms" and row[0] == "text" and float(row[-1]) > 0

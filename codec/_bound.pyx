@@ -1,0 +1,301 @@
+"""Encoder kernel for refinement to an error bound (codec.error_bound): the squared
+error of a mesh's decode against the image, kept per pixel and measured again only
+over the triangles a round changed, and the next round's vertices chosen from it.
+Rendering and measuring the whole image every round took a third of a max_error
+encode of a float DEM, while a round changes a small part of it. The GIL is released
+while it works.
+
+A pixel's value is the decoder's (ATM.md, "Decoding"; codec.decoder_cpu): with the
+integer edge functions w_i and doubled area D > 0 of a triangle holding it,
+floor((2 sum_i w_i v_i + D) / (2 D)). Every pixel of a triangle's closed area is
+measured, its edges too: a pixel on an edge two triangles share gets the same value
+from either (its weights along the edge are the same exact fractions), so no
+ownership rule is needed and measuring a triangle never changes a pixel that another
+triangle holding it gives differently."""
+
+from libc.stdint cimport int64_t, uint8_t, uint16_t
+
+ctypedef fused sample_t:
+    uint8_t
+    uint16_t
+    double
+
+import numpy as np
+
+
+cdef inline int64_t _floor_div_fast(int64_t a, int64_t b) noexcept nogil:
+    """floor(a / b) for b > 0 and |a| < 2**53 (as the decoder's kernel computes it): the
+    float64 quotient truncated, then corrected by one."""
+    cdef int64_t q = <int64_t>(<double>a / <double>b)
+    q -= (a - q * b) < 0
+    return q
+
+
+def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
+            const int64_t[:, ::1] triangles, const uint8_t[::1] changed,
+            const sample_t[:, ::1] reference, const uint8_t[::1] valid,
+            double[::1] worst, double[:, ::1] sq, int64_t width, int64_t height):
+    """Measure the decoded error of every triangle (of every one with a corner marked in
+    `changed`, per vertex, when given): for each pixel of its closed area, the squared
+    difference of the decoded value and `reference` (H*W x C, the image: uint8, uint16
+    or float64; the smaller types keep it in cache) per
+    channel into `sq` (H*W x C; may be None) and their largest into `worst` (H*W), both
+    0 where `valid` (H*W, may be None) is 0. Triangles with no area are skipped (they
+    hold no pixel a decoder writes). Returns the number of triangles measured.
+
+    ValueError if an array's shape does not fit, a corner index is beyond the vertices,
+    a vertex lies outside the image, or the image has more than 2**32 pixels (the exact
+    arithmetic's bound, as the decoder's)."""
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
+    cdef int64_t npix = width * height
+    if width < 1 or height < 1 or npix > (<int64_t>1) << 32:
+        raise ValueError("measure: an image of 1 to 2**32 pixels")
+    if vertices.shape[1] != 2 or triangles.shape[1] != 3 or values.shape[0] != n or c < 1 or c > 4:
+        raise ValueError("measure: N x 2 vertices, N x C values (C <= 4), M x 3 triangles")
+    if reference.shape[0] != npix or reference.shape[1] != c or worst.shape[0] != npix:
+        raise ValueError("measure: reference H*W x C and worst H*W")
+    if sq is not None and (sq.shape[0] != npix or sq.shape[1] != c):
+        raise ValueError("measure: sq H*W x C")
+    if valid is not None and valid.shape[0] != npix:
+        raise ValueError("measure: valid H*W")
+    if changed is not None and changed.shape[0] != n:
+        raise ValueError("measure: changed, one flag per vertex")
+    cdef int64_t k, i, t, status = 0
+    with nogil:
+        for k in range(n):
+            if not (0 <= vertices[k, 0] < width and 0 <= vertices[k, 1] < height):
+                status = 1
+                break
+        if status == 0:
+            for t in range(m):
+                for i in range(3):
+                    if not (0 <= triangles[t, i] < n):
+                        status = 2
+                if status:
+                    break
+    if status == 1:
+        raise ValueError("measure: a vertex outside the image")
+    if status == 2:
+        raise ValueError("measure: a corner index beyond the vertices")
+    cdef bint has_sq = sq is not None, has_valid = valid is not None, has_changed = changed is not None
+    cdef int64_t count = 0, ch, x, y, lo, hi, p, j, l, q, r
+    cdef int64_t c0, c1, c2, x0, y0, x1, y1, x2, y2, d, d2, xmin, xmax, ymin, ymax, e, rest
+    cdef int64_t a[3]
+    cdef int64_t b[3]
+    cdef int64_t cc[3]
+    cdef int64_t ga[4]
+    cdef int64_t gb[4]
+    cdef int64_t g0[4]
+    cdef int64_t plane[4]
+    cdef int64_t vq[4]  # a channel's value at the current pixel: floor over 2D
+    cdef int64_t vr[4]  # and remainder, in [0, 2D)
+    cdef int64_t sq_[4]  # its step per column: floor and remainder
+    cdef int64_t sr[4]
+    cdef int64_t px[3]
+    cdef int64_t py[3]
+    cdef double diff, s, most
+    with nogil:
+        for t in range(m):
+            c0 = triangles[t, 0]
+            c1 = triangles[t, 1]
+            c2 = triangles[t, 2]
+            if has_changed and not (changed[c0] or changed[c1] or changed[c2]):
+                continue
+            x0 = vertices[c0, 0]; y0 = vertices[c0, 1]
+            x1 = vertices[c1, 0]; y1 = vertices[c1, 1]
+            x2 = vertices[c2, 0]; y2 = vertices[c2, 1]
+            d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            if d == 0:
+                continue
+            if d < 0:  # the same values in the other orientation
+                c1, c2 = c2, c1
+                x1, x2 = x2, x1
+                y1, y2 = y2, y1
+                d = -d
+            count += 1
+            px[0] = x0; px[1] = x1; px[2] = x2
+            py[0] = y0; py[1] = y1; py[2] = y2
+            # w_i = (x_k - x_j)(y - y_j) - (y_k - y_j)(x - x_j) = a_i x + b_i y + cc_i,
+            # j = i + 1, k = i + 2: >= 0 on the closed triangle, w_i = D at corner i;
+            # here relative to corner 0, so that every term stays small
+            for i in range(3):
+                j = (i + 1) % 3
+                l = (i + 2) % 3
+                a[i] = -(py[l] - py[j])
+                b[i] = px[l] - px[j]
+                cc[i] = (px[l] - px[j]) * (y0 - py[j]) - (py[l] - py[j]) * (x0 - px[j])
+            # 2 sum_i w_i v_i + D = ga u + gb v + g0 with u = x - x0, v = y - y0; at
+            # corner 0 it is (2 v_0 + 1) D
+            for ch in range(c):
+                ga[ch] = 2 * (a[0] * values[c0, ch] + a[1] * values[c1, ch] + a[2] * values[c2, ch])
+                gb[ch] = 2 * (b[0] * values[c0, ch] + b[1] * values[c1, ch] + b[2] * values[c2, ch])
+                g0[ch] = (2 * values[c0, ch] + 1) * d
+            d2 = 2 * d
+            for ch in range(c):
+                sq_[ch] = _floor_div_fast(ga[ch], d2)
+                sr[ch] = ga[ch] - sq_[ch] * d2
+            xmin = min(x0, min(x1, x2)); xmax = max(x0, max(x1, x2))
+            ymin = min(y0, min(y1, y2)); ymax = max(y0, max(y1, y2))
+            for y in range(ymin, ymax + 1):
+                # the row's columns where every w_i >= 0: a_i (x - x0) >= -(b_i v + cc_i)
+                lo = xmin
+                hi = xmax
+                for i in range(3):
+                    rest = -(b[i] * (y - y0) + cc[i])
+                    if a[i] > 0:
+                        e = x0 - _floor_div_fast(-rest, a[i])  # x0 + ceil(rest / a)
+                        if e > lo:
+                            lo = e
+                    elif a[i] < 0:
+                        e = x0 + _floor_div_fast(-rest, -a[i])  # x0 + floor(rest / a)
+                        if e < hi:
+                            hi = e
+                    elif rest > 0:
+                        hi = lo - 1
+                if lo > hi:
+                    continue
+                # each channel's value as floor and remainder over 2D, stepped along
+                # the row (one division per row, not per pixel)
+                for ch in range(c):
+                    plane[ch] = ga[ch] * (lo - x0) + gb[ch] * (y - y0) + g0[ch]
+                    vq[ch] = _floor_div_fast(plane[ch], d2)
+                    vr[ch] = plane[ch] - vq[ch] * d2
+                p = y * width + lo
+                if c == 1 and not has_sq:
+                    q = vq[0]
+                    r = vr[0]
+                    for x in range(lo, hi + 1):
+                        diff = <double>q - <double>reference[p, 0]
+                        s = diff * diff
+                        if has_valid and not valid[p]:
+                            s = 0.0
+                        worst[p] = s
+                        p += 1
+                        q += sq_[0]
+                        r += sr[0]
+                        if r >= d2:
+                            r -= d2
+                            q += 1
+                    continue
+                for x in range(lo, hi + 1):
+                    most = 0.0
+                    for ch in range(c):
+                        diff = <double>vq[ch] - <double>reference[p, ch]
+                        s = diff * diff
+                        if has_valid and not valid[p]:
+                            s = 0.0
+                        if has_sq:
+                            sq[p, ch] = s
+                        if s > most:
+                            most = s
+                        vq[ch] += sq_[ch]
+                        vr[ch] += sr[ch]
+                        if vr[ch] >= d2:
+                            vr[ch] -= d2
+                            vq[ch] += 1
+                    worst[p] = most
+                    p += 1
+    return count
+
+
+def count(const double[:, ::1] worst, const double[::1] row_limit, double over_limit,
+          const uint8_t[:, ::1] is_vertex, const uint8_t[:, ::1] walls):
+    """Over `worst` (H x W squared errors): (pixels over `over_limit` in any row, bad
+    pixels: over their row's `row_limit` (H), bad ones that are no vertex (`is_vertex`)
+    and off the walls (`walls`, may be None): the candidates, bad ones on the walls that
+    are no vertex)."""
+    cdef int64_t h = worst.shape[0], w = worst.shape[1], x, y
+    cdef int64_t over = 0, bad = 0, candidates = 0, on_walls = 0
+    if row_limit.shape[0] != h or is_vertex.shape[0] != h or is_vertex.shape[1] != w:
+        raise ValueError("count: row_limit (H) and is_vertex (H x W) must fit worst")
+    if walls is not None and (walls.shape[0] != h or walls.shape[1] != w):
+        raise ValueError("count: walls (H x W) must fit worst")
+    cdef bint has_walls = walls is not None
+    cdef double limit, e
+    with nogil:
+        for y in range(h):
+            limit = row_limit[y]
+            for x in range(w):
+                e = worst[y, x]
+                over += e > over_limit
+                if e > limit:
+                    bad += 1
+                    if not is_vertex[y, x]:
+                        if has_walls and walls[y, x]:
+                            on_walls += 1
+                        else:
+                            candidates += 1
+    return over, bad, candidates, on_walls
+
+
+def spread(const double[:, ::1] worst, const double[::1] row_limit, const uint8_t[:, ::1] is_vertex,
+           const uint8_t[:, ::1] walls, int64_t cell):
+    """The worst candidate (a pixel over its row's `row_limit`, no vertex, off `walls`
+    if given) of each cell x cell block of the image, blocks in raster order, the first
+    in a block's raster order among equals: K x 2 (x, y). What error_bound._spread
+    gives for the candidates' errors (and 0 elsewhere)."""
+    cdef int64_t h = worst.shape[0], w = worst.shape[1], x, y, bx, by, blocks_x
+    if cell < 1:
+        raise ValueError("spread: cell must be >= 1")
+    if row_limit.shape[0] != h or is_vertex.shape[0] != h or is_vertex.shape[1] != w:
+        raise ValueError("spread: row_limit (H) and is_vertex (H x W) must fit worst")
+    if walls is not None and (walls.shape[0] != h or walls.shape[1] != w):
+        raise ValueError("spread: walls (H x W) must fit worst")
+    blocks_x = (w + cell - 1) // cell  # (cdivision: no floor of negatives)
+    best_array = np.zeros(blocks_x, dtype=np.float64)
+    at_array = np.zeros(blocks_x, dtype=np.int64)
+    out_array = np.empty((((h + cell - 1) // cell) * blocks_x, 2), dtype=np.int64)
+    cdef double[::1] best = best_array
+    cdef int64_t[::1] at = at_array
+    cdef int64_t[:, ::1] out = out_array
+    cdef bint has_walls = walls is not None
+    cdef int64_t k = 0
+    cdef double limit, e
+    with nogil:
+        by = 0
+        while by < h:
+            for bx in range(blocks_x):
+                best[bx] = 0.0
+            for y in range(by, min(by + cell, h)):
+                limit = row_limit[y]
+                for x in range(w):
+                    e = worst[y, x]
+                    # strictly greater: the first of equals stays, as argmax keeps it
+                    if e > limit and e > best[x // cell] and not is_vertex[y, x] and not (has_walls and walls[y, x]):
+                        best[x // cell] = e
+                        at[x // cell] = y * w + x
+            for bx in range(blocks_x):
+                if best[bx] > 0.0:
+                    out[k, 0] = at[bx] % w
+                    out[k, 1] = at[bx] // w
+                    k += 1
+            by += cell
+    return out_array[:k].copy()
+
+
+def around(const int64_t[:, ::1] triangles, const uint8_t[::1] marked):
+    """Per vertex (as many as `marked`), whether it is a corner of a triangle that has a
+    marked corner: the vertices a refit after inserting the marked ones frees (one pass
+    over the triangles; numpy's gathers and scatters over them took a tenth of a
+    max_error encode of a float DEM). ValueError if a corner is beyond the vertices."""
+    cdef int64_t m = triangles.shape[0], n = marked.shape[0], t, i, status = 0
+    if triangles.shape[1] != 3:
+        raise ValueError("around: M x 3 triangles")
+    out_array = np.zeros(n, dtype=bool)
+    cdef uint8_t[::1] out = out_array.view(np.uint8)
+    cdef int64_t a, b, c
+    with nogil:
+        for t in range(m):
+            a = triangles[t, 0]
+            b = triangles[t, 1]
+            c = triangles[t, 2]
+            if not (0 <= a < n and 0 <= b < n and 0 <= c < n):
+                status = 1
+                break
+            if marked[a] or marked[b] or marked[c]:
+                out[a] = 1
+                out[b] = 1
+                out[c] = 1
+    if status:
+        raise ValueError("around: a corner index beyond the vertices")
+    return out_array
