@@ -207,8 +207,8 @@ def test_read_errors_are_atm_errors(data, tmp_path):
     "options, names",
     [
         (dict(quality=50, points=100), ("points", "quality")),
-        (dict(max_rms=2.0, points=100), ("points", "max_rms")),
-        (dict(max_error=4, points=100), ("points", "max_error")),
+        (dict(max_rms=2.0, points=100, residual=False), ("points", "max_rms")),
+        (dict(max_error=4, points=100, residual=False), ("points", "max_error")),
         (dict(quality=50, max_rms=2.0), ("quality", "max_rms")),
     ],
 )
