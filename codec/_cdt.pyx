@@ -21,9 +21,12 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         CDT_OUTSIDE
     cdef struct Pt:
         int x, y
+    cdef cppclass Slots[X]:
+        size_t size() const
+        X& operator[](size_t)
     cdef cppclass CDT:
         vector[Pt] pt
-        vector[int] V
+        Slots[int] V
         vector[int] vinc
         bint narrow, track, broken
         int64_t flip_limit

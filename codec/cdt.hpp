@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <new>
 #include <utility>
 #include <vector>
@@ -83,6 +84,37 @@ struct Pt {
   i32 x, y;
 };
 
+// Half-edge slots, 3 a triangle: grown by grow(3) with one capacity check inline
+// (std::vector's push_back is an out-of-line call, 9 a triangle), left uninitialised
+// until written.
+template <class X>
+class Slots {
+  std::unique_ptr<X[]> a_;
+  size_t n_ = 0, cap_ = 0;
+
+ public:
+  size_t size() const { return n_; }
+  bool empty() const { return n_ == 0; }
+  X& operator[](size_t i) { return a_[i]; }
+  const X& operator[](size_t i) const { return a_[i]; }
+  X* data() { return a_.get(); }
+  const X* data() const { return a_.get(); }
+  void reserve(size_t k) {
+    if (k <= cap_) return;
+    std::unique_ptr<X[]> b(new X[k]);
+    std::copy(a_.get(), a_.get() + n_, b.get());
+    a_ = std::move(b);
+    cap_ = k;
+  }
+  // room for k more: a pointer to the first
+  X* grow(size_t k) {
+    if (n_ + k > cap_) reserve(std::max(2 * cap_, n_ + k + 64));
+    X* p = a_.get() + n_;
+    n_ += k;
+    return p;
+  }
+};
+
 // A stack of half-edges that grows by doubling: push and pop inline (std::vector's
 // push_back is an out-of-line call on this path).
 class EdgeStack {
@@ -104,9 +136,9 @@ class CDT {
  public:
   // vertices in raster order (y, then x): the index is the priority of §4.2.5
   std::vector<Pt> pt;
-  std::vector<i32> V;     // start vertex of each half-edge; triangle t is 3t..3t+2
-  std::vector<i32> T;     // the twin half-edge, -1 on the hull
-  std::vector<uint8_t> C; // whether the edge is a segment
+  Slots<i32> V;      // start vertex of each half-edge; triangle t is 3t..3t+2
+  Slots<i32> T;      // the twin half-edge, -1 on the hull
+  Slots<uint8_t> C;  // whether the edge is a segment
   std::vector<i32> vinc;  // one outgoing half-edge of each vertex (-1 before it has one)
   EdgeStack stack;
   i64 flips = 0;
@@ -180,9 +212,12 @@ class CDT {
   i32 add_triangle(i32 a, i32 b, i32 c) {
     i32 t = (i32)V.size();
     touch(t / 3);
-    V.push_back(a); V.push_back(b); V.push_back(c);
-    T.push_back(-1); T.push_back(-1); T.push_back(-1);
-    C.push_back(0); C.push_back(0); C.push_back(0);
+    i32* v = V.grow(3);
+    i32* w = T.grow(3);
+    uint8_t* k = C.grow(3);
+    v[0] = a; v[1] = b; v[2] = c;
+    w[0] = w[1] = w[2] = -1;
+    k[0] = k[1] = k[2] = 0;
     vinc[a] = t; vinc[b] = t + 1; vinc[c] = t + 2;
     return t;
   }
