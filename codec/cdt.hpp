@@ -725,7 +725,9 @@ class CDT {
     return -1;
   }
 
-  std::vector<i32> queue;  // constrain's crossed edges (kept: no allocation per segment)
+  // constrain's crossed edges (kept: no allocation per segment): (u, w, a half-edge of
+  // u-w when queued, which is still one unless a flip moved the edge to another slot)
+  std::vector<i32> queue;
 
   // Make the segment a-b an edge (cutting it at the vertices on it).
   Status constrain(i32 a, i32 b) {
@@ -754,6 +756,7 @@ class CDT {
         i32 u = V[h], w = V[nxt(h)];
         queue.push_back(u);
         queue.push_back(w);
+        queue.push_back(h);
         i32 v = V[prv(f)];
         if (v == b) { end = b; break; }
         i64 ov = orient(a, b, v);
@@ -772,9 +775,9 @@ class CDT {
       i64 guard = 0, limit = 64 + 8 * (i64)queue.size() * (i64)queue.size();
       while (head < queue.size()) {
         if (++guard > limit) return CDT_INTERNAL;
-        i32 u = queue[head], w = queue[head + 1];
-        head += 2;
-        i32 e = find_edge(u, w);
+        i32 u = queue[head], w = queue[head + 1], e = queue[head + 2];
+        head += 3;
+        if (!((V[e] == u && V[nxt(e)] == w) || (V[e] == w && V[nxt(e)] == u))) e = find_edge(u, w);
         if (e < 0) return CDT_INTERNAL;
         i32 f = T[e];
         if (f < 0) return CDT_INTERNAL;
@@ -785,10 +788,11 @@ class CDT {
           // that a later flip refills is pushed again by that flip)
           stack.push_back(e); stack.push_back(nxt(e)); stack.push_back(prv(e));
           stack.push_back(nxt(f)); stack.push_back(prv(f));
-          if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); }
+          if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); queue.push_back(e); }
         } else {
           queue.push_back(u);
           queue.push_back(w);
+          queue.push_back(e);
         }
         if (head > 4096 && head * 2 > queue.size()) {
           queue.erase(queue.begin(), queue.begin() + head);
