@@ -21,16 +21,21 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         CDT_OUTSIDE
     cdef struct Pt:
         int x, y
+    cdef cppclass Slots[X]:
+        size_t size() const
+        X& operator[](size_t)
     cdef cppclass CDT:
         vector[Pt] pt
-        vector[int] V
-        bint narrow, track
+        Slots[int] V
+        vector[int] vinc
+        bint narrow, track, broken
+        int64_t flip_limit
         vector[int] dirty, old
         vector[unsigned char] dirty_mark
         Status build() except + nogil
         Status insert(const int64_t* xy, int64_t k, int64_t* done) except + nogil
         Status constrain(int a, int b) except + nogil
-        void legalise() nogil
+        bint legalise() nogil
     void cdt_canonical "atmcdt::canonical" (const CDT& cdt, const int64_t* order,
                                            int64_t* out) nogil
     int64_t MAX_EXTENT
@@ -120,20 +125,24 @@ cdef class Triangulation:
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
         indices continue the vertices' numbering in the points' order. All are checked
         first: if one is refused, only those before it go in (status: its refusal)."""
-        cdef int64_t k = points.shape[0], done = 0
+        cdef int64_t k = points.shape[0], done = 0, first = self.cdt.pt.size()
         cdef const int64_t* xy = &points[0, 0] if k else NULL
         cdef Status status
         if points.shape[1] != 2:
             raise ValueError("points are K x 2")
         with nogil:  # every point checked in the kernel, then inserted in a spatial order
             status = self.cdt.insert(xy, k, &done)
-        first = self.cdt.pt.size() - done
+        if status == CDT_INTERNAL:  # a bug: those that went in are no prefix
+            went_in = [j for j in range(first, self.cdt.pt.size()) if self.cdt.vinc[j] >= 0]
+            return int(status), np.array(went_in, dtype=np.int64)
         return int(status), np.arange(first, first + done, dtype=np.int64)
 
     def constrain(self, const int64_t[:, ::1] segments):
         """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
         cdef int64_t s = segments.shape[0], j, n = self.cdt.pt.size()
         cdef Status status = CDT_OK
+        if self.cdt.broken:
+            return CDT_INTERNAL
         for j in range(s):
             if not (0 <= segments[j, 0] < n and 0 <= segments[j, 1] < n):
                 return CDT_INDEX
@@ -145,8 +154,16 @@ cdef class Triangulation:
                     status = self.cdt.constrain(<int>segments[j, 0], <int>segments[j, 1])
                     if status != CDT_OK:
                         break
-            self.cdt.legalise()
+            if not self.cdt.legalise():
+                status = CDT_INTERNAL
+            if status == CDT_INTERNAL:
+                self.cdt.broken = True
         return int(status)
+
+    def _limit_flips(self, int64_t limit):
+        """For tests: the most flips one Lawson pass may make before it reports an
+        internal error (the guard a broken predicate would meet; -1: n (n - 1) / 2)."""
+        self.cdt.flip_limit = limit
 
     def triangles(self):
         """All triangles, M x 3, canonical order (ATM.md §4.2.3)."""

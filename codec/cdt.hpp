@@ -1,8 +1,10 @@
 // The constrained Delaunay triangulation of format version 6 (format_spec/ATM.md
-// §4.2.5), built directly: the convex hull's corners, then the other vertices inserted
-// one by one with Lawson flips (the perturbed rule throughout), then every segment
-// forced in by flips (Sloan's method), then Lawson flips until every free edge is
-// locally Delaunay. The result is the
+// §4.2.5), built directly: vertices in raster order whose first row spans them all (a
+// band's, whose corners are vertices) by a sweep-line with an advancing front (Žalik),
+// any others by the convex hull's corners and then the other vertices inserted one by
+// one; Lawson flips under the perturbed rule throughout; then every segment forced in
+// by flips (Sloan's method), then Lawson flips until every free edge is locally
+// Delaunay. The result is the
 // unique triangulation of §4.2.5 whatever the construction, so it equals Triangle
 // followed by codec/canonical.py's flip pass. Plain C++ without the Python API, so that
 // the Cython wrapper (codec/_cdt.pyx) runs it with the GIL released.
@@ -11,6 +13,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <new>
 #include <utility>
 #include <vector>
@@ -81,15 +84,63 @@ struct Pt {
   i32 x, y;
 };
 
+// Half-edge slots, 3 a triangle: grown by grow(3) with one capacity check inline
+// (std::vector's push_back is an out-of-line call, 9 a triangle), left uninitialised
+// until written.
+template <class X>
+class Slots {
+  std::unique_ptr<X[]> a_;
+  size_t n_ = 0, cap_ = 0;
+
+ public:
+  size_t size() const { return n_; }
+  bool empty() const { return n_ == 0; }
+  X& operator[](size_t i) { return a_[i]; }
+  const X& operator[](size_t i) const { return a_[i]; }
+  X* data() { return a_.get(); }
+  const X* data() const { return a_.get(); }
+  void reserve(size_t k) {
+    if (k <= cap_) return;
+    std::unique_ptr<X[]> b(new X[k]);
+    std::copy(a_.get(), a_.get() + n_, b.get());
+    a_ = std::move(b);
+    cap_ = k;
+  }
+  // room for k more: a pointer to the first
+  X* grow(size_t k) {
+    if (n_ + k > cap_) reserve(std::max(2 * cap_, n_ + k + 64));
+    X* p = a_.get() + n_;
+    n_ += k;
+    return p;
+  }
+};
+
+// A stack of half-edges that grows by doubling: push and pop inline (std::vector's
+// push_back is an out-of-line call on this path).
+class EdgeStack {
+  std::vector<i32> a_;
+  size_t n_ = 0;
+
+ public:
+  bool empty() const { return n_ == 0; }
+  i32 back() const { return a_[n_ - 1]; }
+  void pop_back() { --n_; }
+  void clear() { n_ = 0; }
+  void push_back(i32 e) {
+    if (n_ == a_.size()) a_.resize(2 * n_ + 64);
+    a_[n_++] = e;
+  }
+};
+
 class CDT {
  public:
   // vertices in raster order (y, then x): the index is the priority of §4.2.5
   std::vector<Pt> pt;
-  std::vector<i32> V;     // start vertex of each half-edge; triangle t is 3t..3t+2
-  std::vector<i32> T;     // the twin half-edge, -1 on the hull
-  std::vector<uint8_t> C; // whether the edge is a segment
+  Slots<i32> V;      // start vertex of each half-edge; triangle t is 3t..3t+2
+  Slots<i32> T;      // the twin half-edge, -1 on the hull
+  Slots<uint8_t> C;  // whether the edge is a segment
   std::vector<i32> vinc;  // one outgoing half-edge of each vertex (-1 before it has one)
-  std::vector<i32> stack;
+  EdgeStack stack;
   i64 flips = 0;
   bool narrow = false;  // every coordinate difference below 2^14 (set by the caller;
                         // incircle then skips its per-call check)
@@ -161,9 +212,12 @@ class CDT {
   i32 add_triangle(i32 a, i32 b, i32 c) {
     i32 t = (i32)V.size();
     touch(t / 3);
-    V.push_back(a); V.push_back(b); V.push_back(c);
-    T.push_back(-1); T.push_back(-1); T.push_back(-1);
-    C.push_back(0); C.push_back(0); C.push_back(0);
+    i32* v = V.grow(3);
+    i32* w = T.grow(3);
+    uint8_t* k = C.grow(3);
+    v[0] = a; v[1] = b; v[2] = c;
+    w[0] = w[1] = w[2] = -1;
+    k[0] = k[1] = k[2] = 0;
     vinc[a] = t; vinc[b] = t + 1; vinc[c] = t + 2;
     return t;
   }
@@ -191,6 +245,12 @@ class CDT {
     link(f2, te1, ce1);
     T[e] = f; T[f] = e; C[e] = C[f] = 0;
     vinc[a] = e2; vinc[b] = f2; vinc[c] = e1; vinc[d] = e;
+    if (sweeping) {  // a front edge moved to another slot: the front follows it
+      if (T[e1] < 0) fedge[V[nxt(e1)]] = e1;
+      if (T[e2] < 0) fedge[V[nxt(e2)]] = e2;
+      if (T[f1] < 0) fedge[V[nxt(f1)]] = f1;
+      if (T[f2] < 0) fedge[V[nxt(f2)]] = f2;
+    }
     ++flips;
   }
 
@@ -200,17 +260,25 @@ class CDT {
   // checking: the edges at p are locally Delaunay once the star of p is (the insertion
   // lemma holds for the perturbed rule, a lifting like any other), so a flip leaves
   // two new edges to check instead of four, half the incircle tests.
-  void legalise(bool star = false) {
+  // False (the stack left as it is) after more flips than can be: each flip lowers the
+  // lifted surface (§4.2.5), so an edge it removes never comes back, and no call makes
+  // more than n (n - 1) / 2 of them unless the predicate is broken (flip_limit >= 0
+  // sets a smaller bound, for tests).
+  bool legalise(bool star = false) {
+    i64 n = (i64)pt.size(), limit = flip_limit >= 0 ? flip_limit : n * (n - 1) / 2, done = 0;
     while (!stack.empty()) {
       i32 e = stack.back();
       stack.pop_back();
       if (T[e] < 0 || C[e] || !illegal(e)) continue;
+      if (++done > limit) return false;
       i32 f = T[e];
       flip(e);  // (a, b, c) + (b, a, d) -> (d, c, a) in e's slot, (c, d, b) in f's
       stack.push_back(prv(e)); stack.push_back(nxt(f));  // a-d and d-b: opposite c
       if (!star) { stack.push_back(nxt(e)); stack.push_back(prv(f)); }
     }
+    return true;
   }
+  i64 flip_limit = -1;
 
   void push_all() {
     for (i32 e = 0; e < (i32)V.size(); ++e)
@@ -313,10 +381,11 @@ class CDT {
     return t;
   }
 
-  // The Delaunay triangulation of the vertices (in raster order, distinct): the convex
-  // hull's corners fanned and flipped, then every other vertex inserted with Lawson
-  // flips, in rounds of growing size (a biased randomised insertion order), each round
-  // along a Hilbert curve, so that point location walks are short.
+  // The Delaunay triangulation of the vertices (distinct): by sweep() when they are in
+  // raster order and their first row spans them (a band's: 2x faster), otherwise the
+  // convex hull's corners fanned and flipped, then every other vertex inserted with
+  // Lawson flips, in rounds of growing size (a biased randomised insertion order), each
+  // round along a Hilbert curve, so that point location walks are short.
   Status build() {
     if ((i64)pt.size() > MAX_VERTICES) return CDT_MEMORY;
     i32 n = (i32)pt.size();
@@ -327,6 +396,13 @@ class CDT {
     // triangulate() passes the vertices in that order already
     bool in_order = true;
     for (i32 i = 1; i < n && in_order; ++i) in_order = before(i - 1, i);
+    if (in_order) {
+      i32 k = 1;
+      while (k < n && pt[k].y == pt[0].y) ++k;
+      i32 xmin = pt[0].x, xmax = pt[0].x;
+      for (i32 i = 1; i < n; ++i) { xmin = std::min(xmin, pt[i].x); xmax = std::max(xmax, pt[i].x); }
+      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) return sweep(k);
+    }
     std::vector<i32> ranked;
     if (!in_order) {
       ranked.resize(n);
@@ -355,13 +431,138 @@ class CDT {
     }
     for (i32 h : hull) done[h] = 1;
     push_all();
-    legalise();
+    if (!legalise()) return CDT_INTERNAL;
     std::vector<i32> rest;
     rest.reserve(n);
     for (i32 i = 0; i < n; ++i)
       if (!done[i]) rest.push_back(i);
     last = hull[0];
     return insert_in_order(insertion_order(rest), n);
+  }
+
+  // The front of sweep(): the upper boundary of the triangulated region, left to right
+  // (x strictly increasing); fedge[v] is the boundary half-edge from fnext[v] to v.
+  std::vector<i32> fnext, fprev, fedge;
+  bool sweeping = false;
+
+  // Whether the angle at m between p and o is below about 110 degrees (cos > -0.346):
+  // the sweep's rule for joining p to o over m. Žalik's is 90 degrees; a little wider
+  // leaves fewer pits in the front that later flips must fill (camera's decode: 1.04
+  // flips per vertex at 90, 0.66 at 110, 0.75 at 120). A heuristic only: the
+  // triangulation is the same either way, and the arithmetic is the same everywhere.
+  bool narrow_at(i32 m, i32 p, i32 o) const {
+    double ax = pt[p].x - pt[m].x, ay = pt[p].y - pt[m].y;
+    double bx = pt[o].x - pt[m].x, by = pt[o].y - pt[m].y;
+    double dot = ax * bx + ay * by;
+    return dot >= 0 || 25 * dot * dot < 3 * (ax * ax + ay * ay) * (bx * bx + by * by);
+  }
+
+  // The triangle (a, b, c) on front vertices a, b = fnext[a], c = fnext[b], with b below
+  // a-c: b leaves the front (fnext -2), both old front edges go on the stack.
+  void fill(i32 a) {
+    i32 b = fnext[a], c = fnext[b];
+    i32 u = add_triangle(a, b, c);
+    link(u, fedge[a], 0); link(u + 1, fedge[b], 0);
+    stack.push_back(u); stack.push_back(u + 1);
+    fnext[a] = c; fprev[c] = a; fedge[a] = u + 2; fnext[b] = -2;
+  }
+
+  // The triangulation of vertices in raster order whose first row (k >= 2 vertices, not
+  // all of them) holds both the smallest and the largest x, by a sweep-line (Žalik, "An
+  // efficient sweep-line Delaunay triangulation algorithm"): the first row is a fan
+  // from vertex k; every later vertex lies above the region triangulated so far and
+  // within its x range, so it is joined to the front edge below it, then to the front
+  // vertices on either side while the angle at the one passed over is narrow. Its
+  // new triangles' edges and those of every flip go on the stack (the region is no
+  // convex hull, so flips at p can be needed too, unlike after an insertion); at the end
+  // the front's concave corners are filled, which leaves the convex hull. With every
+  // free edge then locally Delaunay under the perturbed rule, this is the unique
+  // triangulation, as by insertion (§4.2.5).
+  Status sweep(i32 k) {
+    i32 n = (i32)pt.size();
+    fnext.assign(n, -1); fprev.assign(n, -1); fedge.assign(n, -1);
+    sweeping = true;
+    for (i32 j = 0; j + 1 < k; ++j) {
+      i32 t = add_triangle(j, j + 1, k);
+      if (j > 0) { T[t + 2] = t - 2; T[t - 2] = t + 2; }
+    }
+    i32 left = 0, right = k - 1;
+    fnext[0] = k; fprev[k] = 0; fedge[0] = 2;
+    fnext[k] = k - 1; fprev[k - 1] = k; fedge[k] = 3 * (k - 2) + 1;
+    if (pt[k].x == pt[0].x) { left = k; fprev[k] = -1; }
+    if (pt[k].x == pt[k - 1].x) { right = k; fnext[k] = -1; }
+    // where a row's first vertex meets the front: a front vertex recently seen near
+    // its x, by buckets of x (one inserted vertex each, the last; checked still there)
+    i32 x0 = pt[0].x, span = pt[k - 1].x - x0 + 1;
+    int shift = 0;
+    while ((i64)(span >> shift) * (span >> shift) > 4 * (i64)n) ++shift;
+    std::vector<i32> bucket((span >> shift) + 1, -1);
+    bucket[0] = left;
+    bucket[(pt[k].x - x0) >> shift] = k;
+    i32 cur = k;
+    for (i32 p = k + 1; p < n; ++p) {
+      i32 px = pt[p].x;
+      // the front edge (l, fnext[l]) below p: l.x <= p.x < r.x, or r the right end at p.x
+      i32 l = cur;
+      if (pt[p].y != pt[cur].y) {
+        i32 b = bucket[(px - x0) >> shift];
+        if (b >= 0 && fnext[b] != -2) l = b;
+      }
+      if (pt[l].x > px) { do l = fprev[l]; while (pt[l].x > px); }
+      else { while (fnext[l] >= 0 && pt[fnext[l]].x <= px) l = fnext[l]; }
+      if (l == right) l = fprev[l];
+      i32 r = fnext[l];
+      i32 t = add_triangle(l, r, p);
+      link(t, fedge[l], 0);
+      stack.push_back(t);
+      // front: l, p, r
+      fnext[l] = p; fprev[p] = l; fnext[p] = r; fprev[r] = p;
+      fedge[l] = t + 2; fedge[p] = t + 1;
+      if (pt[r].x == px) {  // r the right end, straight below p: p replaces it
+        fnext[p] = -1; right = p; fnext[r] = -2;
+      }
+      if (pt[l].x == px) {  // straight above l: l leaves the front
+        if (l == left) { left = p; fprev[p] = -1; fnext[l] = -2; }
+        else fill(fprev[l]);
+      }
+      // right: (p, r, rr) while r lies below p-rr and the angle at r is narrow
+      for (;;) {
+        i32 r1 = fnext[p];
+        if (r1 < 0) break;
+        i32 r2 = fnext[r1];
+        if (r2 < 0 || orient(p, r1, r2) <= 0) break;
+        if (!narrow_at(r1, p, r2)) break;
+        fill(p);
+      }
+      for (;;) {
+        i32 l1 = fprev[p];
+        if (l1 < 0) break;
+        i32 l2 = fprev[l1];
+        if (l2 < 0 || orient(l2, l1, p) <= 0) break;
+        if (!narrow_at(l1, p, l2)) break;
+        fill(l2);
+      }
+      cur = p;
+      if (!legalise()) {
+        sweeping = false;
+        return CDT_INTERNAL;
+      }
+      bucket[(px - x0) >> shift] = p;
+    }
+    // the front made convex (the hull's upper chain)
+    i32 a = left;
+    while (fnext[a] >= 0 && fnext[fnext[a]] >= 0) {
+      i32 b = fnext[a], c = fnext[b];
+      if (orient(a, b, c) > 0) {
+        fill(a);
+        if (fprev[a] >= 0) a = fprev[a];
+      } else {
+        a = b;
+      }
+    }
+    sweeping = false;
+    last = cur;
+    return legalise() ? CDT_OK : CDT_INTERNAL;
   }
 
   // Insert the vertices of `keys` (insertion_order's) below `end`, one by one with
@@ -374,8 +575,8 @@ class CDT {
       if (t < 0) return CDT_INTERNAL;
       if (on >= 0) split_edge(on, p);
       else split_triangle(t, p);
-      legalise(true);
       last = p;
+      if (!legalise(true)) return CDT_INTERNAL;
     }
     return CDT_OK;
   }
@@ -524,7 +725,9 @@ class CDT {
     return -1;
   }
 
-  std::vector<i32> queue;  // constrain's crossed edges (kept: no allocation per segment)
+  // constrain's crossed edges (kept: no allocation per segment): (u, w, a half-edge of
+  // u-w when queued, which is still one unless a flip moved the edge to another slot)
+  std::vector<i32> queue;
 
   // Make the segment a-b an edge (cutting it at the vertices on it).
   Status constrain(i32 a, i32 b) {
@@ -553,6 +756,7 @@ class CDT {
         i32 u = V[h], w = V[nxt(h)];
         queue.push_back(u);
         queue.push_back(w);
+        queue.push_back(h);
         i32 v = V[prv(f)];
         if (v == b) { end = b; break; }
         i64 ov = orient(a, b, v);
@@ -571,9 +775,9 @@ class CDT {
       i64 guard = 0, limit = 64 + 8 * (i64)queue.size() * (i64)queue.size();
       while (head < queue.size()) {
         if (++guard > limit) return CDT_INTERNAL;
-        i32 u = queue[head], w = queue[head + 1];
-        head += 2;
-        i32 e = find_edge(u, w);
+        i32 u = queue[head], w = queue[head + 1], e = queue[head + 2];
+        head += 3;
+        if (!((V[e] == u && V[nxt(e)] == w) || (V[e] == w && V[nxt(e)] == u))) e = find_edge(u, w);
         if (e < 0) return CDT_INTERNAL;
         i32 f = T[e];
         if (f < 0) return CDT_INTERNAL;
@@ -584,10 +788,11 @@ class CDT {
           // that a later flip refills is pushed again by that flip)
           stack.push_back(e); stack.push_back(nxt(e)); stack.push_back(prv(e));
           stack.push_back(nxt(f)); stack.push_back(prv(f));
-          if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); }
+          if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); queue.push_back(e); }
         } else {
           queue.push_back(u);
           queue.push_back(w);
+          queue.push_back(e);
         }
         if (head > 4096 && head * 2 > queue.size()) {
           queue.erase(queue.begin(), queue.begin() + head);
@@ -603,17 +808,21 @@ class CDT {
   }
 
   // Incremental use (codec._cdt.Triangulation): the last vertex inserted, where the
-  // next point location walk starts.
+  // next point location walk starts; broken after an internal error (a bug), after
+  // which insert refuses everything.
   i32 last = 0;
+  bool broken = false;
 
   // Insert k points (xy, k x 2) inside the hull as vertices pt.size(), pt.size() + 1,
   // ... in their order, with Lawson flips (no segment is flipped): the constrained
   // triangulation of §4.2.5 of all the points. All are checked first (coordinates,
   // inside the hull, no position twice), so that *done counts those before the first
   // refused one (whose status is returned), and only those go in; they go in the order
-  // of insertion_order, so that the walks are short whatever order they come in.
+  // of insertion_order, so that the walks are short whatever order they come in. After
+  // CDT_INTERNAL (a bug), *done counts the points that went in, those with vinc set.
   Status insert(const i64* xy, i64 k, i64* done) {
     *done = 0;
+    if (broken) return CDT_INTERNAL;
     if (V.empty()) return k ? CDT_OUTSIDE : CDT_OK;
     i64 first = (i64)pt.size(), limit = k;
     Status status = CDT_OK;
@@ -651,7 +860,13 @@ class CDT {
     pt.resize(first + limit);
     vinc.resize(first + limit);
     Status st = insert_in_order(keys, first + limit);
-    if (st != CDT_OK) return st;
+    if (st != CDT_OK) {
+      // a bug: the points that went in (vinc set) are no prefix of the batch, and the
+      // others are vertices of no triangle; nothing more is done with this one
+      broken = true;
+      for (i64 j = first; j < first + limit; ++j) *done += vinc[j] >= 0;
+      return st;
+    }
     *done = limit;
     return status;
   }
@@ -755,7 +970,7 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool stri
         st = cdt->constrain(a, b);
         if (st != CDT_OK) return st;
       }
-      cdt->legalise();  // around the flips that forced the segments in
+      if (!cdt->legalise()) return CDT_INTERNAL;  // around the flips that forced the segments in
     }
     *flips = cdt->flips;
     return CDT_OK;

@@ -120,8 +120,8 @@ def by_triangle(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     """delaunay's triangles (not in canonical order) by Shewchuk's Triangle and the
     canonical flip pass: the construction ATM.md §4.2.5 describes, independent of the
     kernel (tests and benchmarks compare the two; the codec itself uses the kernel,
-    which is 3-6x faster). Crossing segments are refused as by delaunay; a repeated
-    vertex is dropped by Triangle (delaunay refuses it).
+    7-8x faster on a band's vertices). Crossing segments are refused as by delaunay; a
+    repeated vertex is dropped by Triangle (delaunay refuses it).
 
     Triangle's exact arithmetic is skipped where that provably changes nothing
     (exact=True keeps it, for tests: the result is identical).

@@ -16,7 +16,7 @@ from codec import container
 from codec.coding import canonical_triangles
 from codec.errors import ATMError
 from codec.mesh import segments
-from codec.triangulate import by_triangle as triangle_and_pass, delaunay
+from codec.triangulate import by_triangle as triangle_and_pass, delaunay, split_at_vertices
 from tests.test_canonical import local_rule_holds, perturbed_delaunay
 
 CONFORMANCE = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
@@ -31,6 +31,19 @@ def ring_points(r2: int) -> np.ndarray:
     """The lattice points on the circle x^2 + y^2 = r2 (all cocircular)."""
     r = int(np.sqrt(r2))
     return np.array([(x, y) for x in range(-r, r + 1) for y in range(-r, r + 1) if x * x + y * y == r2])
+
+
+def some_walls(draw, rng: np.random.Generator, pts: np.ndarray) -> np.ndarray | None:
+    """None, or a few edges of a triangulation of a subset of pts (vertex index pairs):
+    walls that never cross but may pass over other vertices."""
+    if len(pts) < 6 or not draw(st.booleans()):
+        return None
+    sub = rng.permutation(len(pts))[: max(4, len(pts) // 3)]
+    try:
+        tris = by_triangle(pts[sub], None)
+    except ATMError:
+        return None
+    return sub[tris[rng.permutation(len(tris))[: draw(st.integers(1, 8))], :2]] if len(tris) else None
 
 
 @st.composite
@@ -56,16 +69,7 @@ def point_sets(draw) -> tuple[np.ndarray, np.ndarray | None]:
     pts = np.unique(pts, axis=0) * draw(st.sampled_from([1, 3, 4097, 1 << 20]))
     pts = pts + draw(st.sampled_from([0, 1 << 27]))
     pts = pts[rng.permutation(len(pts))]
-    walls = None
-    if len(pts) >= 6 and draw(st.booleans()):
-        sub = rng.permutation(len(pts))[: max(4, len(pts) // 3)]
-        try:
-            tris = by_triangle(pts[sub], None)
-        except ATMError:
-            tris = np.zeros((0, 3), np.int64)
-        if len(tris):
-            walls = sub[tris[rng.permutation(len(tris))[: draw(st.integers(1, 8))], :2]]
-    return pts, walls
+    return pts, some_walls(draw, rng, pts)
 
 
 @settings(max_examples=300, deadline=None)
@@ -325,3 +329,94 @@ def test_the_encoder_triangulates_with_the_kernel_alone(corpus, monkeypatch):
                          (depth, {"max_error": 2.0})]:
         data = codec.encode(img, **options)
         codec.decode(data)
+
+
+@st.composite
+def band_point_sets(draw) -> tuple[np.ndarray, np.ndarray | None]:
+    """Vertices as a decoder has them (ATM.md §4.2.2): in raster order, with their
+    bounding box's corners among them (a band's corners are vertices), which is what
+    the kernel's sweep-line takes: ties (lattices, cocircular rings, few-valued grids),
+    runs of collinear vertices on one row, all vertices on two rows, one vertex a row,
+    vertices straight above the first row's ends, extents on both sides of the 64-bit
+    incircle's 2^14 and up to 2^28; and walls, as in point_sets."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    kind = draw(st.sampled_from(["lattice", "rings", "grid", "rows", "two rows", "one a row", "sides"]))
+    if kind in ("lattice", "rings", "grid"):
+        pts = draw(point_sets())[0].reshape(-1, 2)
+        pts = pts - pts.min(axis=0, initial=0)
+    elif kind == "rows":  # long collinear runs, rows far apart or adjacent
+        w = draw(st.integers(2, 60))
+        rows = np.unique(rng.integers(0, draw(st.integers(1, 40)), draw(st.integers(1, 8))))
+        pts = np.concatenate([np.stack([xs, np.full(len(xs), y)], 1) for y in rows
+                              for xs in [np.unique(rng.integers(0, w, draw(st.integers(1, 20))))]])
+    elif kind == "two rows":
+        w, gap = draw(st.integers(1, 40)), draw(st.integers(1, 30))
+        pts = np.concatenate([np.stack([xs, np.full(len(xs), y)], 1) for y in (0, gap)
+                              for xs in [np.unique(rng.integers(0, w + 1, draw(st.integers(1, 30))))]])
+    elif kind == "one a row":
+        h = draw(st.integers(1, 60))
+        pts = np.stack([rng.integers(0, draw(st.integers(1, 50)), h), np.arange(h)], 1)
+    else:  # many vertices on the left and right columns, straight above the ends
+        w, h = draw(st.integers(1, 30)), draw(st.integers(1, 30))
+        side = rng.integers(0, h + 1, (draw(st.integers(0, 30)),))
+        inner = rng.integers(0, [w + 1, h + 1], (draw(st.integers(0, 30)), 2))
+        pts = np.concatenate([np.stack([np.where(rng.random(len(side)) < 0.5, 0, w), side], 1), inner])
+    pts = np.asarray(pts, np.int64).reshape(-1, 2)
+    if kind not in ("lattice", "rings", "grid"):
+        pts = pts * draw(st.sampled_from([1, 2, 1639, 4097, 1 << 20]))
+    if len(pts) == 0:
+        pts = np.zeros((1, 2), np.int64)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [lo[0], hi[1]], [hi[0], hi[1]]])
+    pts = np.unique(np.concatenate([pts, corners]), axis=0) + draw(st.sampled_from([0, 5, 1 << 27]))
+    pts = pts[np.lexsort((pts[:, 0], pts[:, 1]))]
+    return pts, some_walls(draw, rng, pts)
+
+
+@settings(max_examples=400, deadline=None)
+@given(band_point_sets())
+def test_the_sweep_gives_the_triangles_of_insertion_and_of_triangle(case):
+    """Raster-ordered vertices whose first row holds the smallest and largest x (the
+    sweep-line's input): the same triangles as the same vertices shuffled (built by
+    insertion), and as Triangle after the canonical pass; every free edge locally
+    Delaunay under the perturbed rule."""
+    pts, walls = case
+    out = delaunay(pts, walls)
+    np.testing.assert_array_equal(out, by_triangle(pts, walls))
+    shuffle = np.random.default_rng(len(pts)).permutation(len(pts))
+    where = np.empty_like(shuffle)
+    where[shuffle] = np.arange(len(pts))  # raster index -> shuffled index
+    by_insertion = delaunay(pts[shuffle], None if walls is None else where[walls])
+    np.testing.assert_array_equal(out, canonical_triangles(shuffle[by_insertion]))
+    if len(out):  # the walls as the kernel keeps them: cut at the vertices on them
+        cut = None if walls is None else split_at_vertices(pts, walls, int(pts[:, 0].max()) + 1)
+        assert local_rule_holds(pts, out, cut)
+
+
+def test_a_lawson_pass_that_does_not_end_is_reported():
+    """A flip loop that would not end (as under a broken predicate) is stopped by its
+    bound and reported as an internal error, in the sweep-line (start) and in an
+    insertion; the points of a batch that went in before it are the ones reported,
+    and the triangulation refuses further work."""
+    from codec import _cdt
+
+    gx, gy = np.meshgrid(np.arange(0, 40, 3), np.arange(0, 40, 4))
+    grid = np.stack([gx.ravel(), gy.ravel()], 1)
+    rng = np.random.default_rng(3)
+    scattered = np.unique(rng.integers(0, 40, (60, 2)), axis=0)
+    band = np.unique(np.concatenate([scattered, [[0, 0], [39, 0], [0, 39], [39, 39]]]), axis=0)
+    band = band[np.lexsort((band[:, 0], band[:, 1]))]
+    tri = _cdt.Triangulation()
+    tri._limit_flips(0)
+    assert tri.start(np.ascontiguousarray(band)) == _cdt.INTERNAL
+    tri = _cdt.Triangulation()
+    assert tri.start(np.array([[0, 0], [40, 0], [0, 40], [40, 40]])) == _cdt.OK
+    tri._limit_flips(2)
+    points = np.ascontiguousarray(rng.permutation(grid[(grid % 40 != 0).all(axis=1)]))
+    status, went_in = tri.insert(points)
+    assert status == _cdt.INTERNAL
+    corners_of = set(tri.triangles().ravel().tolist())
+    assert 0 < len(went_in) < len(points)
+    assert set(went_in.tolist()) == corners_of - {0, 1, 2, 3}
+    assert tri.insert(np.array([[1, 1]]))[0] == _cdt.INTERNAL
+    assert tri.constrain(np.array([[0, 3]])) == _cdt.INTERNAL
