@@ -99,7 +99,9 @@ def render(mesh: Mesh, *, tiles: bool = False) -> np.ndarray:
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.int64)
     values = np.ascontiguousarray(mesh.values).reshape(len(vertices), c)
     triangles = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
-    out = np.empty((h * w, c), dtype=mesh.dtype)
+    # zeroed, not empty: with tiles=True only the count of written pixels is checked, so
+    # should a broken mesh ever pass validation, no stale memory reaches the caller
+    out = np.zeros((h * w, c), dtype=mesh.dtype)
     check = _TOTAL if tiles else _SPANS
     status, detail = _rasterise.rasterise(vertices, values, triangles, out, w, h, check)
     if status:

@@ -270,6 +270,23 @@ def test_cpu_tiles_path_still_counts_the_pixels() -> None:
         decoder_cpu.render(doubled, tiles=True)
 
 
+def test_cpu_tiles_path_never_returns_stale_memory() -> None:
+    """A mesh whose repeated triangle writes exactly as many pixels as its missing one
+    leaves unwritten passes the tiles=True count: those pixels must then hold zeros,
+    never what the memory held before (the output was np.empty: with a freed buffer of
+    the same size filled first, its bytes came back)."""
+    v = np.array([[0, 0], [4, 0], [2, 2], [0, 4], [4, 4]])
+    values = np.array([10, 20, 30, 40, 50], np.uint8)
+    top, left, right = [0, 1, 2], [0, 2, 3], [1, 4, 2]  # the bottom one (2, 4, 3) missing
+    mesh = Mesh(v, values, np.array([top, left, right, top]), 5, 5)
+    for _ in range(20):
+        stale = np.full((25, 1), 0xEE, np.uint8)
+        del stale
+        out = decoder_cpu.render(mesh, tiles=True)
+        assert not (out == 0xEE).any()
+        assert (out[3, 1:3] == 0).all() and (out[4] == 0).all() and (out[:3] != 0).all()
+
+
 def _holed(mesh: Mesh) -> Mesh:
     """The mesh without its first triangle (a hole)."""
     return Mesh(mesh.vertices, mesh.values, mesh.triangles[1:], mesh.width, mesh.height)
