@@ -325,7 +325,8 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
 def _whole(rows: np.ndarray, shape: tuple, dtype: np.dtype) -> bool:
     """Whether rows, as the decoder made them (no other reference to their memory),
     can be the decoded image itself."""
-    return rows.shape == shape and rows.dtype == dtype and rows.flags.c_contiguous and rows.flags.writeable
+    flags = rows.flags
+    return rows.shape == shape and rows.dtype == dtype and flags.c_contiguous and flags.writeable and flags.owndata
 
 
 __all__ = [

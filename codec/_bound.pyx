@@ -47,9 +47,11 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
     a vertex lies outside the image, or the image has more than 2**32 pixels (the exact
     arithmetic's bound, as the decoder's)."""
     cdef int64_t n = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
-    cdef int64_t npix = width * height
-    if width < 1 or height < 1 or npix > (<int64_t>1) << 32:
+    cdef int64_t npix
+    # the bound checked before the product, which could wrap
+    if width < 1 or height < 1 or width > ((<int64_t>1) << 32) // height:
         raise ValueError("measure: an image of 1 to 2**32 pixels")
+    npix = width * height
     if vertices.shape[1] != 2 or triangles.shape[1] != 3 or values.shape[0] != n or c < 1 or c > 4:
         raise ValueError("measure: N x 2 vertices, N x C values (C <= 4), M x 3 triangles")
     if reference.shape[0] != npix or reference.shape[1] != c or worst.shape[0] != npix:

@@ -26,7 +26,8 @@ and n*e / (d * 2**s) < V*d*d / (d * 2**s) <= 1/d. And n*M < V*2**s + V*d.
 Triangles beyond those bounds (d2 over 2**23 for 8-bit samples, 2**15 for 16-bit: 2
 million and 8,192 pixels; taller edges, or over 2**16 rows; images 2**22 wide), with a
 corner in the last column (where the rule needs to know whether the right edge is
-exactly on a column), and those of colour images take the general walk: edges as
+exactly on a column) take the general walk (colour triangles too: their fixed-point
+walk is _triangle_colour's, with the same bounds): edges as
 quotient and remainder over their rows (one float64 division per edge, corrected to
 the exact floor), planes in fixed point or, when too large, as quotient and remainder
 (one division per span and a carry per pixel). Bounds: with W*H <= 2**32 and samples
@@ -560,6 +561,9 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     cdef int status
     if c > 4 or c < 1 or values.shape[0] != nv or vertices.shape[1] != 2:
         raise ValueError("rasterise: 1 to 4 channels, one row of values per vertex")
+    # W*H <= 2**32 (the exact arithmetic's bound), checked before the product could wrap
+    if width < 1 or height < 1 or width > ((<int64_t>1) << 32) // height:
+        raise ValueError("rasterise: an image of 1 to 2**32 pixels")
     if triangles.shape[1] != 3 or out.shape[0] != width * height or out.shape[1] != c:
         raise ValueError("rasterise: M x 3 triangles and an H*W x C output")
     if width < 1 or height < 1:

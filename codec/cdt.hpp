@@ -772,7 +772,9 @@ class CDT {
       // Sloan: flip each crossing edge whose quadrilateral is strictly convex; a new
       // diagonal that still crosses goes back in the queue
       size_t head = 0;
-      i64 guard = 0, limit = 64 + 8 * (i64)queue.size() * (i64)queue.size();
+      // 8 (2k)^2 for k crossed edges, as when an edge took two queue entries (now three)
+      i64 crossed = (i64)queue.size() / 3;
+      i64 guard = 0, limit = 64 + 32 * crossed * crossed;
       while (head < queue.size()) {
         if (++guard > limit) return CDT_INTERNAL;
         i32 u = queue[head], w = queue[head + 1], e = queue[head + 2];

@@ -101,14 +101,15 @@ def render(mesh: Mesh, *, tiles: bool = False) -> np.ndarray:
     triangles = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
     # zeroed, not empty: with tiles=True only the count of written pixels is checked, so
     # should a broken mesh ever pass validation, no stale memory reaches the caller
-    out = np.zeros((h * w, c), dtype=mesh.dtype)
+    # (the image's own shape, so that the result owns its memory: a decode may return it)
+    image = np.zeros((h, w) if c == 1 else (h, w, c), dtype=mesh.dtype)
     check = _TOTAL if tiles else _SPANS
-    status, detail = _rasterise.rasterise(vertices, values, triangles, out, w, h, check)
+    status, detail = _rasterise.rasterise(vertices, values, triangles, image.reshape(h * w, c), w, h, check)
     if status:
         _refuse(status, detail, w, h, len(vertices))
     # no clipping needed: in a triangle every value is a convex combination of values of
     # the dtype, and round-half-up of such a mean stays within the dtype
-    return out.reshape((h, w) if c == 1 else (h, w, c))
+    return image
 
 
 def _refuse(status: int, detail: int, w: int, h: int, n: int) -> None:

@@ -275,11 +275,12 @@ def without_vertices(mesh: Mesh, keep: np.ndarray) -> Mesh:
     remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
     remap[keep] = np.arange(int(np.count_nonzero(keep)))
     constraints = []
-    if mesh.constraints:
+    lines = [line for line in mesh.constraints if len(line)]  # an empty one keeps nothing
+    if lines:
         # the runs of kept vertices within each polyline, found for all at once (a loop
         # over a 2048² band's thousands of walls took 20 ms)
-        lengths = np.array([len(line) for line in mesh.constraints], dtype=np.int64)
-        mapped = remap[np.concatenate(mesh.constraints).astype(np.int64, copy=False)]
+        lengths = np.array([len(line) for line in lines], dtype=np.int64)
+        mapped = remap[np.concatenate(lines).astype(np.int64, copy=False)]
         kept = mapped >= 0
         first = np.zeros(len(mapped), bool)
         first[np.cumsum(lengths)[:-1]] = True

@@ -150,3 +150,15 @@ def test_images_over_the_limits_are_refused_before_work(monkeypatch):
     monkeypatch.setattr(limits, "MAX_IMAGE_PIXELS", 1000)
     with pytest.raises(codec.LimitError, match="1,200 pixels"):
         codec.decode(data)
+
+
+@pytest.mark.parametrize("options", [dict(points=200), dict(max_error=3), dict(max_error=3, residual=False)])
+def test_decode_returns_an_array_of_its_own(options):
+    """A one-band file's render is returned as the decoded image without a copy: it must
+    still be an array that owns its memory, as a freshly made image is (resizable,
+    sharing nothing with another decode)."""
+    image = (np.arange(40 * 30).reshape(30, 40) % 97).astype(np.uint8)
+    data = codec.encode(image, **options)
+    a, b = codec.decode(data), codec.decode(data)
+    assert a.flags.owndata and a.flags.writeable and not np.shares_memory(a, b)
+    a.resize((10, 4), refcheck=False)

@@ -171,3 +171,15 @@ def test_refinement_measures_only_what_a_round_changed(monkeypatch):
     assert len(rounds) > 5 and rounds[0][0] == rounds[0][1]
     assert sum(m for _, m in rounds) < 0.5 * sum(t for t, _ in rounds)
     assert rounds[-1][1] < 0.1 * rounds[-1][0]
+
+
+def test_measure_refuses_a_size_whose_pixel_count_wraps():
+    """width * height = 2**64 wraps to 0 in int64: the kernel took that for a small
+    image and wrote far outside its buffers (a crash); it must refuse the size."""
+    from codec.native import _bound
+
+    v = np.array([[0, 0], [3000, 0], [0, 3000]], np.int64)
+    values = np.array([[1], [2], [3]], np.int64)
+    t = np.array([[0, 1, 2]], np.int64)
+    with pytest.raises(ValueError, match="2\\*\\*32 pixels"):
+        _bound.measure(v, values, t, None, np.zeros((0, 1), np.uint8), None, np.zeros(0), None, 1 << 32, 1 << 32)

@@ -527,3 +527,16 @@ def test_a_decode_returns_an_array_of_its_own(corpus) -> None:
     assert not np.array_equal(a, b)
     whole = codec.decode_mesh(one)
     assert np.array_equal(b, decoder_cpu.render(whole))
+
+
+def test_rasteriser_refuses_a_size_whose_pixel_count_wraps() -> None:
+    """width * height = 2**64 wraps to 0 in int64, which matched an empty output: the
+    kernel then wrote far outside it (a crash); the size must be refused."""
+    from codec.native import _rasterise
+
+    v = np.array([[0, 0], [3000, 0], [0, 3000]], np.int64)
+    values = np.array([[1], [2], [3]], np.uint8)
+    t = np.array([[0, 1, 2]], np.int64)
+    for check in (_rasterise.Check.CHECK_TOTAL, _rasterise.Check.CHECK_SPANS):
+        with pytest.raises(ValueError, match="2\\*\\*32 pixels"):
+            _rasterise.rasterise(v, values, t, np.zeros((0, 1), np.uint8), 1 << 32, 1 << 32, check)

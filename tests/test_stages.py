@@ -351,3 +351,16 @@ def test_walls_through_vertices_are_regrouped_as_the_loop_did() -> None:
                     expected.append(np.append(pieces[run, 0], pieces[run[-1], 1]))
         assert len(got) == len(expected)
         assert all(np.array_equal(a, b) for a, b in zip(got, expected))
+
+
+def test_without_vertices_takes_empty_polylines():
+    """An empty polyline keeps nothing; the vectorised runs indexed past the end on it
+    (IndexError) where the loop it replaced skipped it."""
+    from codec.mesh import Mesh, without_vertices
+
+    v = np.array([[0, 0], [1, 0], [0, 1], [1, 1]])
+    empty = np.array([], np.int64)
+    for walls in ([np.array([0, 1, 3]), empty], [empty], [empty, np.array([0, 1, 3]), empty]):
+        mesh = Mesh(v, np.zeros(4, np.uint8), np.zeros((0, 3), np.int64), 2, 2, walls, None)
+        kept = without_vertices(mesh, np.array([1, 1, 0, 1], bool))
+        assert [c.tolist() for c in kept.constraints] == ([[0, 1, 2]] if len(walls) > 1 else [])
