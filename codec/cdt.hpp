@@ -33,6 +33,7 @@ enum Status {
   CDT_INTERNAL = 6,   // a broken invariant (a bug, never a file's fault)
   CDT_OVER = 7,       // (strict) a segment passes over a vertex, so it is no edge
   CDT_OUTSIDE = 8,    // a point inserted outside the triangulated hull
+  CDT_BUDGET = 9,     // (inside build() only) the sweep-line ran over its flips
 };
 
 //: Largest coordinate extent accepted: differences below 2^28 keep incircle's products
@@ -95,6 +96,7 @@ class Slots {
  public:
   size_t size() const { return n_; }
   bool empty() const { return n_ == 0; }
+  void clear() { n_ = 0; }
   X& operator[](size_t i) { return a_[i]; }
   const X& operator[](size_t i) const { return a_[i]; }
   X* data() { return a_.get(); }
@@ -401,7 +403,16 @@ class CDT {
       while (k < n && pt[k].y == pt[0].y) ++k;
       i32 xmin = pt[0].x, xmax = pt[0].x;
       for (i32 i = 1; i < n; ++i) { xmin = std::min(xmin, pt[i].x); xmax = std::max(xmax, pt[i].x); }
-      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) return sweep(k);
+      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) {
+        Status st = sweep(k);
+        if (st != CDT_BUDGET) return st;
+        // an input the sweep takes quadratic time on (a long first row fanned from one
+        // vertex: a file of 200 bytes took minutes): start again by insertion, whose
+        // expected time does not depend on the input
+        V.clear(); T.clear(); C.clear(); stack.clear();
+        vinc.assign(n, -1);
+        dirty.clear(); old.clear(); std::fill(dirty_mark.begin(), dirty_mark.end(), 0);
+      }
     }
     std::vector<i32> ranked;
     if (!in_order) {
@@ -480,6 +491,11 @@ class CDT {
   // triangulation, as by insertion (§4.2.5).
   Status sweep(i32 k) {
     i32 n = (i32)pt.size();
+    // at most SWEEP_FLIPS flips a vertex (a band's sweep makes under one), else
+    // CDT_BUDGET: build() then inserts instead
+    const i64 budget = SWEEP_FLIPS * (i64)n + 4096, before_flips = flips, saved_limit = flip_limit;
+    if (flip_limit < 0 || flip_limit > budget) flip_limit = budget;
+    auto over = [&]() { return flips - before_flips > budget; };
     fnext.assign(n, -1); fprev.assign(n, -1); fedge.assign(n, -1);
     sweeping = true;
     for (i32 j = 0; j + 1 < k; ++j) {
@@ -543,9 +559,11 @@ class CDT {
         fill(l2);
       }
       cur = p;
-      if (!legalise()) {
+      bool done = legalise();
+      if (!done || over()) {
         sweeping = false;
-        return CDT_INTERNAL;
+        flip_limit = saved_limit;
+        return CDT_BUDGET;  // (a test's smaller flip_limit fails again in insertion)
       }
       bucket[(px - x0) >> shift] = p;
     }
@@ -562,8 +580,12 @@ class CDT {
     }
     sweeping = false;
     last = cur;
-    return legalise() ? CDT_OK : CDT_INTERNAL;
+    bool done = legalise();
+    flip_limit = saved_limit;
+    if (!done || over()) return CDT_BUDGET;
+    return CDT_OK;
   }
+  static const i64 SWEEP_FLIPS = 16;
 
   // Insert the vertices of `keys` (insertion_order's) below `end`, one by one with
   // Lawson flips, each walk starting from the last one's triangle.

@@ -426,3 +426,22 @@ def test_a_lawson_pass_that_does_not_end_is_reported():
     assert set(went_in.tolist()) == corners_of - {0, 1, 2, 3}
     assert tri.insert(np.array([[1, 1]]))[0] == _cdt.INTERNAL
     assert tri.constrain(np.array([[0, 3]])) == _cdt.INTERNAL
+
+
+def test_a_long_first_row_costs_linear_flips():
+    """The sweep-line fans a band's first row from the next vertex: a long row with that
+    vertex at one end needs a quadratic number of flips (a 201-byte file of two rows,
+    37,420 and 22,580 vertices, took minutes to decode; the fuzzer found it). The
+    sweep has a flip budget and the triangulation is then made by insertion: the same
+    triangles, in linear time."""
+    from codec import _cdt
+
+    for k in (300, 20000):
+        x = np.arange(k)
+        pts = np.concatenate([np.stack([x, 0 * x], 1), np.stack([x[: k * 3 // 5], 0 * x[: k * 3 // 5] + 1], 1)])
+        pts = np.ascontiguousarray(pts, dtype=np.int64)
+        status, tris, flips = _cdt.triangulate(pts, np.zeros((0, 2), np.int64), True)
+        assert status == _cdt.OK
+        assert flips < 60 * len(pts)  # the sweep alone made len(pts)**2 / 4
+        if k == 300:
+            np.testing.assert_array_equal(tris, canonical_triangles(triangle_and_pass(pts)))
