@@ -54,6 +54,7 @@ pixel uncovered or covered twice."""
 
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
 from libc.stdlib cimport calloc, free, malloc
+from libc.string cimport memcpy
 
 ctypedef fused sample_t:
     uint8_t
@@ -158,6 +159,87 @@ cdef inline void _write1(sample_t* p, uint64_t a, uint64_t step, int64_t lo, int
         else:
             p[x] = <sample_t>(a >> 46)
         a += step
+
+
+cdef extern from *:
+    """
+    /* Eight 8-bit samples (v + k*s) >> 54, k = 0..7, in one little-endian word: with
+       SSE2 (every x86-64) four 2-lane adds and shifts and three packs instead of some
+       thirty scalar operations; elsewhere the scalar form. A sample beyond a span may
+       reach 10 bits: the packs saturate it, the scalar form carries it into the later
+       bytes, which the caller masks out with it. */
+    #if defined(__SSE2__) || defined(_M_X64) || defined(_M_AMD64)
+    #include <emmintrin.h>
+    static inline uint64_t atm_pack8_u8(uint64_t v, uint64_t s) {
+        __m128i st = _mm_set1_epi64x((long long)s);
+        __m128i st2 = _mm_add_epi64(st, st), st4;
+        __m128i x0 = _mm_set_epi64x((long long)(v + s), (long long)v), x1, x2, x3;
+        st4 = _mm_add_epi64(st2, st2);
+        x1 = _mm_add_epi64(x0, st2);
+        x2 = _mm_add_epi64(x0, st4);
+        x3 = _mm_add_epi64(x1, st4);
+        /* each 64-bit lane now below 2**10, so its high half is 0 and the signed
+           32 -> 16-bit packs keep the values */
+        x0 = _mm_packs_epi32(_mm_srli_epi64(x0, 54), _mm_srli_epi64(x1, 54));
+        x2 = _mm_packs_epi32(_mm_srli_epi64(x2, 54), _mm_srli_epi64(x3, 54));
+        x0 = _mm_packs_epi32(x0, x2);
+        return (uint64_t)_mm_cvtsi128_si64(_mm_packus_epi16(x0, x0));
+    }
+    #else
+    static inline uint64_t atm_pack8_u8(uint64_t v, uint64_t s) {
+        uint64_t w = 0;
+        int k;
+        for (k = 0; k < 8; k++, v += s)
+            w |= (v >> 54) << (8 * k);
+        return w;
+    }
+    #endif
+    """
+    uint64_t atm_pack8_u8(uint64_t v, uint64_t s) noexcept nogil
+
+
+# _MASK[n]: the low n bytes of a word
+cdef uint64_t _MASK[9]
+_MASK[:] = [0, 0xFF, 0xFFFF, 0xFFFFFF, 0xFFFFFFFF, 0xFFFFFFFFFF, 0xFFFFFFFFFFFF, 0xFFFFFFFFFFFFFF,
+            0xFFFFFFFFFFFFFFFF]
+
+
+cdef inline uint64_t _pack(uint64_t a, uint64_t s, int shift, int bits) noexcept nogil:
+    """The 64 // bits samples from the fixed-point value `a`, `s` per sample, in one
+    little-endian word. A sample the span does not reach may exceed `bits`: its excess
+    carries only into the later samples, which the caller masks out with it."""
+    cdef uint64_t s2 = s + s, a1 = a + s, a2 = a + s2, a3 = a1 + s2, w
+    w = (a >> shift) | ((a1 >> shift) << bits) | ((a2 >> shift) << (2 * bits)) | ((a3 >> shift) << (3 * bits))
+    if bits == 8:
+        s2 += s2
+        w |= ((a + s2) >> shift) << 32 | ((a1 + s2) >> shift) << 40 | ((a2 + s2) >> shift) << 48 | ((a3 + s2) >> shift) << 56
+    return w
+
+
+cdef inline void _put8(sample_t* p, uint64_t a, uint64_t s, int64_t n) noexcept nogil:
+    """Samples 0 .. n - 1 (n <= 8) of a one-channel span at p, from the fixed-point value
+    `a`, `s` per sample: the samples of 8 bytes computed at once and merged into the
+    row under a mask, one load and one store, with no exit that depends on n (a span
+    is ~3 pixels, and a loop's exit mispredicted costs more than the span); p + 8 bytes
+    must lie in the image. The bytes beyond the span are written back as they were."""
+    cdef uint64_t old, m, w
+    if sample_t is uint8_t:
+        memcpy(&old, p, 8)
+        m = _MASK[n]
+        w = atm_pack8_u8(a, s)
+        old = (old & ~m) | (w & m)
+        memcpy(p, &old, 8)
+    else:
+        memcpy(&old, p, 8)
+        m = _MASK[2 * n if n < 4 else 8]
+        w = _pack(a, s, 46, 16)
+        old = (old & ~m) | (w & m)
+        memcpy(p, &old, 8)
+        memcpy(&old, p + 4, 8)
+        m = _MASK[2 * n - 8 if n > 4 else 0]
+        w = _pack(a + 4 * s, s, 46, 16)
+        old = (old & ~m) | (w & m)
+        memcpy(p + 4, &old, 8)
 
 
 cdef inline void _span(sample_t* p, const Planes* pl, int64_t c, int64_t lo, int64_t hi) noexcept nogil:
@@ -267,6 +349,19 @@ cdef inline uint64_t _reciprocal(int64_t d, int shift) noexcept nogil:
     return <uint64_t>m
 
 
+# _RECIPROCAL[h] = ceil(2**54 / 2h), the plane multiplier of an 8-bit triangle of
+# doubled area h (d2 = 2h): a division per triangle costs more than the rest of its
+# set-up, and nearly all of a decoder's triangles are this small (camera: 99.9 % of
+# them have h <= 255). A 16-bit triangle's, ceil(2**46 / 2h), is (_RECIPROCAL[h] + 255)
+# >> 8, as ceil(ceil(x) / n) = ceil(x / n) for a whole n. Made once, read only.
+cdef enum:
+    _RECIPROCALS = 2048
+cdef uint64_t _RECIPROCAL[_RECIPROCALS + 1]
+_RECIPROCAL[0] = 0
+for _h in range(1, _RECIPROCALS + 1):
+    _RECIPROCAL[_h] = _reciprocal(2 * _h, 54)
+
+
 cdef inline void _fixed_edge(int64_t x0, int64_t dx, int64_t dy, const uint64_t* recip, uint64_t* e,
                              uint64_t* step) noexcept nogil:
     """An edge from column x0 moving dx columns over dy rows in _triangle1's fixed
@@ -278,15 +373,22 @@ cdef inline void _fixed_edge(int64_t x0, int64_t dx, int64_t dy, const uint64_t*
 
 cdef inline int64_t _fixed_edges(int64_t tx, int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by,
                                  int64_t last, const uint64_t* recip, uint64_t* ea, uint64_t* sa, uint64_t* eb,
-                                 uint64_t* sb) noexcept nogil:
-    """The long edge T -> B (ea, sa) and the short one of the first rows (eb, sb): T -> M,
-    or M -> B for a flat top; the row where the short one ends (turns at M, or the
-    triangle's end)."""
+                                 uint64_t* sb, uint64_t* ec, uint64_t* sc) noexcept nogil:
+    """The long edge T -> B (ea, sa), the short one of the first rows (eb, sb: T -> M, or
+    M -> B for a flat top) and the one it turns into at M's row (ec, sc: M -> B, stepped
+    back to T's row, so that every edge steps on every row and a row picks its short
+    edge by a select, not by a second loop whose exit the branch predictor misses: the
+    walk is modulo 2**64 and exact wherever it is read); the row where the short edge
+    turns (M's, or past the triangle's end)."""
     _fixed_edge(tx, bx - tx, by - ty, recip, ea, sa)
     if my > ty:
         _fixed_edge(tx, mx - tx, my - ty, recip, eb, sb)
+        _fixed_edge(mx, bx - mx, by - my, recip, ec, sc)
+        ec[0] -= <uint64_t>(my - ty) * sc[0]
         return my if by > my else last + 1
     _fixed_edge(mx, bx - mx, by - my, recip, eb, sb)
+    ec[0] = eb[0]
+    sc[0] = sb[0]
     return last + 1
 
 
@@ -298,41 +400,58 @@ cdef inline void _ends(uint64_t ea, uint64_t eb, bint long_left, int64_t* lo, in
     hi[0] = cb if long_left else ca
 
 
+cdef inline int64_t _walk1(sample_t* pixels, sample_t* row, uint64_t arow, uint64_t adx, uint64_t ady, int64_t y,
+                           int64_t last, int64_t turn, uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
+                           uint64_t ec, uint64_t sc, bint long_left, bint narrow, int64_t w, int64_t h, int mode,
+                           uint16_t* counts, int64_t* spans, uint8_t* cover) noexcept nogil:
+    """_triangle1's rows y .. last from `row`; `narrow` (a constant at each call, so
+    that the compiler makes a walk without the test): every span has at most 8
+    samples and room for _put8's word."""
+    cdef int64_t lo, hi, written = 0
+    cdef sample_t* short_end = pixels + w * h - 8
+    while y <= last:
+        _ends(ea, eb if y < turn else ec, long_left, &lo, &hi)
+        if narrow or (<uint64_t>(hi - lo) <= 8 and row + lo <= short_end):
+            _put8(row + lo, arow + adx * <uint64_t>lo, adx, hi - lo)
+        else:
+            _write1(row, arow + adx * <uint64_t>lo, adx, lo, hi)
+        written += hi - lo
+        if mode != MODE_TOTAL:
+            _account(mode, y, lo, hi, w, counts, spans, cover)
+        ea += sa
+        eb += sb
+        ec += sc
+        arow += ady
+        row += w
+        y += 1
+    return written
+
+
 cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, uint64_t ady, int64_t tx,
                                int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by, int64_t last,
-                               bint long_left, const uint64_t* recip, int64_t w, int mode, uint16_t* counts,
-                               int64_t* spans, uint8_t* cover) noexcept nogil:
+                               bint long_left, const uint64_t* recip, int64_t w, int64_t h, int mode,
+                               uint16_t* counts, int64_t* spans, uint8_t* cover) noexcept nogil:
     """A triangle of one channel in fixed point, its edges too (most triangles of a
     gray image; none with a corner in the last column, nor a plane too large for the
-    fixed point), its rows walked in locals: the
-    long edge T -> B and the short one, T -> M above M's row and M -> B from there on,
-    each edge's ceiling taken alike and the two ordered by the triangle's orientation
-    (a select, not a call per run of rows). An edge from column x0 moving dx columns
-    over dy rows has ceil(x) = floor(n / dy) on its k-th row, n = x0*dy + dx*k + dy - 1,
-    with 0 <= n < W*dy, read as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when
-    W*dy*dy <= 2**40, as for the planes: see the module's docstring). The pixels
+    fixed point), its rows walked in locals: the long edge T -> B and the short one,
+    T -> M above M's row and M -> B from there on, each edge's ceiling taken alike and
+    the two ordered by the triangle's orientation (selects, not a loop per run of
+    rows). An edge from column x0 moving dx columns over dy rows has ceil(x) =
+    floor(n / dy) on its k-th row, n = x0*dy + dx*k + dy - 1, with 0 <= n < W*dy, read
+    as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when W*dy*dy <= 2**40, as for
+    the planes: see the module's docstring). Short spans take _put8. The pixels
     written."""
-    cdef int64_t lo, hi, y = ty, stop, written = 0
-    cdef uint64_t ea, sa, eb, sb
+    cdef int64_t turn, xmin = min(tx, mx, bx), xmax = max(tx, mx, bx)
+    cdef uint64_t ea, sa, eb, sb, ec, sc
     cdef sample_t* row = pixels + ty * w
-    stop = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb)
-    while True:
-        while y < stop:
-            _ends(ea, eb, long_left, &lo, &hi)
-            _write1(row, arow + adx * <uint64_t>lo, adx, lo, hi)
-            written += hi - lo
-            if mode != MODE_TOTAL:
-                _account(mode, y, lo, hi, w, counts, spans, cover)
-            ea += sa
-            eb += sb
-            arow += ady
-            row += w
-            y += 1
-        if y > last:
-            return written
-        # M's row: the short edge turns there
-        _fixed_edge(mx, bx - mx, by - my, recip, &eb, &sb)
-        stop = last + 1
+    turn = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb, &ec, &sc)
+    # a narrow triangle (most of them): every span is [lo, hi) within [xmin, xmax], so
+    # at most 8 samples, and the last row's word from xmax lies in the image
+    if xmax - xmin <= 8 and last * w + xmax + 8 <= w * h:
+        return _walk1(pixels, row, arow, adx, ady, ty, last, turn, ea, sa, eb, sb, ec, sc, long_left, True, w, h,
+                      mode, counts, spans, cover)
+    return _walk1(pixels, row, arow, adx, ady, ty, last, turn, ea, sa, eb, sb, ec, sc, long_left, False, w, h,
+                  mode, counts, spans, cover)
 
 
 cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t tx, int64_t ty, int64_t mx,
@@ -341,33 +460,29 @@ cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t t
                               uint8_t* cover) noexcept nogil:
     """_triangle1 for C > 1 channels (kept apart: the gray walk keeps its plane in
     registers)."""
-    cdef int64_t lo, hi, ch, x, y = ty, stop, written = 0
-    cdef uint64_t a, ea, sa, eb, sb
+    cdef int64_t lo, hi, ch, x, y, turn, written = 0
+    cdef uint64_t a, ea, sa, eb, sb, ec, sc
     cdef sample_t* row = pixels + ty * w * c
-    stop = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb)
-    while True:
-        while y < stop:
-            _ends(ea, eb, long_left, &lo, &hi)
-            for ch in range(c):
-                a = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
-                for x in range(lo, hi):
-                    if sample_t is uint8_t:
-                        row[x * c + ch] = <sample_t>(a >> 54)
-                    else:
-                        row[x * c + ch] = <sample_t>(a >> 46)
-                    a += pl.dx[ch]
-                pl.row[ch] += pl.dy[ch]
-            written += hi - lo
-            if mode != MODE_TOTAL:
-                _account(mode, y, lo, hi, w, counts, spans, cover)
-            ea += sa
-            eb += sb
-            row += w * c
-            y += 1
-        if y > last:
-            return written
-        _fixed_edge(mx, bx - mx, by - my, recip, &eb, &sb)
-        stop = last + 1
+    turn = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb, &ec, &sc)
+    for y in range(ty, last + 1):
+        _ends(ea, eb if y < turn else ec, long_left, &lo, &hi)
+        for ch in range(c):
+            a = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
+            for x in range(lo, hi):
+                if sample_t is uint8_t:
+                    row[x * c + ch] = <sample_t>(a >> 54)
+                else:
+                    row[x * c + ch] = <sample_t>(a >> 46)
+                a += pl.dx[ch]
+            pl.row[ch] += pl.dy[ch]
+        written += hi - lo
+        if mode != MODE_TOTAL:
+            _account(mode, y, lo, hi, w, counts, spans, cover)
+        ea += sa
+        eb += sb
+        ec += sc
+        row += w * c
+    return written
 
 
 cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* tris, int64_t m, int64_t c,
@@ -432,7 +547,9 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
         pl.d2 = d2
         pl.fast = d2 <= lim
         mult = 1
-        if pl.fast:
+        if half <= _RECIPROCALS:
+            mult = <int64_t>(_RECIPROCAL[half] if sample_t is uint8_t else (_RECIPROCAL[half] + 255) >> 8)
+        elif pl.fast:
             mult = <int64_t>_reciprocal(d2, pl.shift)
         for ch in range(c):
             vt = vals[corner[0] * c + ch]; vm = vals[corner[1] * c + ch]; vb = vals[corner[2] * c + ch]
@@ -455,7 +572,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
         if pl.fast and not border and dyb <= edge_lim and recip != NULL:
             if c == 1:
                 written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last,
-                                      long_left, recip, w, mode, counts, spans, cover)
+                                      long_left, recip, w, h, mode, counts, spans, cover)
             else:
                 written += _triangle_colour(pixels, &pl, c, tx, ty, mx, my, bx, by, last, long_left, recip, w,
                                             mode, counts, spans, cover)

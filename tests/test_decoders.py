@@ -540,3 +540,45 @@ def test_rasteriser_refuses_a_size_whose_pixel_count_wraps() -> None:
     for check in (_rasterise.Check.CHECK_TOTAL, _rasterise.Check.CHECK_SPANS):
         with pytest.raises(ValueError, match="2\\*\\*32 pixels"):
             _rasterise.rasterise(v, values, t, np.zeros((0, 1), np.uint8), 1 << 32, 1 << 32, check)
+
+
+def _short_span_meshes(rng: np.random.Generator):
+    """Vertex sets of small images: random ones of every density, and two-row bands
+    whose top row has a gap of n = 1 .. 9 pixels at every place (one-row triangles
+    with a span of n pixels, the last row's spans at the image's last bytes)."""
+    for w in range(2, 14):
+        for h in (2, 3, 5):
+            for density in (0.1, 0.3, 0.6, 0.9):
+                keep = rng.random((h, w)) < density
+                yield w, h, {(x, y) for y, x in zip(*np.nonzero(keep))}
+    w = 13
+    for n in range(1, 10):
+        for a in range(0, w - n):
+            for h in (2, 3):
+                b = int(rng.integers(0, w))
+                yield w, h, {(a, 0), (a + n, 0), (b, 1)}
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+def test_cpu_short_spans_to_the_images_last_bytes(dtype, channels: int) -> None:
+    """The kernel writes a short span (up to 8 samples) as one 8-byte word merged
+    into the row under a mask, and a narrow triangle without a test per row: spans of
+    0 .. 9 pixels, one-row triangles and the last bytes of small images, where the word
+    would reach past the image (the kernel must then take the loop), against the rule,
+    with both coverage checks. The triangles in a random order: a byte written beyond
+    a span shows wherever its pixel's own triangle came first."""
+    rng = np.random.default_rng(20 + channels)
+    top = int(np.iinfo(dtype).max)
+    for w, h, pts in _short_span_meshes(rng):
+        vertices = np.array(sorted(pts | set(_corners(w, h))), np.int64)
+        values = rng.integers(0, top + 1, (len(vertices), channels)).astype(dtype)
+        values[rng.random(len(vertices)) < 0.3] = top  # extreme samples too
+        triangles = triangulate(vertices)
+        mesh = Mesh(vertices, values if channels > 1 else values[:, 0], triangles, w, h)
+        validate(mesh)
+        expected = reference(mesh)
+        for order in (np.arange(len(triangles)), rng.permutation(len(triangles)), rng.permutation(len(triangles))):
+            shuffled = Mesh(mesh.vertices, mesh.values, triangles[order], w, h)
+            assert np.array_equal(decoder_cpu.render(shuffled, tiles=True), expected), (w, h, sorted(pts))
+            assert np.array_equal(decoder_cpu.render(shuffled), expected), (w, h, sorted(pts))
