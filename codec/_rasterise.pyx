@@ -185,6 +185,30 @@ cdef extern from *:
         x0 = _mm_packs_epi32(x0, x2);
         return (uint64_t)_mm_cvtsi128_si64(_mm_packus_epi16(x0, x0));
     }
+    /* Samples 0 .. n - 1 (n <= 8) of a 16-bit span at p, (v + k*s) >> 46, merged into
+       the 16 bytes there under a mask. A sample is below 2**18 after the shift (below
+       2**16 in the span): the low 32 bits of each lane, less 2**15, fit the signed
+       32 -> 16-bit pack exactly in the span, and the bias comes off as a flipped top
+       bit. */
+    static inline void atm_put8_u16(uint16_t* p, uint64_t v, uint64_t s, int64_t n) {
+        __m128i st = _mm_set1_epi64x((long long)s);
+        __m128i st2 = _mm_add_epi64(st, st), st4;
+        __m128i x0 = _mm_set_epi64x((long long)(v + s), (long long)v), x1, x2, x3, a, b, bias, m, old;
+        st4 = _mm_add_epi64(st2, st2);
+        x1 = _mm_add_epi64(x0, st2);
+        x2 = _mm_add_epi64(x0, st4);
+        x3 = _mm_add_epi64(x1, st4);
+        a = _mm_unpacklo_epi64(_mm_shuffle_epi32(_mm_srli_epi64(x0, 46), 0x88),
+                               _mm_shuffle_epi32(_mm_srli_epi64(x1, 46), 0x88));
+        b = _mm_unpacklo_epi64(_mm_shuffle_epi32(_mm_srli_epi64(x2, 46), 0x88),
+                               _mm_shuffle_epi32(_mm_srli_epi64(x3, 46), 0x88));
+        bias = _mm_set1_epi32(32768);
+        a = _mm_packs_epi32(_mm_sub_epi32(a, bias), _mm_sub_epi32(b, bias));
+        a = _mm_xor_si128(a, _mm_set1_epi16((short)0x8000));
+        m = _mm_cmpgt_epi16(_mm_set1_epi16((short)n), _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7));
+        old = _mm_loadu_si128((const __m128i*)p);
+        _mm_storeu_si128((__m128i*)p, _mm_or_si128(_mm_and_si128(m, a), _mm_andnot_si128(m, old)));
+    }
     #else
     static inline uint64_t atm_pack8_u8(uint64_t v, uint64_t s) {
         uint64_t w = 0;
@@ -193,9 +217,15 @@ cdef extern from *:
             w |= (v >> 54) << (8 * k);
         return w;
     }
+    static inline void atm_put8_u16(uint16_t* p, uint64_t v, uint64_t s, int64_t n) {
+        int64_t k;
+        for (k = 0; k < n; k++, v += s)
+            p[k] = (uint16_t)(v >> 46);
+    }
     #endif
     """
     uint64_t atm_pack8_u8(uint64_t v, uint64_t s) noexcept nogil
+    void atm_put8_u16(uint16_t* p, uint64_t v, uint64_t s, int64_t n) noexcept nogil
 
 
 # _MASK[n]: the low n bytes of a word
@@ -204,24 +234,12 @@ _MASK[:] = [0, 0xFF, 0xFFFF, 0xFFFFFF, 0xFFFFFFFF, 0xFFFFFFFFFF, 0xFFFFFFFFFFFF,
             0xFFFFFFFFFFFFFFFF]
 
 
-cdef inline uint64_t _pack(uint64_t a, uint64_t s, int shift, int bits) noexcept nogil:
-    """The 64 // bits samples from the fixed-point value `a`, `s` per sample, in one
-    little-endian word. A sample the span does not reach may exceed `bits`: its excess
-    carries only into the later samples, which the caller masks out with it."""
-    cdef uint64_t s2 = s + s, a1 = a + s, a2 = a + s2, a3 = a1 + s2, w
-    w = (a >> shift) | ((a1 >> shift) << bits) | ((a2 >> shift) << (2 * bits)) | ((a3 >> shift) << (3 * bits))
-    if bits == 8:
-        s2 += s2
-        w |= ((a + s2) >> shift) << 32 | ((a1 + s2) >> shift) << 40 | ((a2 + s2) >> shift) << 48 | ((a3 + s2) >> shift) << 56
-    return w
-
-
 cdef inline void _put8(sample_t* p, uint64_t a, uint64_t s, int64_t n) noexcept nogil:
     """Samples 0 .. n - 1 (n <= 8) of a one-channel span at p, from the fixed-point value
-    `a`, `s` per sample: the samples of 8 bytes computed at once and merged into the
-    row under a mask, one load and one store, with no exit that depends on n (a span
-    is ~3 pixels, and a loop's exit mispredicted costs more than the span); p + 8 bytes
-    must lie in the image. The bytes beyond the span are written back as they were."""
+    `a`, `s` per sample: 8 samples computed at once and merged into the row under a
+    mask, one load and one store, with no exit that depends on n (a span is ~3 pixels,
+    and a loop's exit mispredicted costs more than the span); p + 8 samples must lie in
+    the image. The samples beyond the span are written back as they were."""
     cdef uint64_t old, m, w
     if sample_t is uint8_t:
         memcpy(&old, p, 8)
@@ -230,16 +248,7 @@ cdef inline void _put8(sample_t* p, uint64_t a, uint64_t s, int64_t n) noexcept 
         old = (old & ~m) | (w & m)
         memcpy(p, &old, 8)
     else:
-        memcpy(&old, p, 8)
-        m = _MASK[2 * n if n < 4 else 8]
-        w = _pack(a, s, 46, 16)
-        old = (old & ~m) | (w & m)
-        memcpy(p, &old, 8)
-        memcpy(&old, p + 4, 8)
-        m = _MASK[2 * n - 8 if n > 4 else 0]
-        w = _pack(a + 4 * s, s, 46, 16)
-        old = (old & ~m) | (w & m)
-        memcpy(p + 4, &old, 8)
+        atm_put8_u16(p, a, s, n)
 
 
 cdef inline void _span(sample_t* p, const Planes* pl, int64_t c, int64_t lo, int64_t hi) noexcept nogil:
