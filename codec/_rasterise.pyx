@@ -470,20 +470,37 @@ cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t t
     """_triangle1 for C > 1 channels (kept apart: the gray walk keeps its plane in
     registers)."""
     cdef int64_t lo, hi, ch, x, y, turn, written = 0
-    cdef uint64_t a, ea, sa, eb, sb, ec, sc
+    cdef uint64_t ea, sa, eb, sb, ec, sc
+    cdef uint64_t a0, a1, a2, d0, d1, d2
     cdef sample_t* row = pixels + ty * w * c
+    cdef sample_t* p
     turn = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb, &ec, &sc)
     for y in range(ty, last + 1):
         _ends(ea, eb if y < turn else ec, long_left, &lo, &hi)
-        for ch in range(c):
-            a = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
+        if c == 3:
+            # RGB pixel by pixel, its channels within: one loop whose exit depends on
+            # the span, not one a channel (1.2x on astronaut's RGB mesh)
+            p = row + lo * 3
+            a0 = pl.row[0] + pl.dx[0] * <uint64_t>lo; d0 = pl.dx[0]; pl.row[0] += pl.dy[0]
+            a1 = pl.row[1] + pl.dx[1] * <uint64_t>lo; d1 = pl.dx[1]; pl.row[1] += pl.dy[1]
+            a2 = pl.row[2] + pl.dx[2] * <uint64_t>lo; d2 = pl.dx[2]; pl.row[2] += pl.dy[2]
             for x in range(lo, hi):
                 if sample_t is uint8_t:
-                    row[x * c + ch] = <sample_t>(a >> 54)
+                    p[0] = <sample_t>(a0 >> 54); p[1] = <sample_t>(a1 >> 54); p[2] = <sample_t>(a2 >> 54)
                 else:
-                    row[x * c + ch] = <sample_t>(a >> 46)
-                a += pl.dx[ch]
-            pl.row[ch] += pl.dy[ch]
+                    p[0] = <sample_t>(a0 >> 46); p[1] = <sample_t>(a1 >> 46); p[2] = <sample_t>(a2 >> 46)
+                a0 += d0; a1 += d1; a2 += d2
+                p += 3
+        else:
+            for ch in range(c):
+                a0 = pl.row[ch] + pl.dx[ch] * <uint64_t>lo
+                for x in range(lo, hi):
+                    if sample_t is uint8_t:
+                        row[x * c + ch] = <sample_t>(a0 >> 54)
+                    else:
+                        row[x * c + ch] = <sample_t>(a0 >> 46)
+                    a0 += pl.dx[ch]
+                pl.row[ch] += pl.dy[ch]
         written += hi - lo
         if mode != MODE_TOTAL:
             _account(mode, y, lo, hi, w, counts, spans, cover)
