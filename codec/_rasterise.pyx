@@ -251,6 +251,21 @@ cdef inline void _put8(sample_t* p, uint64_t a, uint64_t s, int64_t n) noexcept 
         atm_put8_u16(p, a, s, n)
 
 
+cdef inline void _put_long(sample_t* p, uint64_t a, uint64_t s, int64_t n, const sample_t* short_end) noexcept nogil:
+    """Samples 0 .. n - 1 of a one-channel span at p, of any length: 8 at a time by
+    _put8 (inside the span), the rest by _put8 where its word has room before
+    short_end, else one by one."""
+    while n > 8:
+        _put8(p, a, s, 8)
+        p += 8
+        a += 8 * s
+        n -= 8
+    if p <= short_end:
+        _put8(p, a, s, n)
+    else:
+        _write1(p, a, s, 0, n)
+
+
 cdef inline void _span(sample_t* p, const Planes* pl, int64_t c, int64_t lo, int64_t hi) noexcept nogil:
     """Write pixels lo .. hi - 1 of the row starting at p (C channels each)."""
     cdef int64_t ch, x, q, r, d2 = pl.d2, qa, ra
@@ -423,7 +438,7 @@ cdef inline int64_t _walk1(sample_t* pixels, sample_t* row, uint64_t arow, uint6
         if narrow or (<uint64_t>(hi - lo) <= 8 and row + lo <= short_end):
             _put8(row + lo, arow + adx * <uint64_t>lo, adx, hi - lo)
         else:
-            _write1(row, arow + adx * <uint64_t>lo, adx, lo, hi)
+            _put_long(row + lo, arow + adx * <uint64_t>lo, adx, hi - lo, short_end)
         written += hi - lo
         if mode != MODE_TOTAL:
             _account(mode, y, lo, hi, w, counts, spans, cover)

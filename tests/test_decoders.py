@@ -544,16 +544,17 @@ def test_rasteriser_refuses_a_size_whose_pixel_count_wraps() -> None:
 
 def _short_span_meshes(rng: np.random.Generator):
     """Vertex sets of small images: random ones of every density, and two-row bands
-    whose top row has a gap of n = 1 .. 9 pixels at every place (one-row triangles
-    with a span of n pixels, the last row's spans at the image's last bytes)."""
+    whose top row has a gap of n = 1 .. 19 pixels at every place (one-row triangles
+    with a span of n pixels, written 8 samples at a time and a rest; the last row's
+    spans at the image's last bytes)."""
     for w in range(2, 14):
         for h in (2, 3, 5):
             for density in (0.1, 0.3, 0.6, 0.9):
                 keep = rng.random((h, w)) < density
                 yield w, h, {(x, y) for y, x in zip(*np.nonzero(keep))}
-    w = 13
-    for n in range(1, 10):
-        for a in range(0, w - n):
+    w = 21
+    for n in range(1, 20):
+        for a in range(0, w - n, 1 if n < 10 else 3):
             for h in (2, 3):
                 b = int(rng.integers(0, w))
                 yield w, h, {(a, 0), (a + n, 0), (b, 1)}
@@ -564,7 +565,7 @@ def _short_span_meshes(rng: np.random.Generator):
 def test_cpu_short_spans_to_the_images_last_bytes(dtype, channels: int) -> None:
     """The kernel writes a short span (up to 8 samples) as one 8-byte word merged
     into the row under a mask, and a narrow triangle without a test per row: spans of
-    0 .. 9 pixels, one-row triangles and the last bytes of small images, where the word
+    0 .. 19 pixels, one-row triangles and the last bytes of small images, where the word
     would reach past the image (the kernel must then take the loop), against the rule,
     with both coverage checks. The triangles in a random order: a byte written beyond
     a span shows wherever its pixel's own triangle came first."""
