@@ -20,8 +20,17 @@ and n*e / (d * 2**s) < V*d*d / (d * 2**s) <= 1/d. And n*M < V*2**s + V*d.
   n = x0*dy + dx*k + dy - 1, 0 <= n < W*dy: walked the same way, with V = W below
   2**22 and s = 40 (a constant: a variable shift costs more), so edges over up to
   2**((40 - bits(W)) / 2) rows (2**15 for W = 512). The multipliers of every edge
-  height are made once per call, so a triangle of one channel costs one division
-  (its plane's M).
+  height are made once per call, and the planes' of |D| up to 2048 once at import,
+  so most triangles cost no division.
+* Short spans (a decoder's are ~3 pixels): a loop over a span's pixels ends where the
+  branch predictor cannot guess, which cost more than the pixels. A one-channel span
+  of up to 8 samples is computed 8 samples at once (the same fixed-point values,
+  packed into a word with SSE2 where there is SSE2) and merged into the row under a
+  mask: the samples beyond the span are written back as they were, so this needs
+  only the word's room in the image (the last bytes take the loop) and no other
+  writer of the image during the call (each call owns its output). A sample beyond
+  the span may exceed the sample type; the packs saturate it, or it carries only
+  into later samples, which the mask drops with it.
 
 Triangles beyond those bounds (d2 over 2**23 for 8-bit samples, 2**15 for 16-bit: 2
 million and 8,192 pixels; taller edges, or over 2**16 rows; images 2**22 wide), with a
