@@ -723,7 +723,8 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     checking that every pixel is written exactly once (`check`: CHECK_SPANS for any
     mesh, CHECK_TOTAL only for one known to tile the image). Checks every index it
     reads: returns (status, detail) with status OK or one of the codes above.
-    Releases the GIL."""
+    Releases the GIL; nothing else may write `out` during the call (short spans are
+    merged into it word by word, the samples around them written back as read)."""
     cdef int64_t detail = 0, nv = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
     cdef int status
     if c > 4 or c < 1 or values.shape[0] != nv or vertices.shape[1] != 2:
