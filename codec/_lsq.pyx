@@ -341,3 +341,55 @@ cdef void _apply_vector(const int64_t[:, ::1] corners, const double[:, :, ::1] g
         x2 = x[corners[e, 2]]
         for i in range(3):
             y[corners[e, i]] += gram[e, i, 0] * x0 + gram[e, i, 1] * x1 + gram[e, i, 2] * x2
+
+
+def element_normals(const int64_t[:, :, :] coef, const int64_t[:] den, const double[:, :] moments,
+                    const double[:, :, :] image_sums):
+    """values.normal_equations from its elements' weighted moments: per element e,
+    gram[e] = C M C^T / D^2 (3 x 3, corner by corner; C's rows the corners' (alpha, beta,
+    gamma) = coef[e], M the sums of p p^T over its pixels, p = (u, v, 1), from
+    moments[e] = (1, u, v, uu, uv, vv)) and rhs[e, c] = C (ub, vb, b) / D for every
+    channel c of image_sums[e, c] = (b, ub, vb). The float64 operations of the numpy
+    code it replaces, in its order (each sum from 0 as Python's sum() starts, so the
+    same numbers), in one pass instead of some fifty over the elements. ValueError if
+    the shapes disagree."""
+    cdef Py_ssize_t m = den.shape[0], ch = image_sums.shape[1], e, i, j, k, l, c
+    if (coef.shape[0] != m or coef.shape[1] != 3 or coef.shape[2] != 3 or moments.shape[0] != m
+            or moments.shape[1] < 6 or image_sums.shape[0] != m or image_sums.shape[2] < 3):
+        raise ValueError("element_normals: E x 3 x 3 coef, E den, E x 6 moments, E x C x 3 sums")
+    gram_out = np.empty((m, 3, 3), dtype=np.float64)
+    rhs_out = np.empty((m, ch, 3), dtype=np.float64)
+    cdef double[:, :, ::1] gram = gram_out
+    cdef double[:, :, ::1] rhs = rhs_out
+    cdef double cf[3][3]
+    cdef double mm[3][3]
+    cdef double cm[3][3]
+    cdef double d, dd, g
+    with nogil:
+        for e in range(m):
+            for i in range(3):
+                for k in range(3):
+                    cf[i][k] = <double>coef[e, i, k]
+            d = <double>den[e]
+            # rows ((uu, uv, u), (uv, vv, v), (u, v, 1))
+            mm[0][0] = moments[e, 3]; mm[0][1] = moments[e, 4]; mm[0][2] = moments[e, 1]
+            mm[1][0] = moments[e, 4]; mm[1][1] = moments[e, 5]; mm[1][2] = moments[e, 2]
+            mm[2][0] = moments[e, 1]; mm[2][1] = moments[e, 2]; mm[2][2] = moments[e, 0]
+            for i in range(3):
+                for l in range(3):
+                    g = 0.0 + cf[i][0] * mm[0][l]
+                    g = g + cf[i][1] * mm[1][l]
+                    cm[i][l] = g + cf[i][2] * mm[2][l]
+            dd = d * d
+            for i in range(3):
+                for j in range(i, 3):
+                    g = 0.0 + cm[i][0] * cf[j][0]
+                    g = g + cm[i][1] * cf[j][1]
+                    g = (g + cm[i][2] * cf[j][2]) / dd
+                    gram[e, i, j] = g
+                    gram[e, j, i] = g
+            for c in range(ch):
+                for i in range(3):
+                    rhs[e, c, i] = (cf[i][0] * image_sums[e, c, 1] + cf[i][1] * image_sums[e, c, 2]
+                                    + cf[i][2] * image_sums[e, c, 0]) / d
+    return gram_out, rhs_out

@@ -316,3 +316,41 @@ def test_the_compiled_conjugate_gradients_follow_the_numpy_iteration(corpus):
     bad[3, 2] = n
     with pytest.raises(ValueError, match="corner out of range"):
         _lsq.conjugate_gradients(bad, gram, rhs, start, ridge, anchor, 1e-4, 10)
+
+
+def _numpy_normal_equations(coef, den, moments, image_sums):
+    """values.normal_equations as it was written in numpy before codec._lsq.element_normals."""
+    m = np.ascontiguousarray(moments.T)
+    c = coef.astype(np.float64).transpose(1, 2, 0).copy()
+    d = den.astype(np.float64)
+    rows = ((m[3], m[4], m[1]), (m[4], m[5], m[2]), (m[1], m[2], m[0]))
+    cm = [[sum(c[i, k] * rows[k][l] for k in range(3)) for l in range(3)] for i in range(3)]
+    gram = np.empty((3, 3, len(d)))
+    for i in range(3):
+        for j in range(i, 3):
+            gram[i, j] = gram[j, i] = sum(cm[i][l] * c[j, l] for l in range(3))
+    gram = gram.transpose(2, 0, 1)
+    gram /= (d * d)[:, None, None]
+    s = image_sums
+    rhs = (c[:, 0].T[:, None, :] * s[:, :, 1:2] + c[:, 1].T[:, None, :] * s[:, :, 2:3]
+           + c[:, 2].T[:, None, :] * s[:, :, 0:1]) / d[:, None, None]
+    return gram, rhs
+
+
+def test_the_element_normal_equations_are_the_numpy_ones_to_the_bit(corpus):
+    """codec._lsq.element_normals (values.normal_equations) gives the very float64
+    numbers of the numpy expressions it replaced, on triangles and border lines of
+    gray and RGB images, from strided statistics as the callers pass them."""
+    from codec.mesher.elements import rasterize
+
+    for k, image in enumerate([corpus["camera"][:150, :200], corpus["astronaut"][:120, :140]]):
+        h, w = image.shape[:2]
+        vertices, triangles = random_mesh(image, [500, 300][k], seed=10 + k)
+        raster = rasterize(vertices, triangles, w, h)
+        layout = vertex_values.layout_for(image)
+        moments, sums = layout.fit_part(layout(raster))
+        assert not moments.flags.c_contiguous  # a column slice of the statistics
+        got = vertex_values.normal_equations(raster.coef, raster.den, moments, sums)
+        want = _numpy_normal_equations(raster.coef, raster.den, moments, sums)
+        for g, wnt in zip(got, want):
+            assert g.shape == wnt.shape and np.array_equal(g.view(np.int64), np.ascontiguousarray(wnt).view(np.int64))
