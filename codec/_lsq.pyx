@@ -393,3 +393,53 @@ def element_normals(const int64_t[:, :, :] coef, const int64_t[:] den, const dou
                     rhs[e, c, i] = (cf[i][0] * image_sums[e, c, 1] + cf[i][1] * image_sums[e, c, 2]
                                     + cf[i][2] * image_sums[e, c, 0]) / d
     return gram_out, rhs_out
+
+
+def exact_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, const int64_t[:] den,
+                 const double[::1] z, const double[:, :] moments, const double[:, :] sums, double planar):
+    """(pixels, all): how many pixels lie in the elements whose squared error against
+    the mesh through z is at most `planar` per pixel, and how many there are in all
+    (values._planar_share). Each element's plane as elements.Raster.affine makes it
+    (corner after corner, then / D) and its squared error as elements.squared_error
+    (term by term from the left, below zero taken as zero): the same float64
+    operations in their order, so the same elements count; the counts are whole
+    numbers, exact in any order. ValueError if the shapes disagree or a corner is out
+    of range."""
+    cdef Py_ssize_t m = den.shape[0], n = z.shape[0], e, k
+    if (corners.shape[0] != m or corners.shape[1] != 3 or coef.shape[0] != m or coef.shape[1] != 3
+            or coef.shape[2] != 3 or moments.shape[0] != m or moments.shape[1] < 6 or sums.shape[0] != m
+            or sums.shape[1] < 4):
+        raise ValueError("exact_pixels: E x 3 corners and coef, E den, E x 6 moments, E x 4 sums")
+    for e in range(m):
+        for k in range(3):
+            if not 0 <= corners[e, k] < n:
+                raise ValueError("exact_pixels: a corner out of range")
+    cdef double a, b, c, ff, bf, d, count, exact = 0, total = 0
+    cdef double f[3]
+    with nogil:
+        for e in range(m):
+            for k in range(3):
+                f[k] = <double>coef[e, 0, k] * z[corners[e, 0]]
+                f[k] = f[k] + <double>coef[e, 1, k] * z[corners[e, 1]]
+                f[k] = f[k] + <double>coef[e, 2, k] * z[corners[e, 2]]
+                f[k] = f[k] / <double>den[e]
+            a = f[0]
+            b = f[1]
+            c = f[2]
+            ff = a * a * moments[e, 3]
+            ff = ff + 2 * a * b * moments[e, 4]
+            ff = ff + b * b * moments[e, 5]
+            ff = ff + 2 * a * c * moments[e, 1]
+            ff = ff + 2 * b * c * moments[e, 2]
+            ff = ff + c * c * moments[e, 0]
+            bf = a * sums[e, 1]
+            bf = bf + b * sums[e, 2]
+            bf = bf + c * sums[e, 0]
+            d = sums[e, 3] - 2 * bf + ff
+            if d < 0.0:
+                d = 0.0  # np.maximum(d, 0.0); a NaN stays and compares False below
+            count = moments[e, 0]
+            total += count
+            if d <= planar * count:
+                exact += count
+    return exact, total

@@ -354,3 +354,28 @@ def test_the_element_normal_equations_are_the_numpy_ones_to_the_bit(corpus):
         want = _numpy_normal_equations(raster.coef, raster.den, moments, sums)
         for g, wnt in zip(got, want):
             assert g.shape == wnt.shape and np.array_equal(g.view(np.int64), np.ascontiguousarray(wnt).view(np.int64))
+
+
+def test_the_planar_share_is_counted_as_numpy_counted_it(corpus):
+    """values._planar_share in one compiled pass (codec._lsq.exact_pixels) counts the
+    same elements as the numpy planes and squared errors it replaced: on a photo, on a
+    piecewise-planar image where most elements are exact, and with values that make
+    some elements miss by just about the limit."""
+    from codec.mesher.elements import rasterize, squared_error
+
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[:120, :160]
+    planar = np.where(xx + yy < 130, 2 * xx + yy // 3, 200 - xx // 2).astype(np.uint8)
+    for image in (corpus["camera"][:120, :160], planar):
+        vertices, triangles = random_mesh(image, 400, seed=5)
+        raster = rasterize(vertices, triangles, 160, 120)
+        layout = vertex_values.layout_for(image)
+        stats = layout(raster)
+        moments, _ = layout.fit_part(stats)
+        for values in (image[vertices[:, 1], vertices[:, 0]].astype(np.float64),
+                       image[vertices[:, 1], vertices[:, 0]] + rng.normal(0, 0.3, len(vertices))):
+            values = values[:, None]
+            count = moments[:, 0]
+            exact = squared_error(raster.affine(values[:, 0]), moments, stats[:, layout.IMG]) <= vertex_values.PLANAR * count
+            want = float(count[exact].sum() / max(count.sum(), 1.0))
+            assert vertex_values._planar_share(stats, layout, moments, values, raster) == want

@@ -128,15 +128,19 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
     return np.where(planar[:, None], refit, values)
 
 
-def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.ndarray, affine) -> float:
+def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.ndarray, raster) -> float:
     """Share of the pixels that the mesh through `values` reproduces to within rounding
     (elements with a mean squared error of at most PLANAR): most of a piecewise-planar
     image, hardly any of a photograph."""
-    from .elements import squared_error
+    from ..native import _lsq
 
-    count = moments[:, 0]
-    exact = squared_error(affine(values[:, 0]), moments, stats[:, layout.IMG]) <= PLANAR * count
-    return float(count[exact].sum() / max(count.sum(), 1.0))
+    # one compiled pass: the planes, squared errors and counts with numpy's arithmetic
+    exact, total = _lsq.exact_pixels(
+        np.ascontiguousarray(raster.corners, dtype=np.int64), np.asarray(raster.coef, dtype=np.int64),
+        np.asarray(raster.den, dtype=np.int64), np.ascontiguousarray(values[:, 0], dtype=np.float64),
+        np.asarray(moments, dtype=np.float64), np.asarray(stats[:, layout.IMG], dtype=np.float64), PLANAR,
+    )
+    return float(exact / max(total, 1.0))
 
 
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
@@ -152,7 +156,7 @@ def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.n
     gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
     start = sample(image, vertices).reshape(n, -1).astype(np.float64)
     out = solve(raster.corners, gram, rhs, start)
-    if pixels is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster.affine) >= PLANAR_SHARE:
+    if pixels is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster) >= PLANAR_SHARE:
         out = _planar_refit(image, raster, moments, sums, out, start, pixels(), stats[:, layout.IMG][:, 3])
     out = _to_dtype(out, image.dtype)
     return out[:, 0] if image.ndim == 2 else out
