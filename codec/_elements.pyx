@@ -16,6 +16,8 @@ cimport cython
 from libc.math cimport ceil, fabs
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
 
+from codec.planefit cimport plane_sse
+
 import numpy as np
 
 ctypedef fused table_t:
@@ -248,7 +250,6 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef int64_t py[3]
     cdef double f[3]
     cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
-    cdef double a, b, cc, ff, bf
     cdef table_t dk
     cdef bint bad = False
     with nogil:
@@ -302,22 +303,9 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
             if not errors:
                 continue
             _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
-            a = f[0]
-            b = f[1]
-            cc = f[2]
-            # elements.squared_error, term by term from the left
-            ff = a * a * o[t, 3]
-            ff = ff + 2 * a * b * o[t, 4]
-            ff = ff + b * b * o[t, 5]
-            ff = ff + 2 * a * cc * o[t, 1]
-            ff = ff + 2 * b * cc * o[t, 2]
-            ff = ff + cc * cc * o[t, 0]
-            bf = a * o[t, 7]
-            bf = bf + b * o[t, 8]
-            bf = bf + cc * o[t, 6]
-            d = o[t, 9] - 2 * bf + ff
-            # np.maximum(d, 0.0): -0.0 and NaN stay as they are
-            e[t] = d if d >= 0.0 or d != d else 0.0
+            # elements.squared_error (codec/planefit.pxd)
+            e[t] = plane_sse(f[0], f[1], f[2], o[t, 0], o[t, 1], o[t, 2], o[t, 3], o[t, 4], o[t, 5],
+                             o[t, 6], o[t, 7], o[t, 8], o[t, 9])
     if bad:
         raise ValueError("triangle_statistics: a corner index or coordinate out of range")
     return out, (sse_out if errors else None)

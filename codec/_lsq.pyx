@@ -8,6 +8,8 @@ max_error encode. The GIL is released while it works."""
 from libc.math cimport sqrt
 from libc.stdint cimport int64_t, uint8_t, uint16_t
 
+from codec.planefit cimport plane_sse
+
 import numpy as np
 
 ctypedef fused sample_t:
@@ -414,7 +416,7 @@ def exact_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, con
         for k in range(3):
             if not 0 <= corners[e, k] < n:
                 raise ValueError("exact_pixels: a corner out of range")
-    cdef double a, b, c, ff, bf, d, count, exact = 0, total = 0
+    cdef double d, count, exact = 0, total = 0
     cdef double f[3]
     with nogil:
         for e in range(m):
@@ -423,21 +425,9 @@ def exact_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, con
                 f[k] = f[k] + <double>coef[e, 1, k] * z[corners[e, 1]]
                 f[k] = f[k] + <double>coef[e, 2, k] * z[corners[e, 2]]
                 f[k] = f[k] / <double>den[e]
-            a = f[0]
-            b = f[1]
-            c = f[2]
-            ff = a * a * moments[e, 3]
-            ff = ff + 2 * a * b * moments[e, 4]
-            ff = ff + b * b * moments[e, 5]
-            ff = ff + 2 * a * c * moments[e, 1]
-            ff = ff + 2 * b * c * moments[e, 2]
-            ff = ff + c * c * moments[e, 0]
-            bf = a * sums[e, 1]
-            bf = bf + b * sums[e, 2]
-            bf = bf + c * sums[e, 0]
-            d = sums[e, 3] - 2 * bf + ff
-            if d < 0.0:
-                d = 0.0  # np.maximum(d, 0.0); a NaN stays and compares False below
+            # elements.squared_error (codec/planefit.pxd); a NaN compares False below
+            d = plane_sse(f[0], f[1], f[2], moments[e, 0], moments[e, 1], moments[e, 2], moments[e, 3],
+                          moments[e, 4], moments[e, 5], sums[e, 0], sums[e, 1], sums[e, 2], sums[e, 3])
             count = moments[e, 0]
             total += count
             if d <= planar * count:
