@@ -364,3 +364,76 @@ def test_without_vertices_takes_empty_polylines():
         mesh = Mesh(v, np.zeros(4, np.uint8), np.zeros((0, 3), np.int64), 2, 2, walls, None)
         kept = without_vertices(mesh, np.array([1, 1, 0, 1], bool))
         assert [c.tolist() for c in kept.constraints] == ([[0, 1, 2]] if len(walls) > 1 else [])
+
+
+def _inverse_cdf(cum, lo, hi, k):
+    """sampling's inverse-CDF step as numpy computed it before codec._gradients.tile_samples."""
+    k = np.broadcast_to(np.asarray(k, dtype=np.int64), lo.shape)
+    base = np.where(lo > 0, cum[np.maximum(lo - 1, 0)], 0.0)
+    total = cum[hi - 1] - base
+    which = np.repeat(np.arange(len(lo)), k)
+    j = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)
+    targets = base[which] + (j + 0.5) / k[which] * total[which]
+    pos = np.searchsorted(cum, targets, side="left")
+    return which, np.clip(pos, lo[which], hi[which] - 1)
+
+
+def _numpy_sample(dens, tiles, per_tile):
+    """sampling.sample as numpy computed it, tile row by tile row."""
+    h, w = dens.shape
+    nh, nv = min(tiles[0], w), min(tiles[1], h)
+    r, z = per_tile
+    xb = np.round(np.linspace(0, w, nh + 1)).astype(np.int64)
+    yb = np.round(np.linspace(0, h, nv + 1)).astype(np.int64)
+    out = []
+    for y0, y1 in zip(yb[:-1], yb[1:]):
+        block = dens[y0:y1]
+        colsum = block.sum(axis=0) if block.shape[1] > 1 else np.cumsum(block, axis=0)[-1]
+        _, cols = _inverse_cdf(np.cumsum(colsum), xb[:-1], xb[1:], r)
+        cols = cols[colsum[cols] > 0]
+        if len(cols) == 0:
+            continue
+        cols, mult = np.unique(cols, return_counts=True)
+        height = y1 - y0
+        col_cum = np.cumsum(block[:, cols], axis=0).T
+        offset = np.cumsum(np.concatenate([[0.0], col_cum[:-1, -1] + 1.0]))
+        lo = np.arange(len(cols)) * height
+        which, pos = _inverse_cdf((col_cum + offset[:, None]).ravel(), lo, lo + height, mult * z)
+        out.append(np.stack([cols[which], pos - lo[which] + y0], axis=1))
+    if not out:
+        return np.zeros((0, 2), np.int64)
+    pts = np.concatenate(out)
+    pts = pts[dens[pts[:, 1], pts[:, 0]] > 0]
+    key = np.unique(pts[:, 1] * w + pts[:, 0])
+    return np.stack([key % w, key // w], axis=1).astype(np.int64)
+
+
+def test_region_sampling_in_one_compiled_pass_picks_the_numpy_pixels(corpus) -> None:
+    """#20: sampling.sample's tile rows in one compiled pass (codec._gradients.tile_samples)
+    give the pixels the numpy code gave: random densities with empty patches, one-column
+    and one-row images, many samples per tile, and the density of a corpus image."""
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(200):
+        h, w = int(rng.integers(1, 90)), int(rng.integers(1, 200))
+        dens = rng.gamma(0.5, 1.0, (h, w)) * (rng.random((h, w)) > 0.3) + 0.25 * (rng.random() > 0.5)
+        if rng.random() < 0.2:
+            dens[:, : w // 2] = 0.0
+        tiles = (int(rng.integers(1, 9)), int(rng.integers(1, 9)))
+        cases.append((dens, tiles, (int(rng.integers(1, 12)), int(rng.integers(1, 30)))))
+    gray = corpus["camera"].astype(np.float32)
+    found, _, _ = edges.detect(gray, 255.0)
+    cases.append((sampling.density(sampling.curvature(gray), found), (6, 6), (9, 22)))
+    for dens, tiles, per_tile in cases:
+        assert np.array_equal(sampling.sample(dens, tiles, per_tile), _numpy_sample(dens, tiles, per_tile))
+
+
+def test_tile_sampling_refuses_bounds_that_do_not_tile_the_image() -> None:
+    from codec import native
+
+    dens = np.ones((4, 6))
+    for xb, yb in (([0, 3, 5], [0, 4]), ([0, 3, 3, 6], [0, 4]), ([0, 6], [1, 4]), ([0], [0, 4])):
+        with pytest.raises(ValueError, match="tile"):
+            native._gradients.tile_samples(dens, np.array(xb, np.int64), np.array(yb, np.int64), 1, 1)
+    with pytest.raises(ValueError, match="r and z"):
+        native._gradients.tile_samples(dens, np.array([0, 6], np.int64), np.array([0, 4], np.int64), 0, 1)
