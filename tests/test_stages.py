@@ -437,3 +437,22 @@ def test_tile_sampling_refuses_bounds_that_do_not_tile_the_image() -> None:
             native._gradients.tile_samples(dens, np.array(xb, np.int64), np.array(yb, np.int64), 1, 1)
     with pytest.raises(ValueError, match="r and z"):
         native._gradients.tile_samples(dens, np.array([0, 6], np.int64), np.array([0, 4], np.int64), 0, 1)
+
+
+def test_reordered_polylines_keep_their_points_together() -> None:
+    """adaptive._reorder gathers each polyline's points in the new order without a
+    Python loop: the same points as one arange per polyline, including empty orders."""
+    from codec.mesher.adaptive import _reorder
+
+    rng = np.random.default_rng(2)
+    for count in (0, 1, 7, 60):
+        sizes = rng.integers(2, 9, count)
+        starts = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+        points = rng.integers(0, 100, (int(starts[-1]), 2))
+        pixel_line = rng.integers(0, max(count, 1), 3 * count)
+        lines = polylines.Polylines(points, starts, rng.integers(0, 100, (3 * count, 2)), pixel_line, rng.random(count))
+        order = rng.permutation(count)
+        got = _reorder(lines, order)
+        want = np.concatenate([points[starts[k] : starts[k + 1]] for k in order]) if count else points[:0]
+        assert np.array_equal(got.points, want)
+        assert np.array_equal(got.starts, np.r_[0, np.cumsum(sizes[order])])
