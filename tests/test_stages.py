@@ -456,3 +456,71 @@ def test_reordered_polylines_keep_their_points_together() -> None:
         want = np.concatenate([points[starts[k] : starts[k + 1]] for k in order]) if count else points[:0]
         assert np.array_equal(got.points, want)
         assert np.array_equal(got.starts, np.r_[0, np.cumsum(sizes[order])])
+
+
+def _numpy_opposite_points(lines, gray, reach=3, min_step=4.0):
+    """unfold.opposite_points as numpy computed it before codec._polylines.opposite_feet."""
+    h, w = gray.shape
+    p = lines.points.astype(np.int64)
+    _, normal = unfold._directions(lines)
+    steps = np.arange(1, reach + 1, dtype=np.float64)
+    sides = []
+    for sign in (1.0, -1.0):
+        q = np.rint(p[:, None, :] + sign * steps[None, :, None] * normal[:, None, :]).astype(np.int64)
+        q[..., 0] = np.clip(q[..., 0], 0, w - 1)
+        q[..., 1] = np.clip(q[..., 1], 0, h - 1)
+        change = np.abs(gray[q[..., 1], q[..., 0]] - gray[p[:, 1], p[:, 0]][:, None])
+        change[(q == p[:, None, :]).all(axis=2)] = -1.0
+        limit = np.maximum(0.5 * change.max(axis=1), min_step)
+        hit = change >= limit[:, None]
+        sides.append((q, change, np.where(hit.any(axis=1), np.argmax(hit, axis=1), reach)))
+    (qa, ca, fa), (qb, cb, fb) = sides
+    rows = np.arange(len(p))
+    take_a = (fa < fb) | ((fa == fb) & (ca[rows, np.minimum(fa, reach - 1)] >= cb[rows, np.minimum(fb, reach - 1)]))
+    none = (fa == reach) & (fb == reach)
+    take_a = np.where(none, ca[:, 0] >= cb[:, 0], take_a)
+    ia = np.where(none, 0, np.minimum(fa, reach - 1))
+    ib = np.where(none, 0, np.minimum(fb, reach - 1))
+    opp = np.where(take_a[:, None], qa[rows, ia], qb[rows, ib])
+    rel = opp - p
+    on_left = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1] > 0
+    return np.where(on_left[:, None], opp, p), np.where(on_left[:, None], p, opp)
+
+
+def test_opposite_points_in_one_compiled_pass_are_the_numpy_ones(corpus) -> None:
+    """#20: unfold.opposite_points (codec._polylines.opposite_feet) finds the feet the
+    numpy code found: random polylines over random float32 and float64 images and flat
+    ones (ties), points on the border (clipped steps), other reaches and steps, and
+    camera's own polylines."""
+    rng = np.random.default_rng(12)
+    cases = []
+    for _ in range(150):
+        h, w = int(rng.integers(1, 40)), int(rng.integers(1, 40))
+        gray = (rng.random((h, w)) * rng.choice([1, 20, 255])).astype(rng.choice([np.float32, np.float64]))
+        if rng.random() < 0.2:
+            gray = np.round(gray / 50) * 50  # plateaus: equal changes
+        sizes = rng.integers(2, 8, int(rng.integers(1, 6)))
+        points = np.stack([rng.integers(0, w, sizes.sum()), rng.integers(0, h, sizes.sum())], 1)
+        lines = polylines.Polylines(points, np.r_[0, np.cumsum(sizes)], points, np.zeros(len(points), np.int64),
+                                    np.ones(len(sizes)))
+        cases.append((lines, gray, int(rng.integers(1, 6)), float(rng.choice([0.1, 4.0, 30.0]))))
+    gray = corpus["camera"].astype(np.float32)
+    found, mag, _ = edges.detect(gray, 255.0)
+    cases.append((polylines.trace(found, mag), gray, 3, 4.0))
+    for lines, gray, reach, step in cases:
+        got = unfold.opposite_points(lines, gray, reach=reach, min_step=step)
+        want = _numpy_opposite_points(lines, gray, reach, step)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_opposite_feet_refuses_points_outside_the_image() -> None:
+    from codec import native
+
+    gray = np.zeros((4, 5), np.float32)
+    normal = np.array([[1.0, 0.0]])
+    with pytest.raises(ValueError, match="outside"):
+        native._polylines.opposite_feet(np.array([[5, 0]], np.int64), normal, gray, 3, 4.0)
+    with pytest.raises(ValueError, match="reach"):
+        native._polylines.opposite_feet(np.array([[1, 1]], np.int64), normal, gray, 0, 4.0)
+    with pytest.raises(ValueError, match="64"):
+        native._polylines.opposite_feet(np.array([[1, 1]], np.int64), normal, gray, 65, 4.0)

@@ -33,7 +33,8 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
 
     from .. import native
 
-    g = gray.astype(np.float32) * np.float32(255.0 / peak)
+    # one pass: the float32 product numpy's astype-then-multiply made in two
+    g = np.multiply(gray, np.float32(255.0 / peak), dtype=np.float32)
     g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
     sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
