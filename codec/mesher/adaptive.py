@@ -122,7 +122,7 @@ def _off_edge_curvature(gray: np.ndarray, found: np.ndarray) -> float:
     from its edges."""
     import cv2
 
-    energy = cv2.Laplacian(gray, cv2.CV_32F).astype(np.float64) ** 2
+    energy = np.square(cv2.Laplacian(gray, cv2.CV_32F), dtype=np.float64)
     total = float(energy.sum())
     if total == 0:
         return 0.0

@@ -52,7 +52,9 @@ def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
     top = float(magnitude.max())
     if top <= 0:
         return MIN_HIGH / 2, MIN_HIGH
-    levels = np.clip(magnitude * (255.0 / top), 0, 255).astype(np.uint8)
+    # the float32 product (numpy casts the scale to the array's float32), clipped in place
+    levels = np.multiply(magnitude, np.float32(255.0 / top))
+    levels = np.clip(levels, 0, 255, out=levels).astype(np.uint8)
     otsu, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     high = min(max(MIN_HIGH, float(otsu) * top / 255.0), MAX_HIGH)
     return high / 2, high

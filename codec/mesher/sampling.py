@@ -43,10 +43,16 @@ def curvature(gray: np.ndarray) -> np.ndarray:
 def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor: float = FLOOR) -> np.ndarray:
     """Sample density (float64): curvature ** power scaled to mean 1, plus a floor,
     and zero on excluded pixels."""
-    d = curv.astype(np.float64) ** power
+    # in place where numpy made a temporary per step (the same operations: x ** 0.5 is
+    # numpy's square root)
+    d = np.sqrt(curv, dtype=np.float64) if power == 0.5 else curv.astype(np.float64) ** power
     free = ~excluded
     mean = d[free].mean() if free.any() else 0.0
-    d = (d / mean if mean > 0 else np.zeros_like(d)) + floor
+    if mean > 0:
+        np.divide(d, mean, out=d)
+    else:
+        d[...] = 0.0
+    np.add(d, floor, out=d)
     d[excluded] = 0.0
     return d
 
