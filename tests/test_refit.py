@@ -379,3 +379,38 @@ def test_the_planar_share_is_counted_as_numpy_counted_it(corpus):
             exact = squared_error(raster.affine(values[:, 0]), moments, stats[:, layout.IMG]) <= vertex_values.PLANAR * count
             want = float(count[exact].sum() / max(count.sum(), 1.0))
             assert vertex_values._planar_share(stats, layout, moments, values, raster) == want
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float64])
+def test_the_outliers_sums_without_pixel_arrays_are_the_bincount_ones(dtype) -> None:
+    """values._planar_refit sums the outlying pixels' terms in a compiled walk over the
+    triangles (codec._elements.outlier_sums) instead of from every pixel's element, x
+    and y as arrays and np.bincount: the same count and the same sums, bit for bit, on
+    piecewise-planar images with steps and noise under planes near and far from them."""
+    from codec.mesher.elements import triangle_pixels, triangle_raster
+    from codec.native import _elements
+
+    rng = np.random.default_rng(9)
+    yy, xx = np.mgrid[:90, :130]
+    scale = 1 if dtype == np.uint8 else 200
+    for noise in (0.0, 3.0):
+        image = np.where(xx * 2 + yy < 150, 40 + xx // 2 + yy // 3, 180 - xx // 4) * scale
+        image = np.clip(image + rng.normal(0, noise * scale, image.shape), 0, 65535).astype(dtype)
+        vertices, triangles = random_mesh(image, 300, seed=3)
+        raster = triangle_raster(vertices, triangles, 130, 90)
+        values = image[vertices[:, 1], vertices[:, 0]].astype(np.float64) + rng.normal(0, 2 * scale, len(vertices))
+        affine = np.ascontiguousarray(raster.affine(values))
+        e, x, y = triangle_pixels(vertices, triangles, 130, 90)
+        b = image[y, x].astype(np.float64)
+        out = np.abs(b - raster.evaluate(affine, e, x, y)) > vertex_values.OUTLIER
+        e, b = e[out], b[out]
+        u = (x[out] - raster.origin[e, 0]).astype(np.float64)
+        v = (y[out] - raster.origin[e, 1]).astype(np.float64)
+        want = np.stack([np.bincount(e, wt, len(triangles)) for wt in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        count, got = _elements.outlier_sums(vertices.astype(np.int64), triangles.astype(np.int64), 130, 90, affine,
+                                            np.ascontiguousarray(raster.origin, dtype=np.int64), image,
+                                            vertex_values.OUTLIER)
+        assert 0 < count == out.sum() and np.array_equal(got, want)
+    with pytest.raises(ValueError, match="out of range"):
+        _elements.outlier_sums(vertices.astype(np.int64), triangles.astype(np.int64) + 1000, 130, 90, affine,
+                               np.ascontiguousarray(raster.origin, dtype=np.int64), image, 2.0)

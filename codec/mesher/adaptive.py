@@ -30,7 +30,7 @@ from ..image import structure
 from ..mesh import Mesh
 from ..mesh import segments as segment_pairs
 from . import Finish, Meshed
-from .elements import Statistics, element_sse, line_raster, triangle_pixels
+from .elements import Statistics, element_sse
 from .refine import FOCUSED_ROUNDS, ROUNDS, merge, refine_to_budget, run_breaks
 from .unfold import Walls, unfold
 
@@ -107,14 +107,6 @@ def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, i
     mask[lines.pixels[:, 1], lines.pixels[:, 0]] = 1
     mask[walls.points[:, 1], walls.points[:, 0]] = 1
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
-
-
-def _pixels(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int):
-    """(element, x, y) of every pixel, elements numbered as the triangles then the
-    border lines (line_raster)."""
-    e, x, y = triangle_pixels(vertices, triangles, width, height)
-    le, lx, ly = line_raster(vertices, width, height).pixels()
-    return np.r_[e, le + len(triangles)], np.r_[x, lx], np.r_[y, ly]
 
 
 def _off_edge_curvature(gray: np.ndarray, found: np.ndarray) -> float:
@@ -241,7 +233,7 @@ def build(
     )
     if values == "lsq":
         vals = vertex_values.from_statistics(
-            image, vertices, elements, stats, layout, lambda: _pixels(vertices, triangles, width, height)
+            image, vertices, elements, stats, layout, triangles
         )
     else:
         vals = vertex_values.sample(image, vertices)

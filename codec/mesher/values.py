@@ -80,16 +80,16 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
     )
 
 
-def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarray, values: np.ndarray,
-                  samples: np.ndarray, pixels: tuple[np.ndarray, np.ndarray, np.ndarray], bb: np.ndarray) -> np.ndarray:
+def _planar_refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, raster, moments: np.ndarray,
+                  sums: np.ndarray, values: np.ndarray, samples: np.ndarray, bb: np.ndarray) -> np.ndarray:
     """Least squares without the pixels the mesh cannot follow, kept where that makes
     the image exact.
 
     A pixel on a step belongs to neither side: a wall cannot follow it to the pixel,
     and left in the fit it pulls the values of the wall vertices on both sides, so
     that even a piecewise-planar image is not reproduced away from its steps. So the
-    pixels (`pixels`: element, x, y of all) that the mesh misses by more than OUTLIER
-    are dropped and the fit solved again, then once more with the pixels the new fit
+    pixels that the mesh misses by more than OUTLIER (`raster`: the `triangles`, then
+    the border lines) are dropped and the fit solved again, then once more with the pixels the new fit
     misses; what a vertex loses in dropped pixels it keeps as a pull (LOST) to its own
     pixel's value (`samples`), so that a vertex left with few pixels stays put. The
     new values are taken at the vertices around which the remaining pixels fit to
@@ -97,22 +97,35 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
     the planar parts of the image. Elsewhere the first fit, the smaller squared error
     overall, stays.
     """
+    from ..native import _elements
     from .elements import squared_error
 
-    e0, x0, y0 = pixels
+    m, n, t = len(raster), len(values), len(triangles)
+    height, width = image.shape
+    # the border lines' pixels (a row and a column: few) as arrays; the triangles' are
+    # walked by a compiled pass that sums the outliers' terms itself (every pixel's
+    # element, x and y took three image-sized int64 arrays)
+    e0, x0, y0 = raster.pixels(np.arange(t, m))
     b0 = image[y0, x0].astype(np.float64)
-    m, n = len(raster), len(values)
+    plane = np.ascontiguousarray(image if image.dtype in (np.uint8, np.uint16, np.float32, np.float64)
+                                 else image.astype(np.float64))
+    verts = np.ascontiguousarray(vertices, dtype=np.int64)
+    tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    origin = np.ascontiguousarray(raster.origin, dtype=np.int64)
     full = _diagonal(raster.corners, normal_equations(raster.coef, raster.den, moments, sums)[0], n)
-    out = np.zeros(len(e0), bool)
     refit = values
     for _ in range(2):
-        out = np.abs(b0 - raster.evaluate(raster.affine(refit[:, 0]), e0, x0, y0)) > OUTLIER
-        if not out.any():
+        affine = np.ascontiguousarray(raster.affine(refit[:, 0]))
+        missed, drop_tris = _elements.outlier_sums(verts, tris, width, height, affine, origin, plane, OUTLIER)
+        out = np.abs(b0 - raster.evaluate(affine, e0, x0, y0)) > OUTLIER
+        if not missed and not out.any():
             return values
-        e, b = e0[out], b0[out]
-        u = (x0[out] - raster.origin[e, 0]).astype(np.float64)
-        v = (y0[out] - raster.origin[e, 1]).astype(np.float64)
-        drop = np.stack([np.bincount(e, w, m) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        e, b = e0[out] - t, b0[out]
+        u = (x0[out] - raster.origin[e + t, 0]).astype(np.float64)
+        v = (y0[out] - raster.origin[e + t, 1]).astype(np.float64)
+        # np.bincount's sums per element, the lines' elements apart from the triangles'
+        drop_lines = np.stack([np.bincount(e, w, m - t) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        drop = np.concatenate([drop_tris, drop_lines])
         kept_moments = moments - drop[:, :6]
         kept = sums - drop[:, None, 6:9]
         gram, rhs = normal_equations(raster.coef, raster.den, kept_moments, kept)
@@ -144,20 +157,20 @@ def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.nda
 
 
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
-                    pixels=None) -> np.ndarray:
+                    triangles: np.ndarray | None = None) -> np.ndarray:
     """Least-squares vertex values in the image's dtype from the elements of `raster`
     and their statistics (`layout`: the codec.mesher.elements.Statistics that measured them).
 
-    pixels: for single-channel images, a function giving (element, x, y) of every pixel;
-    on an image that is mostly planar (PLANAR_SHARE) the values are fitted again
+    triangles: for single-channel images, the triangles (the raster's first elements,
+    the border lines after them); on an image that is mostly planar (PLANAR_SHARE) the values are fitted again
     without the pixels the mesh cannot follow (_planar_refit)."""
     n = len(vertices)
     moments, sums = layout.fit_part(stats)
     gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
     start = sample(image, vertices).reshape(n, -1).astype(np.float64)
     out = solve(raster.corners, gram, rhs, start)
-    if pixels is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster) >= PLANAR_SHARE:
-        out = _planar_refit(image, raster, moments, sums, out, start, pixels(), stats[:, layout.IMG][:, 3])
+    if triangles is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster) >= PLANAR_SHARE:
+        out = _planar_refit(image, vertices, triangles, raster, moments, sums, out, start, stats[:, layout.IMG][:, 3])
     out = _to_dtype(out, image.dtype)
     return out[:, 0] if image.ndim == 2 else out
 
