@@ -397,26 +397,26 @@ def element_normals(const int64_t[:, :, :] coef, const int64_t[:] den, const dou
     return gram_out, rhs_out
 
 
-def exact_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, const int64_t[:] den,
-                 const double[::1] z, const double[:, :] moments, const double[:, :] sums, double planar):
-    """(pixels, all): how many pixels lie in the elements whose squared error against
-    the mesh through z is at most `planar` per pixel, and how many there are in all
-    (values._planar_share). Each element's plane as elements.Raster.affine makes it
-    (corner after corner, then / D) and its squared error as elements.squared_error
-    (term by term from the left, below zero taken as zero): the same float64
-    operations in their order, so the same elements count; the counts are whole
-    numbers, exact in any order. ValueError if the shapes disagree or a corner is out
-    of range."""
+def plane_errors(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, const int64_t[:] den,
+                 const double[::1] z, const double[:, :] moments, const double[:, :] sums):
+    """elements.element_sse: per element, the squared error of the mesh through z (a
+    value per vertex) against the image over its pixels, from its moments (1, u, v, uu,
+    uv, vv) and image sums (b, ub, vb, bb). The plane as elements.Raster.affine makes
+    it (corner after corner, then / D) and its squared error as
+    elements.squared_error (codec/planefit.pxd): numpy's float64 operations in their
+    order, so the same numbers, without its twenty-odd temporaries over the elements.
+    ValueError if the shapes disagree or a corner is out of range."""
     cdef Py_ssize_t m = den.shape[0], n = z.shape[0], e, k
     if (corners.shape[0] != m or corners.shape[1] != 3 or coef.shape[0] != m or coef.shape[1] != 3
             or coef.shape[2] != 3 or moments.shape[0] != m or moments.shape[1] < 6 or sums.shape[0] != m
             or sums.shape[1] < 4):
-        raise ValueError("exact_pixels: E x 3 corners and coef, E den, E x 6 moments, E x 4 sums")
+        raise ValueError("plane_errors: E x 3 corners and coef, E den, E x 6 moments, E x 4 sums")
     for e in range(m):
         for k in range(3):
             if not 0 <= corners[e, k] < n:
-                raise ValueError("exact_pixels: a corner out of range")
-    cdef double d, count, exact = 0, total = 0
+                raise ValueError("plane_errors: a corner out of range")
+    out_a = np.empty(m, dtype=np.float64)
+    cdef double[::1] out = out_a
     cdef double f[3]
     with nogil:
         for e in range(m):
@@ -425,11 +425,6 @@ def exact_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, con
                 f[k] = f[k] + <double>coef[e, 1, k] * z[corners[e, 1]]
                 f[k] = f[k] + <double>coef[e, 2, k] * z[corners[e, 2]]
                 f[k] = f[k] / <double>den[e]
-            # elements.squared_error (codec/planefit.pxd); a NaN compares False below
-            d = plane_sse(f[0], f[1], f[2], moments[e, 0], moments[e, 1], moments[e, 2], moments[e, 3],
-                          moments[e, 4], moments[e, 5], sums[e, 0], sums[e, 1], sums[e, 2], sums[e, 3])
-            count = moments[e, 0]
-            total += count
-            if d <= planar * count:
-                exact += count
-    return exact, total
+            out[e] = plane_sse(f[0], f[1], f[2], moments[e, 0], moments[e, 1], moments[e, 2], moments[e, 3],
+                               moments[e, 4], moments[e, 5], sums[e, 0], sums[e, 1], sums[e, 2], sums[e, 3])
+    return out_a

@@ -357,7 +357,7 @@ def test_the_element_normal_equations_are_the_numpy_ones_to_the_bit(corpus):
 
 
 def test_the_planar_share_is_counted_as_numpy_counted_it(corpus):
-    """values._planar_share in one compiled pass (codec._lsq.exact_pixels) counts the
+    """values._planar_share with the compiled squared errors (codec._lsq.plane_errors) counts the
     same elements as the numpy planes and squared errors it replaced: on a photo, on a
     piecewise-planar image where most elements are exact, and with values that make
     some elements miss by just about the limit."""
@@ -414,3 +414,24 @@ def test_the_outliers_sums_without_pixel_arrays_are_the_bincount_ones(dtype) -> 
     with pytest.raises(ValueError, match="out of range"):
         _elements.outlier_sums(vertices.astype(np.int64), triangles.astype(np.int64) + 1000, 130, 90, affine,
                                np.ascontiguousarray(raster.origin, dtype=np.int64), image, 2.0)
+
+
+def test_element_squared_errors_are_numpys_to_the_bit(corpus) -> None:
+    """elements.element_sse (codec._lsq.plane_errors) gives squared_error(raster.affine(z),
+    ...)'s very numbers, on triangles and border lines, for smooth and rough values,
+    from the strided statistics the callers pass; it refuses a corner out of range."""
+    from codec.mesher.elements import Statistics, element_sse, rasterize, squared_error
+    from codec.native import _lsq
+
+    rng = np.random.default_rng(13)
+    image = corpus["camera"][:140, :170]
+    vertices, triangles = random_mesh(image, 600, seed=4)
+    raster = rasterize(vertices, triangles, 170, 140)
+    stats = vertex_values.layout_for(image)(raster)
+    for z in (image[vertices[:, 1], vertices[:, 0]].astype(np.float64), rng.normal(100, 80, len(vertices))):
+        want = squared_error(raster.affine(z), stats[:, Statistics.GEO], stats[:, Statistics.IMG])
+        got = element_sse(raster, stats, z)
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    with pytest.raises(ValueError, match="corner"):
+        _lsq.plane_errors(np.full((1, 3), 9, np.int64), np.ones((1, 3, 3), np.int64), np.ones(1, np.int64),
+                          np.zeros(3), np.zeros((1, 6)), np.zeros((1, 4)))

@@ -145,15 +145,11 @@ def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.nda
     """Share of the pixels that the mesh through `values` reproduces to within rounding
     (elements with a mean squared error of at most PLANAR): most of a piecewise-planar
     image, hardly any of a photograph."""
-    from ..native import _lsq
+    from .elements import element_sse
 
-    # one compiled pass: the planes, squared errors and counts with numpy's arithmetic
-    exact, total = _lsq.exact_pixels(
-        np.ascontiguousarray(raster.corners, dtype=np.int64), np.asarray(raster.coef, dtype=np.int64),
-        np.asarray(raster.den, dtype=np.int64), np.ascontiguousarray(values[:, 0], dtype=np.float64),
-        np.asarray(moments, dtype=np.float64), np.asarray(stats[:, layout.IMG], dtype=np.float64), PLANAR,
-    )
-    return float(exact / max(total, 1.0))
+    count = moments[:, 0]
+    exact = element_sse(raster, stats, values[:, 0]) <= PLANAR * count
+    return float(count[exact].sum() / max(count.sum(), 1.0))
 
 
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
