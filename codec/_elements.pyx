@@ -14,7 +14,9 @@ in row order, as a sparse row-sum adds them. The GIL is released while they work
 
 cimport cython
 from libc.math cimport ceil, fabs
-from libc.stdint cimport int32_t, int64_t, uint8_t, uint64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint64_t
+
+from codec.planefit cimport plane_sse
 
 import numpy as np
 
@@ -248,7 +250,6 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef int64_t py[3]
     cdef double f[3]
     cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
-    cdef double a, b, cc, ff, bf
     cdef table_t dk
     cdef bint bad = False
     with nogil:
@@ -302,22 +303,9 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
             if not errors:
                 continue
             _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
-            a = f[0]
-            b = f[1]
-            cc = f[2]
-            # elements.squared_error, term by term from the left
-            ff = a * a * o[t, 3]
-            ff = ff + 2 * a * b * o[t, 4]
-            ff = ff + b * b * o[t, 5]
-            ff = ff + 2 * a * cc * o[t, 1]
-            ff = ff + 2 * b * cc * o[t, 2]
-            ff = ff + cc * cc * o[t, 0]
-            bf = a * o[t, 7]
-            bf = bf + b * o[t, 8]
-            bf = bf + cc * o[t, 6]
-            d = o[t, 9] - 2 * bf + ff
-            # np.maximum(d, 0.0): -0.0 and NaN stay as they are
-            e[t] = d if d >= 0.0 or d != d else 0.0
+            # elements.squared_error (codec/planefit.pxd)
+            e[t] = plane_sse(f[0], f[1], f[2], o[t, 0], o[t, 1], o[t, 2], o[t, 3], o[t, 4], o[t, 5],
+                             o[t, 6], o[t, 7], o[t, 8], o[t, 9])
     if bad:
         raise ValueError("triangle_statistics: a corner index or coordinate out of range")
     return out, (sse_out if errors else None)
@@ -653,3 +641,70 @@ def first_of_each(const int64_t[::1] keys):
                 table[s] = i
                 first[i] = 1
     return first_out
+
+
+ctypedef fused pixel_t:
+    uint8_t
+    uint16_t
+    float
+    double
+
+
+def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width, int64_t height,
+                 const double[:, ::1] affine, const int64_t[:, ::1] origin, const pixel_t[:, ::1] image,
+                 double limit):
+    """(count, drop): the pixels of the triangles (walked as triangle_pixels lists them)
+    whose value b lies more than `limit` from the mesh f = a (x - ox) + b (y - oy) + c
+    of their triangle (affine's and origin's rows, as evaluate sums it), and per
+    triangle their sums of 1, u, v, u u, u v, v v, b, u b, v b, b b (u = x - ox,
+    v = y - oy), added pixel after pixel as np.bincount adds them: what
+    values._planar_refit took from every pixel's (element, x, y) arrays, without them.
+    ValueError on an index or coordinate out of range or tables that do not match."""
+    _check(vertices, triangles, width, height)
+    cdef int64_t m = triangles.shape[0], t, dy, y, x0, n, x, up, count = 0
+    if affine.shape[0] < m or affine.shape[1] != 3 or origin.shape[0] < m or origin.shape[1] != 2:
+        raise ValueError("outlier_sums: an affine and an origin per triangle")
+    if image.shape[0] != height or image.shape[1] != width:
+        raise ValueError("outlier_sums: the image does not match its size")
+    drop_a = np.zeros((m, 10), dtype=np.float64)
+    cdef double[:, ::1] drop = drop_a
+    cdef _Rows rows
+    cdef int64_t ys[3]
+    cdef int64_t xs[3]
+    cdef double a, bb, c, u, v, b, f
+    cdef int64_t ox, oy
+    cdef bint bad = False
+    with nogil:
+        for t in range(m):
+            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+                bad = True
+                break
+            a = affine[t, 0]
+            bb = affine[t, 1]
+            c = affine[t, 2]
+            ox = origin[t, 0]
+            oy = origin[t, 1]
+            _rows_start(&rows, ys, xs, up)
+            for dy in range(ys[2] - ys[0]):
+                _rows_next(&rows, &x0, &n)
+                y = ys[0] + dy
+                v = <double>(y - oy)
+                for x in range(x0, x0 + n):
+                    u = <double>(x - ox)
+                    f = a * u + bb * v + c
+                    b = <double>image[y, x]
+                    if fabs(b - f) > limit:
+                        count += 1
+                        drop[t, 0] += 1.0
+                        drop[t, 1] += u
+                        drop[t, 2] += v
+                        drop[t, 3] += u * u
+                        drop[t, 4] += u * v
+                        drop[t, 5] += v * v
+                        drop[t, 6] += b
+                        drop[t, 7] += u * b
+                        drop[t, 8] += v * b
+                        drop[t, 9] += b * b
+    if bad:
+        raise ValueError("outlier_sums: a corner index or coordinate out of range")
+    return count, drop_a

@@ -2,12 +2,13 @@
 derivatives, in one pass each instead of a numpy temporary per operation (a 512²
 image's float32 planes are a megabyte each): the gradient magnitude and Canny's
 fixed-point derivatives (codec.mesher.edges), the norm of the Hessian
-(codec.mesher.sampling). Each gives the very float32 numbers numpy gave (the same
-operations in the same order, in float32, without contraction). The GIL is released
-while they work."""
+(codec.mesher.sampling), and the region samples' inverse-CDF walk over the tiles
+(codec.mesher.sampling.sample). Each gives the very numbers numpy gave (the same
+operations in the same order, without contraction). The GIL is released while they
+work."""
 
 from libc.math cimport rintf, sqrtf
-from libc.stdint cimport int16_t
+from libc.stdint cimport int16_t, int64_t
 
 import numpy as np
 
@@ -75,3 +76,115 @@ def hessian_norm(const float[:, ::1] dxx, const float[:, ::1] dyy, const float[:
             c = pc[i]
             o[i] = sqrtf(a * a + two * b * b + c * c)
     return out
+
+
+cdef inline Py_ssize_t _lower_bound(const double* a, Py_ssize_t n, double v) noexcept nogil:
+    """The first i with a[i] >= v (n if none): numpy's searchsorted(side="left")."""
+    cdef Py_ssize_t lo = 0, hi = n, mid
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if a[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+cdef Py_ssize_t _shares(const double* cum, Py_ssize_t n, Py_ssize_t lo, Py_ssize_t hi, int64_t k,
+                        int64_t* pos) noexcept nogil:
+    """sampling._inverse_cdf for one interval [lo, hi) of the cumulative sum cum (n
+    long): the k positions splitting its mass into equal shares, at the middle of each,
+    with its float64 operations in their order; returns k."""
+    cdef double base = cum[lo - 1] if lo > 0 else 0.0
+    cdef double total = cum[hi - 1] - base
+    cdef int64_t j
+    cdef Py_ssize_t p
+    for j in range(k):
+        p = _lower_bound(cum, n, base + (<double>j + 0.5) / <double>k * total)
+        pos[j] = lo if p < lo else (hi - 1 if p > hi - 1 else p)
+    return k
+
+
+def tile_samples(const double[:, ::1] dens, const int64_t[::1] xb, const int64_t[::1] yb, int64_t r,
+                 int64_t z):
+    """sampling.sample's samples before its last filter (N x 2 (x, y), tile row after
+    tile row): in each tile row, r columns per tile by inverse-CDF sampling of the
+    column sums (rows added in turn, as numpy sums axis 0), those of zero mass dropped,
+    then along each distinct chosen column (m times chosen: m * z samples) the same on
+    the columns' cumulative sums, stacked into one increasing sequence (each column's
+    after the last one's end + 1). The float64 operations of the numpy code in their
+    order, so the same pixels. ValueError unless the tile bounds increase strictly
+    within the image and r, z >= 1."""
+    cdef Py_ssize_t h = dens.shape[0], w = dens.shape[1], nh = xb.shape[0] - 1, nv = yb.shape[0] - 1
+    cdef Py_ssize_t t, x, y, c, i, count = 0, ncols, nchosen, height, y0, y1, j
+    if nh < 1 or nv < 1 or r < 1 or z < 1 or xb[0] != 0 or xb[nh] != w or yb[0] != 0 or yb[nv] != h:
+        raise ValueError("tile_samples: tile bounds from 0 to the image's size, r and z >= 1")
+    for t in range(nh):
+        if xb[t + 1] <= xb[t]:
+            raise ValueError("tile_samples: tile bounds must increase")
+    for t in range(nv):
+        if yb[t + 1] <= yb[t]:
+            raise ValueError("tile_samples: tile bounds must increase")
+    out_a = np.empty((nv * nh * r * z, 2), dtype=np.int64)
+    colsum_a = np.empty(w, dtype=np.float64)
+    cum_a = np.empty(w, dtype=np.float64)
+    chosen_a = np.empty(nh * r, dtype=np.int64)
+    mult_a = np.empty(nh * r, dtype=np.int64)
+    pos_a = np.empty(max(nh * r, nh * r * z), dtype=np.int64)
+    seq_a = np.empty(nh * r * h, dtype=np.float64)
+    cdef int64_t[:, ::1] out = out_a
+    cdef double[::1] colsum = colsum_a, cum = cum_a, seq = seq_a
+    cdef int64_t[::1] chosen = chosen_a, mult = mult_a, pos = pos_a
+    cdef double offset, run
+    cdef int64_t col, last
+    with nogil:
+        for t in range(nv):
+            y0 = yb[t]
+            y1 = yb[t + 1]
+            height = y1 - y0
+            for x in range(w):
+                colsum[x] = dens[y0, x]
+            for y in range(y0 + 1, y1):
+                for x in range(w):
+                    colsum[x] = colsum[x] + dens[y, x]
+            run = 0.0
+            for x in range(w):
+                run = colsum[x] if x == 0 else run + colsum[x]
+                cum[x] = run
+            ncols = 0
+            for i in range(nh):
+                _shares(&cum[0], w, xb[i], xb[i + 1], r, &pos[ncols])
+                ncols += r
+            # the chosen columns of some mass, distinct and sorted, with their counts
+            # (chosen tile by tile, each tile's in increasing order: already sorted)
+            nchosen = 0
+            last = -1
+            for i in range(ncols):
+                col = pos[i]
+                if not colsum[col] > 0:
+                    continue
+                if col == last:
+                    mult[nchosen - 1] += 1
+                else:
+                    chosen[nchosen] = col
+                    mult[nchosen] = 1
+                    nchosen += 1
+                    last = col
+            if nchosen == 0:
+                continue
+            # the chosen columns' cumulative sums down the tile row, one after another
+            offset = 0.0
+            for c in range(nchosen):
+                col = chosen[c]
+                run = 0.0
+                for y in range(height):
+                    run = dens[y0, col] if y == 0 else run + dens[y0 + y, col]
+                    seq[c * height + y] = run + offset
+                offset = offset + (run + 1.0)
+            for c in range(nchosen):
+                _shares(&seq[0], nchosen * height, c * height, (c + 1) * height, mult[c] * z, &pos[0])
+                for j in range(mult[c] * z):
+                    out[count, 0] = chosen[c]
+                    out[count, 1] = pos[j] - c * height + y0
+                    count += 1
+    return out_a[:count]

@@ -8,6 +8,8 @@ max_error encode. The GIL is released while it works."""
 from libc.math cimport sqrt
 from libc.stdint cimport int64_t, uint8_t, uint16_t
 
+from codec.planefit cimport plane_sse
+
 import numpy as np
 
 ctypedef fused sample_t:
@@ -341,3 +343,88 @@ cdef void _apply_vector(const int64_t[:, ::1] corners, const double[:, :, ::1] g
         x2 = x[corners[e, 2]]
         for i in range(3):
             y[corners[e, i]] += gram[e, i, 0] * x0 + gram[e, i, 1] * x1 + gram[e, i, 2] * x2
+
+
+def element_normals(const int64_t[:, :, :] coef, const int64_t[:] den, const double[:, :] moments,
+                    const double[:, :, :] image_sums):
+    """values.normal_equations from its elements' weighted moments: per element e,
+    gram[e] = C M C^T / D^2 (3 x 3, corner by corner; C's rows the corners' (alpha, beta,
+    gamma) = coef[e], M the sums of p p^T over its pixels, p = (u, v, 1), from
+    moments[e] = (1, u, v, uu, uv, vv)) and rhs[e, c] = C (ub, vb, b) / D for every
+    channel c of image_sums[e, c] = (b, ub, vb). The float64 operations of the numpy
+    code it replaces, in its order (each sum from 0 as Python's sum() starts, so the
+    same numbers), in one pass instead of some fifty over the elements. ValueError if
+    the shapes disagree."""
+    cdef Py_ssize_t m = den.shape[0], ch = image_sums.shape[1], e, i, j, k, l, c
+    if (coef.shape[0] != m or coef.shape[1] != 3 or coef.shape[2] != 3 or moments.shape[0] != m
+            or moments.shape[1] < 6 or image_sums.shape[0] != m or image_sums.shape[2] < 3):
+        raise ValueError("element_normals: E x 3 x 3 coef, E den, E x 6 moments, E x C x 3 sums")
+    gram_out = np.empty((m, 3, 3), dtype=np.float64)
+    rhs_out = np.empty((m, ch, 3), dtype=np.float64)
+    cdef double[:, :, ::1] gram = gram_out
+    cdef double[:, :, ::1] rhs = rhs_out
+    cdef double cf[3][3]
+    cdef double mm[3][3]
+    cdef double cm[3][3]
+    cdef double d, dd, g
+    with nogil:
+        for e in range(m):
+            for i in range(3):
+                for k in range(3):
+                    cf[i][k] = <double>coef[e, i, k]
+            d = <double>den[e]
+            # rows ((uu, uv, u), (uv, vv, v), (u, v, 1))
+            mm[0][0] = moments[e, 3]; mm[0][1] = moments[e, 4]; mm[0][2] = moments[e, 1]
+            mm[1][0] = moments[e, 4]; mm[1][1] = moments[e, 5]; mm[1][2] = moments[e, 2]
+            mm[2][0] = moments[e, 1]; mm[2][1] = moments[e, 2]; mm[2][2] = moments[e, 0]
+            for i in range(3):
+                for l in range(3):
+                    g = 0.0 + cf[i][0] * mm[0][l]
+                    g = g + cf[i][1] * mm[1][l]
+                    cm[i][l] = g + cf[i][2] * mm[2][l]
+            dd = d * d
+            for i in range(3):
+                for j in range(i, 3):
+                    g = 0.0 + cm[i][0] * cf[j][0]
+                    g = g + cm[i][1] * cf[j][1]
+                    g = (g + cm[i][2] * cf[j][2]) / dd
+                    gram[e, i, j] = g
+                    gram[e, j, i] = g
+            for c in range(ch):
+                for i in range(3):
+                    rhs[e, c, i] = (cf[i][0] * image_sums[e, c, 1] + cf[i][1] * image_sums[e, c, 2]
+                                    + cf[i][2] * image_sums[e, c, 0]) / d
+    return gram_out, rhs_out
+
+
+def plane_errors(const int64_t[:, ::1] corners, const int64_t[:, :, :] coef, const int64_t[:] den,
+                 const double[::1] z, const double[:, :] moments, const double[:, :] sums):
+    """elements.element_sse: per element, the squared error of the mesh through z (a
+    value per vertex) against the image over its pixels, from its moments (1, u, v, uu,
+    uv, vv) and image sums (b, ub, vb, bb). The plane as elements.Raster.affine makes
+    it (corner after corner, then / D) and its squared error as
+    elements.squared_error (codec/planefit.pxd): numpy's float64 operations in their
+    order, so the same numbers, without its twenty-odd temporaries over the elements.
+    ValueError if the shapes disagree or a corner is out of range."""
+    cdef Py_ssize_t m = den.shape[0], n = z.shape[0], e, k
+    if (corners.shape[0] != m or corners.shape[1] != 3 or coef.shape[0] != m or coef.shape[1] != 3
+            or coef.shape[2] != 3 or moments.shape[0] != m or moments.shape[1] < 6 or sums.shape[0] != m
+            or sums.shape[1] < 4):
+        raise ValueError("plane_errors: E x 3 corners and coef, E den, E x 6 moments, E x 4 sums")
+    for e in range(m):
+        for k in range(3):
+            if not 0 <= corners[e, k] < n:
+                raise ValueError("plane_errors: a corner out of range")
+    out_a = np.empty(m, dtype=np.float64)
+    cdef double[::1] out = out_a
+    cdef double f[3]
+    with nogil:
+        for e in range(m):
+            for k in range(3):
+                f[k] = <double>coef[e, 0, k] * z[corners[e, 0]]
+                f[k] = f[k] + <double>coef[e, 1, k] * z[corners[e, 1]]
+                f[k] = f[k] + <double>coef[e, 2, k] * z[corners[e, 2]]
+                f[k] = f[k] / <double>den[e]
+            out[e] = plane_sse(f[0], f[1], f[2], moments[e, 0], moments[e, 1], moments[e, 2], moments[e, 3],
+                               moments[e, 4], moments[e, 5], sums[e, 0], sums[e, 1], sums[e, 2], sums[e, 3])
+    return out_a

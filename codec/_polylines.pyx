@@ -6,7 +6,9 @@ Triangular Meshes" that picks each chain's control points. The results are those
 the numpy code they replace. The GIL is released while they work.
 """
 
-from libc.stdint cimport int64_t, uint8_t
+from libc.stdint cimport int64_t, uint8_t, uint64_t
+from libc.math cimport rint
+from libc.string cimport memcpy
 
 import numpy as np
 
@@ -30,7 +32,8 @@ def order_chains(const uint8_t[::1] simple, const int64_t[::1] offsets):
     n = len(flat_a)
     if n == 0:
         return flat_a, flat_a.copy(), np.zeros(0, bool)
-    index_a = np.full(size, -1, dtype=np.int64)
+    # read only where `simple` is set, which the first loop below fills: no image-sized fill
+    index_a = np.empty(size, dtype=np.int64)
     nb_a = np.full((n, 2), -1, dtype=np.int64)
     comp_start_a = np.full(n, -1, dtype=np.int64)
     is_start_a = np.zeros(n, dtype=np.uint8)
@@ -271,3 +274,183 @@ def later_conflicts(const int64_t[:, ::1] points, const int64_t[:, ::1] segments
                     if not bad[j] and _conflict(points, segments, members[u], j):
                         bad[j] = 1
     return bad_a
+
+
+def thin_split(uint8_t[::1] on, Py_ssize_t stride, const uint8_t[::1] redundant):
+    """Thin a flat edge mask padded by one empty pixel all round (rows of `stride`) in
+    place, as polylines.thin did with image filters: two passes, over the pixels with
+    (x + y) % 2 == 0 and then 1 (padded coordinates), each removing at once every
+    pixel of its colour whose 8-neighbourhood code (bit k: neighbour k of
+    polylines._OFFSETS on, as the pass found them) is `redundant`. Returns (junction,
+    simple) masks over the same pixels: the pixels left with three or more neighbours,
+    and the others. Works over the mask's pixels only (an edge map is sparse).
+    ValueError if the border is not empty or the table has not 256 entries."""
+    cdef Py_ssize_t size = on.shape[0], rows, i, j, p, x, y, k, n = 0, removed
+    cdef int code, count
+    if stride < 3 or size % stride or size // stride < 3:
+        raise ValueError("thin_split: a padded mask of at least 3 x 3")
+    if redundant.shape[0] != 256:
+        raise ValueError("thin_split: a table of 256 neighbourhood codes")
+    rows = size // stride
+    for x in range(stride):
+        if on[x] or on[size - stride + x]:
+            raise ValueError("thin_split: the mask's border must be empty")
+    for y in range(rows):
+        if on[y * stride] or on[y * stride + stride - 1]:
+            raise ValueError("thin_split: the mask's border must be empty")
+    # the neighbours in polylines._OFFSETS' order: (dy, dx) = (-1, -1), (-1, 0), (-1, 1),
+    # (0, 1), (1, 1), (1, 0), (1, -1), (0, -1)
+    cdef Py_ssize_t off[8]
+    off[0] = -stride - 1; off[1] = -stride; off[2] = -stride + 1; off[3] = 1
+    off[4] = stride + 1; off[5] = stride; off[6] = stride - 1; off[7] = -1
+    # the edge pixels, row by row (an edge map is mostly empty: eight bytes tested at a
+    # time), each with its colour (x + y) % 2
+    cdef const uint8_t* o = &on[0]
+    cdef uint64_t word
+    for y in range(1, rows - 1):
+        for x in range(y * stride, y * stride + stride - 7, 8):
+            memcpy(&word, o + x, 8)
+            if word:
+                for k in range(x, x + 8):
+                    n += o[k] != 0
+        for x in range(y * stride + stride - stride % 8, y * stride + stride):
+            n += o[x] != 0
+    pixels_a = np.empty(n, np.intp)
+    colour_a = np.empty(n, np.uint8)
+    gone_a = np.empty(n, np.intp)
+    junction_a = np.zeros(size, np.uint8)
+    simple_a = np.zeros(size, np.uint8)
+    cdef Py_ssize_t[::1] pixels = pixels_a, gone = gone_a
+    cdef uint8_t[::1] junction = junction_a, simple = simple_a, colour = colour_a
+    cdef int parity
+    with nogil:
+        j = 0
+        for y in range(1, rows - 1):
+            for x in range(y * stride, y * stride + stride - 7, 8):
+                memcpy(&word, o + x, 8)
+                if word:
+                    for k in range(x, x + 8):
+                        if o[k]:
+                            pixels[j] = k
+                            colour[j] = (k - y * stride + y) & 1
+                            j += 1
+            for x in range(y * stride + stride - stride % 8, y * stride + stride):
+                if o[x]:
+                    pixels[j] = x
+                    colour[j] = (x - y * stride + y) & 1
+                    j += 1
+        for parity in range(2):
+            # every code of the pass from the mask as the pass found it, then the removals
+            removed = 0
+            for j in range(n):
+                p = pixels[j]
+                if not on[p] or colour[j] != parity:
+                    continue
+                code = ((o[p + off[0]] != 0) | (o[p + off[1]] != 0) << 1 | (o[p + off[2]] != 0) << 2
+                        | (o[p + off[3]] != 0) << 3 | (o[p + off[4]] != 0) << 4 | (o[p + off[5]] != 0) << 5
+                        | (o[p + off[6]] != 0) << 6 | (o[p + off[7]] != 0) << 7)
+                if redundant[code]:
+                    gone[removed] = p
+                    removed += 1
+            for j in range(removed):
+                on[gone[j]] = 0
+        for j in range(n):
+            p = pixels[j]
+            if not on[p]:
+                continue
+            count = ((o[p + off[0]] != 0) + (o[p + off[1]] != 0) + (o[p + off[2]] != 0) + (o[p + off[3]] != 0)
+                     + (o[p + off[4]] != 0) + (o[p + off[5]] != 0) + (o[p + off[6]] != 0) + (o[p + off[7]] != 0))
+            if count >= 3:
+                junction[p] = 1
+            else:
+                simple[p] = 1
+    return junction_a.view(bool), simple_a.view(bool)
+
+
+ctypedef fused gray_t:
+    float
+    double
+
+
+def opposite_feet(const int64_t[:, ::1] points, const double[:, ::1] normal, const gray_t[:, ::1] gray,
+                  int64_t reach, double min_step):
+    """unfold.opposite_points for every control point P (N x 2 (x, y)) with its unit
+    normal (N x 2), in one pass: on each side (+normal, then -normal) the pixels
+    rint(P + s * k * normal), k = 1 .. reach, clipped to the image; the change |gray -
+    gray[P]| of each (-1 where the pixel is P itself); the first at least max(half the
+    side's largest change, min_step); the side whose hit comes first wins (ties: the
+    larger change there; no hit on either side: the larger change at k = 1). Returns
+    (left, right): P and its opposite point O, each on its side of the normal. The
+    numpy code's arithmetic in gray's own precision, so the same pixels. ValueError
+    on shapes that disagree or reach < 1."""
+    cdef Py_ssize_t n = points.shape[0], h = gray.shape[0], w = gray.shape[1], i, k, s
+    if normal.shape[0] != n or (n and (points.shape[1] != 2 or normal.shape[1] != 2)) or reach < 1 or h < 1 or w < 1:
+        raise ValueError("opposite_feet: N x 2 points and normals, reach >= 1, a non-empty image")
+    for i in range(n):
+        if not (0 <= points[i, 0] < w and 0 <= points[i, 1] < h):
+            raise ValueError("opposite_feet: a point outside the image")
+    left_a = np.empty((n, 2), np.int64)
+    right_a = np.empty((n, 2), np.int64)
+    qs_a = np.empty((2, reach, 2), np.int64)
+    cdef int64_t[:, ::1] left = left_a, right = right_a
+    cdef int64_t[:, :, ::1] qs = qs_a
+    cdef int64_t px, py, qx, qy, first[2], ia, ib, ox, oy
+    cdef gray_t centre, change, biggest, limit, half = 0.5, floor_step = <gray_t>min_step
+    cdef gray_t ch[2][64]
+    cdef double sign, step, nx, ny
+    cdef bint take_a, none
+    if reach > 64:
+        raise ValueError("opposite_feet: reach up to 64")
+    with nogil:
+        for i in range(n):
+            px = points[i, 0]
+            py = points[i, 1]
+            nx = normal[i, 0]
+            ny = normal[i, 1]
+            centre = gray[py, px]
+            for s in range(2):
+                sign = 1.0 if s == 0 else -1.0
+                biggest = 0
+                for k in range(reach):
+                    step = sign * <double>(k + 1)
+                    qx = <int64_t>rint(<double>px + step * nx)
+                    qy = <int64_t>rint(<double>py + step * ny)
+                    qx = 0 if qx < 0 else (w - 1 if qx > w - 1 else qx)
+                    qy = 0 if qy < 0 else (h - 1 if qy > h - 1 else qy)
+                    qs[s, k, 0] = qx
+                    qs[s, k, 1] = qy
+                    change = gray[qy, qx] - centre
+                    change = -change if change < 0 else change
+                    if qx == px and qy == py:
+                        change = -1
+                    ch[s][k] = change
+                    if k == 0 or change > biggest:
+                        biggest = change
+                limit = half * biggest
+                if not limit >= floor_step:
+                    limit = floor_step
+                first[s] = reach
+                for k in range(reach):
+                    if ch[s][k] >= limit:
+                        first[s] = k
+                        break
+            ia = first[0] if first[0] < reach - 1 else reach - 1
+            ib = first[1] if first[1] < reach - 1 else reach - 1
+            take_a = first[0] < first[1] or (first[0] == first[1] and ch[0][ia] >= ch[1][ib])
+            none = first[0] == reach and first[1] == reach
+            if none:
+                take_a = ch[0][0] >= ch[1][0]
+                ia = 0
+                ib = 0
+            if take_a:
+                ox = qs[0, ia, 0]
+                oy = qs[0, ia, 1]
+            else:
+                ox = qs[1, ib, 0]
+                oy = qs[1, ib, 1]
+            # the paper's swap (section 3.3.2.1): each polyline keeps the points on its side
+            if <double>(ox - px) * nx + <double>(oy - py) * ny > 0:
+                left[i, 0] = ox; left[i, 1] = oy; right[i, 0] = px; right[i, 1] = py
+            else:
+                left[i, 0] = px; left[i, 1] = py; right[i, 0] = ox; right[i, 1] = oy
+    return left_a, right_a

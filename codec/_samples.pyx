@@ -47,3 +47,29 @@ def quantised(const int64_t[:, ::1] values, const int64_t[::1] steps, const int6
                     prev -= _floordiv(prev, s) * s
                 o[i, c] = prev
     return out
+
+
+def varint_histograms(const int64_t[::1] values, int64_t first, int64_t last):
+    """For each shift k = first .. last, the histogram (256 counts) of the bytes of the
+    varints (coding.varints: 7 bits a byte, low first, the top bit set on all but the
+    last) of values >> k, and the number of those bytes: what
+    meshcode._varint_entropy counts for one k, for all of them in one pass each.
+    ValueError on a negative value or shift."""
+    cdef Py_ssize_t n = values.shape[0], i
+    cdef int64_t k, v
+    if first < 0 or last < first or last > 62:
+        raise ValueError("varint_histograms: shifts 0 <= first <= last <= 62")
+    for i in range(n):
+        if values[i] < 0:
+            raise ValueError("varint_histograms: a negative value")
+    counts_a = np.zeros((last - first + 1, 256), dtype=np.int64)
+    cdef int64_t[:, ::1] counts = counts_a
+    with nogil:
+        for k in range(first, last + 1):
+            for i in range(n):
+                v = values[i] >> k
+                while v >= 128:
+                    counts[k - first, (v & 127) | 128] += 1
+                    v >>= 7
+                counts[k - first, v] += 1
+    return counts_a

@@ -56,17 +56,12 @@ def payload_parts(raw: bytes, fields: dict) -> list[bytes]:
 MAX_POSITION_BITS = 24
 
 
-def _varint_entropy(values: np.ndarray) -> float:
-    """Order-0 entropy in bytes of the varint bytes of `values` (what zstd's entropy
-    stage can reach), from a histogram of the bytes without writing them."""
-    if values.max() >= 1 << 14:
-        data = np.frombuffer(varints(values), np.uint8)
-    else:
-        long = values >= 128
-        data = np.r_[np.where(long, (values & 127) | 128, values), values[long] >> 7]
-    counts = np.bincount(data, minlength=256)
-    p = counts[counts > 0] / len(data)
-    return float(-(p * np.log2(p)).sum() * len(data) / 8)
+def _histogram_entropy(counts: np.ndarray) -> float:
+    """Order-0 entropy in bytes of data with these byte counts (what zstd's entropy
+    stage can reach)."""
+    size = int(counts.sum())
+    p = counts[counts > 0] / size
+    return float(-(p * np.log2(p)).sum() * size / 8)
 
 
 def position_fields(gaps: np.ndarray, bits: int | None = None) -> dict:
@@ -81,7 +76,9 @@ def position_fields(gaps: np.ndarray, bits: int | None = None) -> dict:
             # the best split lies a few bits below the mean gap's size
             top = min(MAX_POSITION_BITS, int(np.log2(gaps.mean() + 1)) + 1)
             ks = range(max(0, top - 5), top + 1)
-            sizes = [_varint_entropy(gaps >> k) + len(gaps) * k / 8 for k in ks]
+            # the varint bytes of gaps >> k for every k, counted in one compiled pass each
+            counts = _samples.varint_histograms(np.ascontiguousarray(gaps), ks[0], ks[-1])
+            sizes = [_histogram_entropy(c) + len(gaps) * k / 8 for c, k in zip(counts, ks)]
             bits = ks[int(np.argmin(sizes))]
     low = (gaps[:, None] >> np.arange(bits - 1, -1, -1)) & 1
     return dict(

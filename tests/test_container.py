@@ -417,3 +417,23 @@ def test_value_step_option():
     assert sizes[0] > sizes[1] > sizes[2]
     with pytest.raises(codec.OptionError, match="value_step"):
         codec.encode(image, value_step=0)
+
+
+def test_a_mesh_given_without_its_triangulation_vouched_for_is_still_checked_for_tiling() -> None:
+    """write_band skips the edge sort only for a mesh the encoder triangulated as a
+    decoder will (delaunay=True); any other mesh is checked whole: here two triangles
+    of the right total area that overlap and leave a gap."""
+    from codec.mesh import Mesh
+
+    v = np.array([[0, 0], [4, 0], [0, 4], [4, 4], [2, 2]], np.int64)
+    good = np.array([[0, 1, 4], [1, 3, 4], [3, 2, 4], [2, 0, 4]], np.int64)
+    # the same area: the top triangle twice, the bottom one missing
+    bad = np.array([[0, 1, 4], [0, 1, 4], [1, 3, 4], [2, 0, 4]], np.int64)
+    values = np.full(5, 7, np.uint8)
+    for triangles, delaunay in ((good, None), (good, True)):
+        writer = container.Writer(io.BytesIO(), container.Header(5, 5, np.dtype(np.uint8), 1))
+        writer.write_band(0, Mesh(v, values, triangles, 5, 5, []), 1, delaunay)
+    for delaunay in (None, False):
+        writer = container.Writer(io.BytesIO(), container.Header(5, 5, np.dtype(np.uint8), 1))
+        with pytest.raises(CorruptError, match="same side|tile"):
+            writer.write_band(0, Mesh(v, values, bad, 5, 5, []), 1, delaunay)

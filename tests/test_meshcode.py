@@ -179,3 +179,22 @@ def test_the_samples_kernel_refuses_what_it_cannot_follow() -> None:
         _samples.quantised(values, np.array([1, 0, 1]), np.array([-1, 0, 0]), 255)
     with pytest.raises(ValueError, match="a step and a parent"):
         _samples.quantised(values, np.ones(2, np.int64), np.array([-1, 0, 0]), 255)
+
+
+def test_the_varint_byte_histograms_are_those_of_the_written_varints() -> None:
+    """codec._samples.varint_histograms counts, for every shift, the bytes that
+    coding.varints writes for the shifted values (position_fields' size estimates),
+    one- to six-byte varints included; it refuses negative values and shifts."""
+    from codec.coding import varints
+    from codec.native import _samples
+
+    rng = np.random.default_rng(8)
+    values = np.concatenate([rng.integers(0, 300, 500), rng.integers(0, 1 << 40, 50), [0, 127, 128, 16383, 16384]])
+    counts = _samples.varint_histograms(values.astype(np.int64), 2, 9)
+    for row, k in zip(counts, range(2, 10)):
+        data = np.frombuffer(varints(values >> k), np.uint8)
+        assert np.array_equal(row, np.bincount(data, minlength=256))
+    with pytest.raises(ValueError, match="negative"):
+        _samples.varint_histograms(np.array([3, -1], np.int64), 0, 1)
+    with pytest.raises(ValueError, match="shifts"):
+        _samples.varint_histograms(np.array([3], np.int64), 2, 1)

@@ -175,3 +175,57 @@ def test_wall_conflicts_refuse_bad_input() -> None:
         native._polylines.later_conflicts(-p, np.array([[0, 1]], np.int64), 8)
     with pytest.raises(ValueError, match="cell"):
         native._polylines.later_conflicts(p, np.array([[0, 1]], np.int64), 0)
+
+
+def _thin_by_filters(on: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(thinned, junction, simple) of a padded mask the way trace() made them before
+    codec._polylines.thin_split: each pass's neighbourhood codes by cv2.filter2D over
+    the whole mask, a look-up table, the pass's colour cleared at once; then the
+    neighbour count by a filter."""
+    import cv2
+
+    from codec.mesher.polylines import _REDUNDANT_U8
+
+    def kernel(weights):
+        k = np.zeros((3, 3), np.float32)
+        k[_OFFSETS[:, 0] + 1, _OFFSETS[:, 1] + 1] = weights
+        return k
+
+    on = on.copy()
+    for parity in (0, 1):
+        code = cv2.filter2D(on.view(np.uint8), cv2.CV_8U, kernel(1 << np.arange(8)), borderType=cv2.BORDER_CONSTANT)
+        redundant = cv2.LUT(code, _REDUNDANT_U8).view(bool)
+        for y0 in (0, 1):
+            colour = (slice(y0, None, 2), slice((y0 + parity) % 2, None, 2))
+            on[colour] &= ~redundant[colour]
+    count = cv2.filter2D(on.view(np.uint8), cv2.CV_8U, kernel(np.ones(8)), borderType=cv2.BORDER_CONSTANT)
+    junction = on & (count >= 3)
+    return on, junction, on & ~junction
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_thinning_in_one_pass_over_the_edge_pixels_matches_the_image_filters(seed: int) -> None:
+    from codec.mesher.polylines import _REDUNDANT_U8
+
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(3, 60, 2))
+    on = np.zeros((h + 2, w + 2), bool)
+    on[1:-1, 1:-1] = rng.random((h, w)) < rng.uniform(0.05, 0.8)
+    want = _thin_by_filters(on)
+    flat = on.ravel().copy()
+    junction, simple = native._polylines.thin_split(flat.view(np.uint8), w + 2, _REDUNDANT_U8)
+    assert (flat == want[0].ravel()).all()
+    assert (junction == want[1].ravel()).all() and (simple == want[2].ravel()).all()
+
+
+def test_thinning_refuses_a_mask_without_its_empty_border() -> None:
+    from codec.mesher.polylines import _REDUNDANT_U8
+
+    on = np.zeros((5, 6), np.uint8)
+    on[0, 2] = 1
+    with pytest.raises(ValueError, match="border"):
+        native._polylines.thin_split(on.ravel(), 6, _REDUNDANT_U8)
+    with pytest.raises(ValueError, match="256"):
+        native._polylines.thin_split(np.zeros(30, np.uint8), 6, _REDUNDANT_U8[:10])
+    with pytest.raises(ValueError, match="3 x 3"):
+        native._polylines.thin_split(np.zeros(31, np.uint8), 6, _REDUNDANT_U8)

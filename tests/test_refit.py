@@ -316,3 +316,122 @@ def test_the_compiled_conjugate_gradients_follow_the_numpy_iteration(corpus):
     bad[3, 2] = n
     with pytest.raises(ValueError, match="corner out of range"):
         _lsq.conjugate_gradients(bad, gram, rhs, start, ridge, anchor, 1e-4, 10)
+
+
+def _numpy_normal_equations(coef, den, moments, image_sums):
+    """values.normal_equations as it was written in numpy before codec._lsq.element_normals."""
+    m = np.ascontiguousarray(moments.T)
+    c = coef.astype(np.float64).transpose(1, 2, 0).copy()
+    d = den.astype(np.float64)
+    rows = ((m[3], m[4], m[1]), (m[4], m[5], m[2]), (m[1], m[2], m[0]))
+    cm = [[sum(c[i, k] * rows[k][l] for k in range(3)) for l in range(3)] for i in range(3)]
+    gram = np.empty((3, 3, len(d)))
+    for i in range(3):
+        for j in range(i, 3):
+            gram[i, j] = gram[j, i] = sum(cm[i][l] * c[j, l] for l in range(3))
+    gram = gram.transpose(2, 0, 1)
+    gram /= (d * d)[:, None, None]
+    s = image_sums
+    rhs = (c[:, 0].T[:, None, :] * s[:, :, 1:2] + c[:, 1].T[:, None, :] * s[:, :, 2:3]
+           + c[:, 2].T[:, None, :] * s[:, :, 0:1]) / d[:, None, None]
+    return gram, rhs
+
+
+def test_the_element_normal_equations_are_the_numpy_ones_to_the_bit(corpus):
+    """codec._lsq.element_normals (values.normal_equations) gives the very float64
+    numbers of the numpy expressions it replaced, on triangles and border lines of
+    gray and RGB images, from strided statistics as the callers pass them."""
+    from codec.mesher.elements import rasterize
+
+    for k, image in enumerate([corpus["camera"][:150, :200], corpus["astronaut"][:120, :140]]):
+        h, w = image.shape[:2]
+        vertices, triangles = random_mesh(image, [500, 300][k], seed=10 + k)
+        raster = rasterize(vertices, triangles, w, h)
+        layout = vertex_values.layout_for(image)
+        moments, sums = layout.fit_part(layout(raster))
+        assert not moments.flags.c_contiguous  # a column slice of the statistics
+        got = vertex_values.normal_equations(raster.coef, raster.den, moments, sums)
+        want = _numpy_normal_equations(raster.coef, raster.den, moments, sums)
+        for g, wnt in zip(got, want):
+            assert g.shape == wnt.shape and np.array_equal(g.view(np.int64), np.ascontiguousarray(wnt).view(np.int64))
+
+
+def test_the_planar_share_is_counted_as_numpy_counted_it(corpus):
+    """values._planar_share with the compiled squared errors (codec._lsq.plane_errors) counts the
+    same elements as the numpy planes and squared errors it replaced: on a photo, on a
+    piecewise-planar image where most elements are exact, and with values that make
+    some elements miss by just about the limit."""
+    from codec.mesher.elements import rasterize, squared_error
+
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[:120, :160]
+    planar = np.where(xx + yy < 130, 2 * xx + yy // 3, 200 - xx // 2).astype(np.uint8)
+    for image in (corpus["camera"][:120, :160], planar):
+        vertices, triangles = random_mesh(image, 400, seed=5)
+        raster = rasterize(vertices, triangles, 160, 120)
+        layout = vertex_values.layout_for(image)
+        stats = layout(raster)
+        moments, _ = layout.fit_part(stats)
+        for values in (image[vertices[:, 1], vertices[:, 0]].astype(np.float64),
+                       image[vertices[:, 1], vertices[:, 0]] + rng.normal(0, 0.3, len(vertices))):
+            values = values[:, None]
+            count = moments[:, 0]
+            exact = squared_error(raster.affine(values[:, 0]), moments, stats[:, layout.IMG]) <= vertex_values.PLANAR * count
+            want = float(count[exact].sum() / max(count.sum(), 1.0))
+            assert vertex_values._planar_share(stats, layout, moments, values, raster) == want
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float64])
+def test_the_outliers_sums_without_pixel_arrays_are_the_bincount_ones(dtype) -> None:
+    """values._planar_refit sums the outlying pixels' terms in a compiled walk over the
+    triangles (codec._elements.outlier_sums) instead of from every pixel's element, x
+    and y as arrays and np.bincount: the same count and the same sums, bit for bit, on
+    piecewise-planar images with steps and noise under planes near and far from them."""
+    from codec.mesher.elements import triangle_pixels, triangle_raster
+    from codec.native import _elements
+
+    rng = np.random.default_rng(9)
+    yy, xx = np.mgrid[:90, :130]
+    scale = 1 if dtype == np.uint8 else 200
+    for noise in (0.0, 3.0):
+        image = np.where(xx * 2 + yy < 150, 40 + xx // 2 + yy // 3, 180 - xx // 4) * scale
+        image = np.clip(image + rng.normal(0, noise * scale, image.shape), 0, 65535).astype(dtype)
+        vertices, triangles = random_mesh(image, 300, seed=3)
+        raster = triangle_raster(vertices, triangles, 130, 90)
+        values = image[vertices[:, 1], vertices[:, 0]].astype(np.float64) + rng.normal(0, 2 * scale, len(vertices))
+        affine = np.ascontiguousarray(raster.affine(values))
+        e, x, y = triangle_pixels(vertices, triangles, 130, 90)
+        b = image[y, x].astype(np.float64)
+        out = np.abs(b - raster.evaluate(affine, e, x, y)) > vertex_values.OUTLIER
+        e, b = e[out], b[out]
+        u = (x[out] - raster.origin[e, 0]).astype(np.float64)
+        v = (y[out] - raster.origin[e, 1]).astype(np.float64)
+        want = np.stack([np.bincount(e, wt, len(triangles)) for wt in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        count, got = _elements.outlier_sums(vertices.astype(np.int64), triangles.astype(np.int64), 130, 90, affine,
+                                            np.ascontiguousarray(raster.origin, dtype=np.int64), image,
+                                            vertex_values.OUTLIER)
+        assert 0 < count == out.sum() and np.array_equal(got, want)
+    with pytest.raises(ValueError, match="out of range"):
+        _elements.outlier_sums(vertices.astype(np.int64), triangles.astype(np.int64) + 1000, 130, 90, affine,
+                               np.ascontiguousarray(raster.origin, dtype=np.int64), image, 2.0)
+
+
+def test_element_squared_errors_are_numpys_to_the_bit(corpus) -> None:
+    """elements.element_sse (codec._lsq.plane_errors) gives squared_error(raster.affine(z),
+    ...)'s very numbers, on triangles and border lines, for smooth and rough values,
+    from the strided statistics the callers pass; it refuses a corner out of range."""
+    from codec.mesher.elements import Statistics, element_sse, rasterize, squared_error
+    from codec.native import _lsq
+
+    rng = np.random.default_rng(13)
+    image = corpus["camera"][:140, :170]
+    vertices, triangles = random_mesh(image, 600, seed=4)
+    raster = rasterize(vertices, triangles, 170, 140)
+    stats = vertex_values.layout_for(image)(raster)
+    for z in (image[vertices[:, 1], vertices[:, 0]].astype(np.float64), rng.normal(100, 80, len(vertices))):
+        want = squared_error(raster.affine(z), stats[:, Statistics.GEO], stats[:, Statistics.IMG])
+        got = element_sse(raster, stats, z)
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    with pytest.raises(ValueError, match="corner"):
+        _lsq.plane_errors(np.full((1, 3), 9, np.int64), np.ones((1, 3, 3), np.int64), np.ones(1, np.int64),
+                          np.zeros(3), np.zeros((1, 6)), np.zeros((1, 4)))

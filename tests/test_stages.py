@@ -364,3 +364,163 @@ def test_without_vertices_takes_empty_polylines():
         mesh = Mesh(v, np.zeros(4, np.uint8), np.zeros((0, 3), np.int64), 2, 2, walls, None)
         kept = without_vertices(mesh, np.array([1, 1, 0, 1], bool))
         assert [c.tolist() for c in kept.constraints] == ([[0, 1, 2]] if len(walls) > 1 else [])
+
+
+def _inverse_cdf(cum, lo, hi, k):
+    """sampling's inverse-CDF step as numpy computed it before codec._gradients.tile_samples."""
+    k = np.broadcast_to(np.asarray(k, dtype=np.int64), lo.shape)
+    base = np.where(lo > 0, cum[np.maximum(lo - 1, 0)], 0.0)
+    total = cum[hi - 1] - base
+    which = np.repeat(np.arange(len(lo)), k)
+    j = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)
+    targets = base[which] + (j + 0.5) / k[which] * total[which]
+    pos = np.searchsorted(cum, targets, side="left")
+    return which, np.clip(pos, lo[which], hi[which] - 1)
+
+
+def _numpy_sample(dens, tiles, per_tile):
+    """sampling.sample as numpy computed it, tile row by tile row."""
+    h, w = dens.shape
+    nh, nv = min(tiles[0], w), min(tiles[1], h)
+    r, z = per_tile
+    xb = np.round(np.linspace(0, w, nh + 1)).astype(np.int64)
+    yb = np.round(np.linspace(0, h, nv + 1)).astype(np.int64)
+    out = []
+    for y0, y1 in zip(yb[:-1], yb[1:]):
+        block = dens[y0:y1]
+        colsum = block.sum(axis=0) if block.shape[1] > 1 else np.cumsum(block, axis=0)[-1]
+        _, cols = _inverse_cdf(np.cumsum(colsum), xb[:-1], xb[1:], r)
+        cols = cols[colsum[cols] > 0]
+        if len(cols) == 0:
+            continue
+        cols, mult = np.unique(cols, return_counts=True)
+        height = y1 - y0
+        col_cum = np.cumsum(block[:, cols], axis=0).T
+        offset = np.cumsum(np.concatenate([[0.0], col_cum[:-1, -1] + 1.0]))
+        lo = np.arange(len(cols)) * height
+        which, pos = _inverse_cdf((col_cum + offset[:, None]).ravel(), lo, lo + height, mult * z)
+        out.append(np.stack([cols[which], pos - lo[which] + y0], axis=1))
+    if not out:
+        return np.zeros((0, 2), np.int64)
+    pts = np.concatenate(out)
+    pts = pts[dens[pts[:, 1], pts[:, 0]] > 0]
+    key = np.unique(pts[:, 1] * w + pts[:, 0])
+    return np.stack([key % w, key // w], axis=1).astype(np.int64)
+
+
+def test_region_sampling_in_one_compiled_pass_picks_the_numpy_pixels(corpus) -> None:
+    """#20: sampling.sample's tile rows in one compiled pass (codec._gradients.tile_samples)
+    give the pixels the numpy code gave: random densities with empty patches, one-column
+    and one-row images, many samples per tile, and the density of a corpus image."""
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(200):
+        h, w = int(rng.integers(1, 90)), int(rng.integers(1, 200))
+        dens = rng.gamma(0.5, 1.0, (h, w)) * (rng.random((h, w)) > 0.3) + 0.25 * (rng.random() > 0.5)
+        if rng.random() < 0.2:
+            dens[:, : w // 2] = 0.0
+        tiles = (int(rng.integers(1, 9)), int(rng.integers(1, 9)))
+        cases.append((dens, tiles, (int(rng.integers(1, 12)), int(rng.integers(1, 30)))))
+    gray = corpus["camera"].astype(np.float32)
+    found, _, _ = edges.detect(gray, 255.0)
+    cases.append((sampling.density(sampling.curvature(gray), found), (6, 6), (9, 22)))
+    for dens, tiles, per_tile in cases:
+        assert np.array_equal(sampling.sample(dens, tiles, per_tile), _numpy_sample(dens, tiles, per_tile))
+
+
+def test_tile_sampling_refuses_bounds_that_do_not_tile_the_image() -> None:
+    from codec import native
+
+    dens = np.ones((4, 6))
+    for xb, yb in (([0, 3, 5], [0, 4]), ([0, 3, 3, 6], [0, 4]), ([0, 6], [1, 4]), ([0], [0, 4])):
+        with pytest.raises(ValueError, match="tile"):
+            native._gradients.tile_samples(dens, np.array(xb, np.int64), np.array(yb, np.int64), 1, 1)
+    with pytest.raises(ValueError, match="r and z"):
+        native._gradients.tile_samples(dens, np.array([0, 6], np.int64), np.array([0, 4], np.int64), 0, 1)
+
+
+def test_reordered_polylines_keep_their_points_together() -> None:
+    """adaptive._reorder gathers each polyline's points in the new order without a
+    Python loop: the same points as one arange per polyline, including empty orders."""
+    from codec.mesher.adaptive import _reorder
+
+    rng = np.random.default_rng(2)
+    for count in (0, 1, 7, 60):
+        sizes = rng.integers(2, 9, count)
+        starts = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+        points = rng.integers(0, 100, (int(starts[-1]), 2))
+        pixel_line = rng.integers(0, max(count, 1), 3 * count)
+        lines = polylines.Polylines(points, starts, rng.integers(0, 100, (3 * count, 2)), pixel_line, rng.random(count))
+        order = rng.permutation(count)
+        got = _reorder(lines, order)
+        want = np.concatenate([points[starts[k] : starts[k + 1]] for k in order]) if count else points[:0]
+        assert np.array_equal(got.points, want)
+        assert np.array_equal(got.starts, np.r_[0, np.cumsum(sizes[order])])
+
+
+def _numpy_opposite_points(lines, gray, reach=3, min_step=4.0):
+    """unfold.opposite_points as numpy computed it before codec._polylines.opposite_feet."""
+    h, w = gray.shape
+    p = lines.points.astype(np.int64)
+    _, normal = unfold._directions(lines)
+    steps = np.arange(1, reach + 1, dtype=np.float64)
+    sides = []
+    for sign in (1.0, -1.0):
+        q = np.rint(p[:, None, :] + sign * steps[None, :, None] * normal[:, None, :]).astype(np.int64)
+        q[..., 0] = np.clip(q[..., 0], 0, w - 1)
+        q[..., 1] = np.clip(q[..., 1], 0, h - 1)
+        change = np.abs(gray[q[..., 1], q[..., 0]] - gray[p[:, 1], p[:, 0]][:, None])
+        change[(q == p[:, None, :]).all(axis=2)] = -1.0
+        limit = np.maximum(0.5 * change.max(axis=1), min_step)
+        hit = change >= limit[:, None]
+        sides.append((q, change, np.where(hit.any(axis=1), np.argmax(hit, axis=1), reach)))
+    (qa, ca, fa), (qb, cb, fb) = sides
+    rows = np.arange(len(p))
+    take_a = (fa < fb) | ((fa == fb) & (ca[rows, np.minimum(fa, reach - 1)] >= cb[rows, np.minimum(fb, reach - 1)]))
+    none = (fa == reach) & (fb == reach)
+    take_a = np.where(none, ca[:, 0] >= cb[:, 0], take_a)
+    ia = np.where(none, 0, np.minimum(fa, reach - 1))
+    ib = np.where(none, 0, np.minimum(fb, reach - 1))
+    opp = np.where(take_a[:, None], qa[rows, ia], qb[rows, ib])
+    rel = opp - p
+    on_left = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1] > 0
+    return np.where(on_left[:, None], opp, p), np.where(on_left[:, None], p, opp)
+
+
+def test_opposite_points_in_one_compiled_pass_are_the_numpy_ones(corpus) -> None:
+    """#20: unfold.opposite_points (codec._polylines.opposite_feet) finds the feet the
+    numpy code found: random polylines over random float32 and float64 images and flat
+    ones (ties), points on the border (clipped steps), other reaches and steps, and
+    camera's own polylines."""
+    rng = np.random.default_rng(12)
+    cases = []
+    for _ in range(150):
+        h, w = int(rng.integers(1, 40)), int(rng.integers(1, 40))
+        gray = (rng.random((h, w)) * rng.choice([1, 20, 255])).astype(rng.choice([np.float32, np.float64]))
+        if rng.random() < 0.2:
+            gray = np.round(gray / 50) * 50  # plateaus: equal changes
+        sizes = rng.integers(2, 8, int(rng.integers(1, 6)))
+        points = np.stack([rng.integers(0, w, sizes.sum()), rng.integers(0, h, sizes.sum())], 1)
+        lines = polylines.Polylines(points, np.r_[0, np.cumsum(sizes)], points, np.zeros(len(points), np.int64),
+                                    np.ones(len(sizes)))
+        cases.append((lines, gray, int(rng.integers(1, 6)), float(rng.choice([0.1, 4.0, 30.0]))))
+    gray = corpus["camera"].astype(np.float32)
+    found, mag, _ = edges.detect(gray, 255.0)
+    cases.append((polylines.trace(found, mag), gray, 3, 4.0))
+    for lines, gray, reach, step in cases:
+        got = unfold.opposite_points(lines, gray, reach=reach, min_step=step)
+        want = _numpy_opposite_points(lines, gray, reach, step)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_opposite_feet_refuses_points_outside_the_image() -> None:
+    from codec import native
+
+    gray = np.zeros((4, 5), np.float32)
+    normal = np.array([[1.0, 0.0]])
+    with pytest.raises(ValueError, match="outside"):
+        native._polylines.opposite_feet(np.array([[5, 0]], np.int64), normal, gray, 3, 4.0)
+    with pytest.raises(ValueError, match="reach"):
+        native._polylines.opposite_feet(np.array([[1, 1]], np.int64), normal, gray, 0, 4.0)
+    with pytest.raises(ValueError, match="64"):
+        native._polylines.opposite_feet(np.array([[1, 1]], np.int64), normal, gray, 65, 4.0)

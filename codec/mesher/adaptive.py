@@ -30,7 +30,7 @@ from ..image import structure
 from ..mesh import Mesh
 from ..mesh import segments as segment_pairs
 from . import Finish, Meshed
-from .elements import Statistics, element_sse, line_raster, triangle_pixels
+from .elements import Statistics, element_sse
 from .refine import FOCUSED_ROUNDS, ROUNDS, merge, refine_to_budget, run_breaks
 from .unfold import Walls, unfold
 
@@ -84,7 +84,9 @@ def _select_lines(lines: polyline_stage.Polylines, budget: int) -> polyline_stag
 
 def _reorder(lines: polyline_stage.Polylines, order: np.ndarray) -> polyline_stage.Polylines:
     sizes = np.diff(lines.starts)
-    idx = np.concatenate([np.arange(lines.starts[k], lines.starts[k + 1]) for k in order]) if len(order) else np.zeros(0, np.int64)
+    # the points of each polyline in `order`, one after another (no Python loop over them)
+    picked = sizes[order]
+    idx = np.repeat(lines.starts[:-1][order] - (np.cumsum(picked) - picked), picked) + np.arange(int(picked.sum()))
     new_of_old = np.empty(len(order), dtype=np.int64)
     new_of_old[order] = np.arange(len(order))
     px_order = np.argsort(new_of_old[lines.pixel_line], kind="stable")
@@ -107,20 +109,12 @@ def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, i
     return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
 
-def _pixels(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int):
-    """(element, x, y) of every pixel, elements numbered as the triangles then the
-    border lines (line_raster)."""
-    e, x, y = triangle_pixels(vertices, triangles, width, height)
-    le, lx, ly = line_raster(vertices, width, height).pixels()
-    return np.r_[e, le + len(triangles)], np.r_[x, lx], np.r_[y, ly]
-
-
 def _off_edge_curvature(gray: np.ndarray, found: np.ndarray) -> float:
     """Share of the image's curvature energy (squared Laplacian) more than a pixel away
     from its edges."""
     import cv2
 
-    energy = cv2.Laplacian(gray, cv2.CV_32F).astype(np.float64) ** 2
+    energy = np.square(cv2.Laplacian(gray, cv2.CV_32F), dtype=np.float64)
     total = float(energy.sum())
     if total == 0:
         return 0.0
@@ -239,7 +233,7 @@ def build(
     )
     if values == "lsq":
         vals = vertex_values.from_statistics(
-            image, vertices, elements, stats, layout, lambda: _pixels(vertices, triangles, width, height)
+            image, vertices, elements, stats, layout, triangles
         )
     else:
         vals = vertex_values.sample(image, vertices)

@@ -33,7 +33,8 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
 
     from .. import native
 
-    g = gray.astype(np.float32) * np.float32(255.0 / peak)
+    # one pass: the float32 product numpy's astype-then-multiply made in two
+    g = np.multiply(gray, np.float32(255.0 / peak), dtype=np.float32)
     g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
     sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
@@ -51,7 +52,9 @@ def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
     top = float(magnitude.max())
     if top <= 0:
         return MIN_HIGH / 2, MIN_HIGH
-    levels = np.clip(magnitude * (255.0 / top), 0, 255).astype(np.uint8)
+    # the float32 product (numpy casts the scale to the array's float32), clipped in place
+    levels = np.multiply(magnitude, np.float32(255.0 / top))
+    levels = np.clip(levels, 0, 255, out=levels).astype(np.uint8)
     otsu, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     high = min(max(MIN_HIGH, float(otsu) * top / 255.0), MAX_HIGH)
     return high / 2, high

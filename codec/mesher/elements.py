@@ -284,8 +284,16 @@ def squared_error(affine: np.ndarray, moments: np.ndarray, sums: np.ndarray) -> 
 
 def element_sse(raster: Raster, stats: np.ndarray, vertex_values: np.ndarray) -> np.ndarray:
     """E: squared error of the (unrounded) mesh through `vertex_values` against the
-    structure plane, summed over each element's pixels (`stats` from Statistics)."""
-    return squared_error(raster.affine(vertex_values), stats[:, Statistics.GEO], stats[:, Statistics.IMG])
+    structure plane, summed over each element's pixels (`stats` from Statistics): the
+    numbers squared_error(raster.affine(vertex_values), ...) gives, from one compiled
+    pass (codec._lsq.plane_errors)."""
+    from .. import native
+
+    return native._lsq.plane_errors(
+        np.ascontiguousarray(raster.corners, dtype=np.int64), np.asarray(raster.coef, dtype=np.int64),
+        np.asarray(raster.den, dtype=np.int64), np.ascontiguousarray(vertex_values, dtype=np.float64),
+        np.asarray(stats[:, Statistics.GEO], dtype=np.float64), np.asarray(stats[:, Statistics.IMG], dtype=np.float64),
+    )
 
 
 def _sort3(keys, *values):

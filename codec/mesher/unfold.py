@@ -62,41 +62,17 @@ def opposite_points(
     lines: Polylines, gray: np.ndarray, *, reach: int = 3, min_step: float = 4.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """(left, right): the two wall feet at each control point, N x 2 int64 each."""
-    h, w = gray.shape
-    p = lines.points.astype(np.int64)
-    tangent, normal = _directions(lines)
-    steps = np.arange(1, reach + 1, dtype=np.float64)
-    sides = []
-    for sign in (1.0, -1.0):
-        q = np.rint(p[:, None, :] + sign * steps[None, :, None] * normal[:, None, :]).astype(np.int64)
-        q[..., 0] = np.clip(q[..., 0], 0, w - 1)
-        q[..., 1] = np.clip(q[..., 1], 0, h - 1)
-        change = np.abs(gray[q[..., 1], q[..., 0]] - gray[p[:, 1], p[:, 0]][:, None])
-        # a step that lands back on P (clipped at the border) is no partner
-        change[(q == p[:, None, :]).all(axis=2)] = -1.0
-        biggest = change.max(axis=1)
-        limit = np.maximum(0.5 * biggest, min_step)
-        hit = change >= limit[:, None]
-        first = np.where(hit.any(axis=1), np.argmax(hit, axis=1), reach)
-        sides.append((q, change, first))
-    (qa, ca, fa), (qb, cb, fb) = sides
-    rows = np.arange(len(p))
-    # the side whose change comes first wins; a tie goes to the larger change
-    take_a = (fa < fb) | ((fa == fb) & (ca[rows, np.minimum(fa, reach - 1)] >= cb[rows, np.minimum(fb, reach - 1)]))
-    # no significant change on either side: the neighbour on the side that changes more
-    none = (fa == reach) & (fb == reach)
-    take_a = np.where(none, ca[:, 0] >= cb[:, 0], take_a)
-    ia = np.where(none, 0, np.minimum(fa, reach - 1))
-    ib = np.where(none, 0, np.minimum(fb, reach - 1))
-    opp = np.where(take_a[:, None], qa[rows, ia], qb[rows, ib])
-    stuck = (opp == p).all(axis=1)  # both sides clipped away (a 1-pixel-wide image)
-    opp[stuck] = p[stuck]
-    # the paper's swap (section 3.3.2.1): each polyline keeps the points on its own side of the edge
-    rel = opp - p
-    on_left = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1] > 0
-    left = np.where(on_left[:, None], opp, p)
-    right = np.where(on_left[:, None], p, opp)
-    return left, right
+    from .. import native
+
+    _, normal = _directions(lines)
+    if gray.dtype not in (np.float32, np.float64):
+        gray = gray.astype(np.float64)
+    # every control point's exploration in one compiled pass (the numpy arithmetic, in
+    # gray's precision: the same feet)
+    return native._polylines.opposite_feet(
+        np.ascontiguousarray(lines.points, dtype=np.int64), np.ascontiguousarray(normal), np.ascontiguousarray(gray),
+        int(reach), float(min_step),
+    )
 
 
 def drop_conflicts(points: np.ndarray, segments: np.ndarray, cell: int = 8) -> np.ndarray:

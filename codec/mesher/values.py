@@ -47,24 +47,12 @@ def normal_equations(coef: np.ndarray, den: np.ndarray, moments: np.ndarray, ima
     (E x C x 3), from its weighted moments (E x 6: 1, u, v, uu, uv, vv) and image sums
     (E x C x 3: b, ub, vb), where a pixel's row of A holds its corners' weights
     w_i = (alpha_i u + beta_i v + gamma_i) / D."""
-    # element-last copies, so that every product below runs over contiguous arrays
-    m = np.ascontiguousarray(moments.T)
-    c = coef.astype(np.float64).transpose(1, 2, 0).copy()  # [corner, (alpha, beta, gamma), element]
-    d = den.astype(np.float64)
-    # M = sum over pixels of p p^T with p = (u, v, 1); gram = C M C^T / D^2, C's rows
-    # the corners' (alpha, beta, gamma)
-    rows = ((m[3], m[4], m[1]), (m[4], m[5], m[2]), (m[1], m[2], m[0]))
-    cm = [[sum(c[i, k] * rows[k][l] for k in range(3)) for l in range(3)] for i in range(3)]
-    gram = np.empty((3, 3, len(d)))
-    for i in range(3):
-        for j in range(i, 3):
-            gram[i, j] = gram[j, i] = sum(cm[i][l] * c[j, l] for l in range(3))
-    gram = gram.transpose(2, 0, 1)
-    gram /= (d * d)[:, None, None]
-    # (ub, vb, b) against (alpha, beta, gamma)
-    s = image_sums
-    rhs = (c[:, 0].T[:, None, :] * s[:, :, 1:2] + c[:, 1].T[:, None, :] * s[:, :, 2:3] + c[:, 2].T[:, None, :] * s[:, :, 0:1]) / d[:, None, None]
-    return gram, rhs
+    from ..native import _lsq
+
+    # one compiled pass (the same float64 operations in the same order as the numpy
+    # expressions it replaced: about fifty passes over the elements)
+    return _lsq.element_normals(np.asarray(coef, dtype=np.int64), np.asarray(den, dtype=np.int64),
+                                np.asarray(moments, dtype=np.float64), np.asarray(image_sums, dtype=np.float64))
 
 
 def _diagonal(corners: np.ndarray, gram: np.ndarray, n: int) -> np.ndarray:
@@ -92,16 +80,16 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
     )
 
 
-def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarray, values: np.ndarray,
-                  samples: np.ndarray, pixels: tuple[np.ndarray, np.ndarray, np.ndarray], bb: np.ndarray) -> np.ndarray:
+def _planar_refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, raster, moments: np.ndarray,
+                  sums: np.ndarray, values: np.ndarray, samples: np.ndarray, bb: np.ndarray) -> np.ndarray:
     """Least squares without the pixels the mesh cannot follow, kept where that makes
     the image exact.
 
     A pixel on a step belongs to neither side: a wall cannot follow it to the pixel,
     and left in the fit it pulls the values of the wall vertices on both sides, so
     that even a piecewise-planar image is not reproduced away from its steps. So the
-    pixels (`pixels`: element, x, y of all) that the mesh misses by more than OUTLIER
-    are dropped and the fit solved again, then once more with the pixels the new fit
+    pixels that the mesh misses by more than OUTLIER (`raster`: the `triangles`, then
+    the border lines) are dropped and the fit solved again, then once more with the pixels the new fit
     misses; what a vertex loses in dropped pixels it keeps as a pull (LOST) to its own
     pixel's value (`samples`), so that a vertex left with few pixels stays put. The
     new values are taken at the vertices around which the remaining pixels fit to
@@ -109,22 +97,35 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
     the planar parts of the image. Elsewhere the first fit, the smaller squared error
     overall, stays.
     """
+    from ..native import _elements
     from .elements import squared_error
 
-    e0, x0, y0 = pixels
+    m, n, t = len(raster), len(values), len(triangles)
+    height, width = image.shape
+    # the border lines' pixels (a row and a column: few) as arrays; the triangles' are
+    # walked by a compiled pass that sums the outliers' terms itself (every pixel's
+    # element, x and y took three image-sized int64 arrays)
+    e0, x0, y0 = raster.pixels(np.arange(t, m))
     b0 = image[y0, x0].astype(np.float64)
-    m, n = len(raster), len(values)
+    plane = np.ascontiguousarray(image if image.dtype in (np.uint8, np.uint16, np.float32, np.float64)
+                                 else image.astype(np.float64))
+    verts = np.ascontiguousarray(vertices, dtype=np.int64)
+    tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    origin = np.ascontiguousarray(raster.origin, dtype=np.int64)
     full = _diagonal(raster.corners, normal_equations(raster.coef, raster.den, moments, sums)[0], n)
-    out = np.zeros(len(e0), bool)
     refit = values
     for _ in range(2):
-        out = np.abs(b0 - raster.evaluate(raster.affine(refit[:, 0]), e0, x0, y0)) > OUTLIER
-        if not out.any():
+        affine = np.ascontiguousarray(raster.affine(refit[:, 0]))
+        missed, drop_tris = _elements.outlier_sums(verts, tris, width, height, affine, origin, plane, OUTLIER)
+        out = np.abs(b0 - raster.evaluate(affine, e0, x0, y0)) > OUTLIER
+        if not missed and not out.any():
             return values
-        e, b = e0[out], b0[out]
-        u = (x0[out] - raster.origin[e, 0]).astype(np.float64)
-        v = (y0[out] - raster.origin[e, 1]).astype(np.float64)
-        drop = np.stack([np.bincount(e, w, m) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        e, b = e0[out] - t, b0[out]
+        u = (x0[out] - raster.origin[e + t, 0]).astype(np.float64)
+        v = (y0[out] - raster.origin[e + t, 1]).astype(np.float64)
+        # np.bincount's sums per element, the lines' elements apart from the triangles'
+        drop_lines = np.stack([np.bincount(e, w, m - t) for w in (np.ones_like(u), u, v, u * u, u * v, v * v, b, u * b, v * b, b * b)], 1)
+        drop = np.concatenate([drop_tris, drop_lines])
         kept_moments = moments - drop[:, :6]
         kept = sums - drop[:, None, 6:9]
         gram, rhs = normal_equations(raster.coef, raster.den, kept_moments, kept)
@@ -140,32 +141,32 @@ def _planar_refit(image: np.ndarray, raster, moments: np.ndarray, sums: np.ndarr
     return np.where(planar[:, None], refit, values)
 
 
-def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.ndarray, affine) -> float:
+def _planar_share(stats: np.ndarray, layout, moments: np.ndarray, values: np.ndarray, raster) -> float:
     """Share of the pixels that the mesh through `values` reproduces to within rounding
     (elements with a mean squared error of at most PLANAR): most of a piecewise-planar
     image, hardly any of a photograph."""
-    from .elements import squared_error
+    from .elements import element_sse
 
     count = moments[:, 0]
-    exact = squared_error(affine(values[:, 0]), moments, stats[:, layout.IMG]) <= PLANAR * count
+    exact = element_sse(raster, stats, values[:, 0]) <= PLANAR * count
     return float(count[exact].sum() / max(count.sum(), 1.0))
 
 
 def from_statistics(image: np.ndarray, vertices: np.ndarray, raster, stats: np.ndarray, layout,
-                    pixels=None) -> np.ndarray:
+                    triangles: np.ndarray | None = None) -> np.ndarray:
     """Least-squares vertex values in the image's dtype from the elements of `raster`
     and their statistics (`layout`: the codec.mesher.elements.Statistics that measured them).
 
-    pixels: for single-channel images, a function giving (element, x, y) of every pixel;
-    on an image that is mostly planar (PLANAR_SHARE) the values are fitted again
+    triangles: for single-channel images, the triangles (the raster's first elements,
+    the border lines after them); on an image that is mostly planar (PLANAR_SHARE) the values are fitted again
     without the pixels the mesh cannot follow (_planar_refit)."""
     n = len(vertices)
     moments, sums = layout.fit_part(stats)
     gram, rhs = normal_equations(raster.coef, raster.den, moments, sums)
     start = sample(image, vertices).reshape(n, -1).astype(np.float64)
     out = solve(raster.corners, gram, rhs, start)
-    if pixels is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster.affine) >= PLANAR_SHARE:
-        out = _planar_refit(image, raster, moments, sums, out, start, pixels(), stats[:, layout.IMG][:, 3])
+    if triangles is not None and image.ndim == 2 and _planar_share(stats, layout, moments, out, raster) >= PLANAR_SHARE:
+        out = _planar_refit(image, vertices, triangles, raster, moments, sums, out, start, stats[:, layout.IMG][:, 3])
     out = _to_dtype(out, image.dtype)
     return out[:, 0] if image.ndim == 2 else out
 
