@@ -121,22 +121,28 @@ class Slots {
   }
 };
 
-// A stack of half-edges that grows by doubling: push and pop inline (std::vector's
-// push_back is an out-of-line call on this path).
-class EdgeStack {
-  std::vector<i32> a_;
+// A stack (of half-edges, vertices, ...) that grows by doubling: push and pop inline
+// (std::vector's push_back is an out-of-line call on these paths).
+template <class X>
+class Stack {
+  std::vector<X> a_;
   size_t n_ = 0;
 
  public:
   bool empty() const { return n_ == 0; }
-  i32 back() const { return a_[n_ - 1]; }
+  size_t size() const { return n_; }
+  X back() const { return a_[n_ - 1]; }
+  X operator[](size_t i) const { return a_[i]; }
+  X* begin() { return a_.data(); }
+  X* end() { return a_.data() + n_; }
   void pop_back() { --n_; }
   void clear() { n_ = 0; }
-  void push_back(i32 e) {
+  void push_back(X e) {
     if (n_ == a_.size()) a_.resize(2 * n_ + 64);
     a_[n_++] = e;
   }
 };
+typedef Stack<i32> EdgeStack;
 
 class CDT {
  public:
@@ -524,7 +530,7 @@ class CDT {
       i32 px = pt[p].x;
       // the front edge (l, fnext[l]) below p: l.x <= p.x < r.x, or r the right end at p.x
       i32 l = cur;
-      if (pt[p].y != pt[cur].y) {
+      {
         i32 b = bucket[(px - x0) >> shift];
         if (b >= 0 && fnext[b] != -2) l = b;
       }
@@ -763,8 +769,8 @@ class CDT {
   // segment crosses; the polygon on its right (rv: a, ..., end) and on its left (lv:
   // end, ..., a), each with the half-edges along it (re, le: rv[i] -> rv[i + 1]) as the
   // outside's twin and segment mark (rt, rc, lt, lc); jobs for cavity().
-  std::vector<i32> slots, rv, re, rt, lv, le, lt, jobs;
-  std::vector<uint8_t> rc, lc;
+  Stack<i32> slots, rv, re, rt, lv, le, lt, jobs;
+  Stack<uint8_t> rc, lc;
 
   // The triangles of the polygon pv[0 .. m] (m >= 2) on the right of pv[0] -> pv[m],
   // whose sides pv[i] -> pv[i + 1] have the outside twins pt_[i] (marks pc[i]), in the
@@ -774,8 +780,7 @@ class CDT {
   // segment insertion and incremental construction of constrained Delaunay
   // triangulations"): the polygon's own constrained Delaunay triangulation, which is the
   // whole one's there. Jobs on a stack, not recursion: a polygon can be long.
-  i32 cavity(const std::vector<i32>& pv, const std::vector<i32>& pt_, const std::vector<uint8_t>& pc,
-             size_t* next) {
+  i32 cavity(const Stack<i32>& pv, const Stack<i32>& pt_, const Stack<uint8_t>& pc, size_t* next) {
     i32 m = (i32)pv.size() - 1, base = -1;
     jobs.clear();
     jobs.push_back(0); jobs.push_back(m); jobs.push_back(-1);  // (lo, hi, half-edge to twin)
@@ -859,9 +864,9 @@ class CDT {
       std::reverse(le.begin(), le.end());
       if (rv.size() + lv.size() != slots.size() + 4) return CDT_INTERNAL;
       // the outside's twins before the slots are written
-      rt.resize(re.size()); rc.resize(re.size()); lt.resize(le.size()); lc.resize(le.size());
-      for (size_t i = 0; i < re.size(); ++i) { rt[i] = T[re[i]]; rc[i] = C[re[i]]; }
-      for (size_t i = 0; i < le.size(); ++i) { lt[i] = T[le[i]]; lc[i] = C[le[i]]; }
+      rt.clear(); rc.clear(); lt.clear(); lc.clear();
+      for (size_t i = 0; i < re.size(); ++i) { rt.push_back(T[re[i]]); rc.push_back(C[re[i]]); }
+      for (size_t i = 0; i < le.size(); ++i) { lt.push_back(T[le[i]]); lc.push_back(C[le[i]]); }
       size_t next = 0;
       i32 right = cavity(rv, rt, rc, &next), left = cavity(lv, lt, lc, &next);
       link(right, left, 1);
