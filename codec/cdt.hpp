@@ -2,10 +2,10 @@
 // §4.2.5), built directly: vertices in raster order whose first row spans them all (a
 // band's, whose corners are vertices) by a sweep-line with an advancing front (Žalik),
 // any others by the convex hull's corners and then the other vertices inserted one by
-// one; Lawson flips under the perturbed rule throughout; then every segment forced in
-// by flips (Sloan's method), then Lawson flips until every free edge is locally
-// Delaunay. The result is the
-// unique triangulation of §4.2.5 whatever the construction, so it equals Triangle
+// one; Lawson flips under the perturbed rule throughout; then each segment put in by
+// taking out the triangles it crosses and triangulating the polygon on either side
+// (Anglada's method; where a polygon meets itself, by Sloan's flips and Lawson flips
+// around them). The result is the unique triangulation of §4.2.5 whatever the construction, so it equals Triangle
 // followed by codec/canonical.py's flip pass. Plain C++ without the Python API, so that
 // the Cython wrapper (codec/_cdt.pyx) runs it with the GIL released.
 #ifndef ATM_CDT_HPP
@@ -19,6 +19,10 @@
 #include <vector>
 
 namespace atmcdt {
+// Internal linkage (one translation unit, the Cython wrapper's): the compiler sees every
+// call, so the predicates and flips inline instead of going through the shared object's
+// symbol table (interposable calls, the PLT).
+namespace {
 
 typedef int64_t i64;
 typedef int32_t i32;
@@ -117,22 +121,28 @@ class Slots {
   }
 };
 
-// A stack of half-edges that grows by doubling: push and pop inline (std::vector's
-// push_back is an out-of-line call on this path).
-class EdgeStack {
-  std::vector<i32> a_;
+// A stack (of half-edges, vertices, ...) that grows by doubling: push and pop inline
+// (std::vector's push_back is an out-of-line call on these paths).
+template <class X>
+class Stack {
+  std::vector<X> a_;
   size_t n_ = 0;
 
  public:
   bool empty() const { return n_ == 0; }
-  i32 back() const { return a_[n_ - 1]; }
+  size_t size() const { return n_; }
+  X back() const { return a_[n_ - 1]; }
+  X operator[](size_t i) const { return a_[i]; }
+  X* begin() { return a_.data(); }
+  X* end() { return a_.data() + n_; }
   void pop_back() { --n_; }
   void clear() { n_ = 0; }
-  void push_back(i32 e) {
+  void push_back(X e) {
     if (n_ == a_.size()) a_.resize(2 * n_ + 64);
     a_[n_++] = e;
   }
 };
+typedef Stack<i32> EdgeStack;
 
 class CDT {
  public:
@@ -520,7 +530,7 @@ class CDT {
       i32 px = pt[p].x;
       // the front edge (l, fnext[l]) below p: l.x <= p.x < r.x, or r the right end at p.x
       i32 l = cur;
-      if (pt[p].y != pt[cur].y) {
+      {
         i32 b = bucket[(px - x0) >> shift];
         if (b >= 0 && fnext[b] != -2) l = b;
       }
@@ -696,37 +706,27 @@ class CDT {
     if (T[e] >= 0) C[T[e]] = 1;
   }
 
-  bool crosses(i32 a, i32 b, i32 c, i32 d) const {
-    // whether the open segments ab and cd cross (no vertex lies inside either)
-    if (c == a || c == b || d == a || d == b) return false;
-    i64 o1 = orient(a, b, c), o2 = orient(a, b, d);
-    if (!((o1 > 0 && o2 < 0) || (o1 < 0 && o2 > 0))) return false;
-    i64 o3 = orient(c, d, a), o4 = orient(c, d, b);
-    return (o3 > 0 && o4 < 0) || (o3 < 0 && o4 > 0);
-  }
-
   // From vertex a towards b: the first edge the segment crosses, as a half-edge on
-  // a's side, or (through `on`) the neighbour of a on the segment, or an existing edge.
-  // Returns 0 for a crossed edge in *h, 1 for a vertex on it in *on (*h the edge a-on
-  // as a half-edge, or -1), -1 if nothing fits.
+  // a's side, or (through `on`) the neighbour of a on the segment: b itself when a-b is
+  // an edge already. Returns 0 for a crossed edge in *h, 1 for a vertex on it in *on
+  // (*h a half-edge of a-on), -1 if nothing fits.
   int first_step(i32 a, i32 b, i32* h, i32* on) const {
     i32 start = vinc[a], e = start;
-    i64 bx = pt[b].x - pt[a].x, by = pt[b].y - pt[a].y;
+    const Pt A = pt[a];
+    i64 bx = pt[b].x - A.x, by = pt[b].y - A.y;
+    auto side = [&](i32 v) { return bx * (pt[v].y - A.y) - by * (pt[v].x - A.x); };  // orient(a, b, v)
+    auto ahead = [&](i32 v) { return (pt[v].x - A.x) * bx + (pt[v].y - A.y) * by > 0; };
     // every outgoing half-edge of a, counterclockwise then clockwise from vinc
     for (int pass = 0; pass < 2; ++pass) {
       e = start;
       for (;;) {
         i32 u = V[nxt(e)], w = V[prv(e)];
-        for (int side = 0; side < 2; ++side) {
-          i32 v = side ? w : u;
-          i64 o = orient(a, b, v);
-          if (o == 0 && (pt[v].x - pt[a].x) * bx + (pt[v].y - pt[a].y) * by > 0) {
-            *on = v;
-            *h = side ? prv(e) : e;
-            return 1;
-          }
-        }
-        if (orient(a, u, b) > 0 && orient(a, b, w) > 0) {
+        if (u == b) { *on = b; *h = e; return 1; }  // most segments: index compares only
+        if (w == b) { *on = b; *h = prv(e); return 1; }
+        i64 ou = side(u), ow = side(w);
+        if (ou == 0 && ahead(u)) { *on = u; *h = e; return 1; }
+        if (ow == 0 && ahead(w)) { *on = w; *h = prv(e); return 1; }
+        if (ou < 0 && ow > 0) {  // u on the right of a -> b, w on its left
           *h = nxt(e);
           return 0;
         }
@@ -747,19 +747,75 @@ class CDT {
     return -1;
   }
 
-  // constrain's crossed edges (kept: no allocation per segment): (u, w, a half-edge of
-  // u-w when queued, which is still one unless a flip moved the edge to another slot)
-  std::vector<i32> queue;
+  // The sign of incircle(a, b, c, d) under §4.2.5's perturbation, for any four distinct
+  // points with orient(a, b, c) != 0 (d on either side of ab): when the exact value is 0,
+  // the sign of the term of the first of the four in raster order, whose coefficient is
+  // + orient(b, c, d), - orient(a, c, d), + orient(a, b, d) or - orient(a, b, c) for a,
+  // b, c or d (the lift's cofactors; nonzero, as three of four cocircular points are
+  // never collinear). With d across ab this is illegal()'s rule.
+  int incircle_perturbed(i32 a, i32 b, i32 c, i32 d) const {
+    int s = incircle(a, b, c, d);
+    if (s) return s;
+    i32 first = a;
+    if (before(b, first)) first = b;
+    if (before(c, first)) first = c;
+    if (before(d, first)) first = d;
+    i64 o = first == a ? orient(b, c, d) : first == b ? -orient(a, c, d)
+          : first == c ? orient(a, b, d) : -orient(a, b, c);
+    return (o > 0) - (o < 0);
+  }
 
-  // Make the segment a-b an edge (cutting it at the vertices on it).
+  // constrain's cavity (kept: no allocation per segment): the triangle slots the
+  // segment crosses; the polygon on its right (rv: a, ..., end) and on its left (lv:
+  // end, ..., a), each with the half-edges along it (re, le: rv[i] -> rv[i + 1]) as the
+  // outside's twin and segment mark (rt, rc, lt, lc); jobs for cavity().
+  Stack<i32> slots, rv, re, rt, lv, le, lt, jobs;
+  Stack<uint8_t> rc, lc;
+
+  // The triangles of the polygon pv[0 .. m] (m >= 2) on the right of pv[0] -> pv[m],
+  // whose sides pv[i] -> pv[i + 1] have the outside twins pt_[i] (marks pc[i]), in the
+  // slots from slots[*next]; its base pv[m] -> pv[0] is the half-edge returned. Each
+  // triangle (pv[hi], pv[lo], pv[c]) takes the c whose circle has no other vertex of
+  // pv[lo .. hi] inside under the perturbed rule (Anglada; Shewchuk and Brown, "Fast
+  // segment insertion and incremental construction of constrained Delaunay
+  // triangulations"): the polygon's own constrained Delaunay triangulation, which is the
+  // whole one's there. Jobs on a stack, not recursion: a polygon can be long.
+  i32 cavity(const Stack<i32>& pv, const Stack<i32>& pt_, const Stack<uint8_t>& pc, size_t* next) {
+    i32 m = (i32)pv.size() - 1, base = -1;
+    jobs.clear();
+    jobs.push_back(0); jobs.push_back(m); jobs.push_back(-1);  // (lo, hi, half-edge to twin)
+    while (!jobs.empty()) {
+      i32 up = jobs.back(); jobs.pop_back();
+      i32 hi = jobs.back(); jobs.pop_back();
+      i32 lo = jobs.back(); jobs.pop_back();
+      i32 c = lo + 1;
+      for (i32 v = lo + 2; v < hi; ++v)
+        if (incircle_perturbed(pv[hi], pv[lo], pv[c], pv[v]) > 0) c = v;
+      i32 t = slots[(*next)++], e = 3 * t;
+      touch(t);
+      V[e] = pv[hi]; V[e + 1] = pv[lo]; V[e + 2] = pv[c];
+      vinc[pv[hi]] = e; vinc[pv[lo]] = e + 1; vinc[pv[c]] = e + 2;
+      if (up >= 0) link(e, up, 0);
+      else base = e;
+      // pv[lo] -> pv[c], then pv[c] -> pv[hi]: a side of the polygon, or a smaller one
+      if (c == lo + 1) link(e + 1, pt_[lo], pc[lo]);
+      else { C[e + 1] = 0; jobs.push_back(lo); jobs.push_back(c); jobs.push_back(e + 1); }
+      if (hi == c + 1) link(e + 2, pt_[c], pc[c]);
+      else { C[e + 2] = 0; jobs.push_back(c); jobs.push_back(hi); jobs.push_back(e + 2); }
+    }
+    return base;
+  }
+
+  // Make the segment a-b an edge (cutting it at the vertices on it): each piece not yet
+  // an edge by taking out the triangles it crosses and triangulating the two polygons
+  // on its sides. The triangles no piece crosses stay constrained Delaunay (a segment
+  // only hides vertices from them), so no flips follow. A polygon that meets itself (a
+  // vertex whose every triangle the piece crosses, joined to the rest by one edge, or a
+  // pinch) is no simple polygon: that piece is forced in by flips instead.
   Status constrain(i32 a, i32 b) {
+    if (seen.size() != pt.size()) seen.assign(pt.size(), 0);
     while (a != b) {
-      i32 h = find_edge(a, b);  // most segments are edges already: index compares only
-      if (h >= 0) {
-        mark(h);
-        return CDT_OK;
-      }
-      i32 on = -1;
+      i32 h = -1, on = -1;
       int r = first_step(a, b, &h, &on);
       if (r < 0) return CDT_INTERNAL;
       if (r == 1) {
@@ -768,67 +824,124 @@ class CDT {
         a = on;
         continue;
       }
-      // walk across the triangles the segment enters, to b or a vertex on it
-      queue.clear();
-      i32 end = -1;
+      // walk across the triangles the segment enters, to b or a vertex on it: h crosses
+      // it from right (V[h]) to left, in the triangle (a, V[h], V[nxt(h)])
+      if (++stamp == 0) { std::fill(seen.begin(), seen.end(), 0); stamp = 1; }
+      i32 h0 = h, end = -1;
+      bool simple = true;
+      slots.clear(); rv.clear(); re.clear(); lv.clear(); le.clear();
+      slots.push_back(h / 3);
+      rv.push_back(a); rv.push_back(V[h]); re.push_back(prv(h));
+      lv.push_back(a); lv.push_back(V[nxt(h)]); le.push_back(nxt(h));
+      seen[V[h]] = seen[V[nxt(h)]] = stamp;
       for (;;) {
         if (C[h]) return CDT_CROSSING;
         i32 f = T[h];
         if (f < 0) return CDT_INTERNAL;
-        i32 u = V[h], w = V[nxt(h)];
-        queue.push_back(u);
-        queue.push_back(w);
-        queue.push_back(h);
+        slots.push_back(f / 3);
         i32 v = V[prv(f)];
-        if (v == b) { end = b; break; }
-        i64 ov = orient(a, b, v);
+        i64 ov = v == b ? 0 : orient(a, b, v);
         if (ov == 0) {
-          if (strict) return CDT_OVER;
+          if (strict && v != b) return CDT_OVER;
           end = v;
+          rv.push_back(v); re.push_back(nxt(f));
+          lv.push_back(v); le.push_back(prv(f));
           break;
         }
-        i64 ou = orient(a, b, u);
-        // triangle f is w-u, u-v, v-w: leave through the side whose ends differ
-        h = ((ov > 0) == (ou > 0)) ? prv(f) : nxt(f);
+        if (seen[v] == stamp) simple = false;
+        seen[v] = stamp;
+        if (ov < 0) { rv.push_back(v); re.push_back(nxt(f)); h = prv(f); }
+        else { lv.push_back(v); le.push_back(prv(f)); h = nxt(f); }
       }
-      // Sloan: flip each crossing edge whose quadrilateral is strictly convex; a new
-      // diagonal that still crosses goes back in the queue
-      size_t head = 0;
-      // 8 (2k)^2 for k crossed edges, as when an edge took two queue entries (now three)
-      i64 crossed = (i64)queue.size() / 3;
-      i64 guard = 0, limit = 64 + 32 * crossed * crossed;
-      while (head < queue.size()) {
-        if (++guard > limit) return CDT_INTERNAL;
-        i32 u = queue[head], w = queue[head + 1], e = queue[head + 2];
-        head += 3;
-        if (!((V[e] == u && V[nxt(e)] == w) || (V[e] == w && V[nxt(e)] == u))) e = find_edge(u, w);
-        if (e < 0) return CDT_INTERNAL;
-        i32 f = T[e];
-        if (f < 0) return CDT_INTERNAL;
-        i32 p = V[e], q = V[nxt(e)], c = V[prv(e)], d = V[prv(f)];
-        if (orient(p, d, c) > 0 && orient(d, q, c) > 0) {
-          flip(e);
-          // the edges whose quadrilateral changed, for the last Lawson pass (a slot
-          // that a later flip refills is pushed again by that flip)
-          stack.push_back(e); stack.push_back(nxt(e)); stack.push_back(prv(e));
-          stack.push_back(nxt(f)); stack.push_back(prv(f));
-          if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); queue.push_back(e); }
-        } else {
-          queue.push_back(u);
-          queue.push_back(w);
-          queue.push_back(e);
-        }
-        if (head > 4096 && head * 2 > queue.size()) {
-          queue.erase(queue.begin(), queue.begin() + head);
-          head = 0;
-        }
+      if (!simple) {
+        Status st = flip_in(a, b, h0, end);
+        if (st != CDT_OK) return st;
+        a = end;
+        continue;
       }
-      i32 e = find_edge(a, end);
-      if (e < 0) return CDT_INTERNAL;
-      mark(e);
+      // the left polygon from end back to a, so that it too lies on its chain's right
+      std::reverse(lv.begin(), lv.end());
+      std::reverse(le.begin(), le.end());
+      if (rv.size() + lv.size() != slots.size() + 4) return CDT_INTERNAL;
+      // the outside's twins before the slots are written
+      rt.clear(); rc.clear(); lt.clear(); lc.clear();
+      for (size_t i = 0; i < re.size(); ++i) { rt.push_back(T[re[i]]); rc.push_back(C[re[i]]); }
+      for (size_t i = 0; i < le.size(); ++i) { lt.push_back(T[le[i]]); lc.push_back(C[le[i]]); }
+      size_t next = 0;
+      i32 right = cavity(rv, rt, rc, &next), left = cavity(lv, lt, lc, &next);
+      link(right, left, 1);
+      C[left] = 1;
       a = end;
     }
     return CDT_OK;
+  }
+  std::vector<uint32_t> seen;  // constrain's polygon vertices: stamp when seen
+  uint32_t stamp = 0;
+
+  bool crosses(i32 a, i32 b, i32 c, i32 d) const {
+    // whether the open segments ab and cd cross (no vertex lies inside either)
+    if (c == a || c == b || d == a || d == b) return false;
+    i64 o1 = orient(a, b, c), o2 = orient(a, b, d);
+    if (!((o1 > 0 && o2 < 0) || (o1 < 0 && o2 > 0))) return false;
+    i64 o3 = orient(c, d, a), o4 = orient(c, d, b);
+    return (o3 > 0 && o4 < 0) || (o3 < 0 && o4 > 0);
+  }
+
+  // flip_in's crossed edges (kept: no allocation per segment): (u, w, a half-edge of
+  // u-w when queued, which is still one unless a flip moved the edge to another slot)
+  std::vector<i32> queue;
+
+  // The piece a-end of the segment a-b made an edge by flips (Sloan), h the first edge
+  // it crosses (first_step's), then Lawson flips around them: the triangulation is
+  // constrained Delaunay again.
+  Status flip_in(i32 a, i32 b, i32 h, i32 end) {
+    queue.clear();
+    for (;;) {  // the crossed edges, as constrain's walk found them
+      i32 f = T[h];
+      i32 u = V[h], w = V[nxt(h)];
+      queue.push_back(u);
+      queue.push_back(w);
+      queue.push_back(h);
+      i32 v = V[prv(f)];
+      if (v == end) break;
+      h = orient(a, b, v) > 0 ? nxt(f) : prv(f);
+    }
+    // flip each crossing edge whose quadrilateral is strictly convex; a new diagonal
+    // that still crosses goes back in the queue
+    size_t head = 0;
+    // 8 (2k)^2 for k crossed edges, as when an edge took two queue entries (now three)
+    i64 crossed = (i64)queue.size() / 3;
+    i64 guard = 0, limit = 64 + 32 * crossed * crossed;
+    while (head < queue.size()) {
+      if (++guard > limit) return CDT_INTERNAL;
+      i32 u = queue[head], w = queue[head + 1], e = queue[head + 2];
+      head += 3;
+      if (!((V[e] == u && V[nxt(e)] == w) || (V[e] == w && V[nxt(e)] == u))) e = find_edge(u, w);
+      if (e < 0) return CDT_INTERNAL;
+      i32 f = T[e];
+      if (f < 0) return CDT_INTERNAL;
+      i32 p = V[e], q = V[nxt(e)], c = V[prv(e)], d = V[prv(f)];
+      if (orient(p, d, c) > 0 && orient(d, q, c) > 0) {
+        flip(e);
+        // the edges whose quadrilateral changed, for the Lawson pass (a slot that a
+        // later flip refills is pushed again by that flip)
+        stack.push_back(e); stack.push_back(nxt(e)); stack.push_back(prv(e));
+        stack.push_back(nxt(f)); stack.push_back(prv(f));
+        if (crosses(a, end, c, d)) { queue.push_back(d); queue.push_back(c); queue.push_back(e); }
+      } else {
+        queue.push_back(u);
+        queue.push_back(w);
+        queue.push_back(e);
+      }
+      if (head > 4096 && head * 2 > queue.size()) {
+        queue.erase(queue.begin(), queue.begin() + head);
+        head = 0;
+      }
+    }
+    i32 e = find_edge(a, end);
+    if (e < 0) return CDT_INTERNAL;
+    mark(e);
+    return legalise() ? CDT_OK : CDT_INTERNAL;
   }
 
   // Incremental use (codec._cdt.Triangulation): the last vertex inserted, where the
@@ -994,7 +1107,6 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool stri
         st = cdt->constrain(a, b);
         if (st != CDT_OK) return st;
       }
-      if (!cdt->legalise()) return CDT_INTERNAL;  // around the flips that forced the segments in
     }
     *flips = cdt->flips;
     return CDT_OK;
@@ -1003,6 +1115,7 @@ inline Status triangulate(i64 n, const i64* xy, i64 s, const i64* seg, bool stri
   }
 }
 
+}  // namespace
 }  // namespace atmcdt
 
 #endif

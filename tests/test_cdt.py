@@ -445,3 +445,58 @@ def test_a_long_first_row_costs_linear_flips():
         assert flips < 60 * len(pts)  # the sweep alone made len(pts)**2 / 4
         if k == 300:
             np.testing.assert_array_equal(tris, canonical_triangles(triangle_and_pass(pts)))
+
+
+def many_walls(rng: np.random.Generator, pts: np.ndarray, share: float) -> np.ndarray | None:
+    """Many walls that never cross: a random share of the edges of a triangulation of a
+    random half of pts; long ones cross many edges of pts' triangulation."""
+    sub = rng.permutation(len(pts))[: max(3, len(pts) // 2)]
+    tris = by_triangle(pts[sub], None)
+    if not len(tris):
+        return None
+    edges = np.unique(np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1), axis=0)
+    keep = edges[rng.random(len(edges)) < share]
+    return sub[keep] if len(keep) else None
+
+
+@settings(max_examples=200, deadline=None)
+@given(band_point_sets(), st.floats(0.05, 1.0), st.integers(0, 2**32 - 1))
+def test_many_walls_forced_in_give_the_triangles_of_triangle(case, share, seed):
+    """Walls go in by taking out the triangles they cross and triangulating the polygon
+    on each side (or by flips, where a polygon meets itself): with ties, many walls
+    crossing many edges, walls over vertices (cut there), the same triangles as
+    Triangle after the canonical pass, batch and incremental."""
+    pts, _ = case
+    rng = np.random.default_rng(seed)
+    if len(pts) < 4:
+        return
+    walls = many_walls(rng, pts, share)
+    out = delaunay(pts, walls)
+    np.testing.assert_array_equal(out, by_triangle(pts, walls))
+    if len(out) and walls is not None:
+        tri = Triangulation(pts - pts.min(axis=0))
+        tri.constrain(walls[rng.permutation(len(walls))])
+        np.testing.assert_array_equal(out, tri.triangles())
+
+
+def test_a_wall_whose_right_side_meets_itself_is_flipped_in():
+    """A wall that crosses every triangle of a vertex but one edge of it (the vertex
+    hangs in the polygon beside the wall by that edge: the polygon meets itself) goes
+    in by flips; the triangles are Triangle's. Found by search: the kernel reports
+    flips only for such walls after a sweep without flips."""
+    from codec import _cdt
+
+    rng = np.random.default_rng(5)
+    found = 0
+    for _ in range(4000):
+        pts = np.unique(rng.integers(0, 12, (14, 2)), axis=0)
+        pts = np.unique(np.concatenate([pts, [[0, 0], [11, 0], [0, 11], [11, 11]]]), axis=0)
+        pts = np.ascontiguousarray(pts[np.lexsort((pts[:, 0], pts[:, 1]))])
+        status, _, swept = _cdt.triangulate(pts, np.zeros((0, 2), np.int64), True)
+        wall = np.ascontiguousarray(rng.choice(len(pts), (1, 2), replace=False))
+        status, tris, flips = _cdt.triangulate(pts, wall, False)
+        if status != _cdt.OK or flips == swept:
+            continue
+        found += 1
+        np.testing.assert_array_equal(tris, by_triangle(pts, wall))
+    assert found >= 5
