@@ -6,7 +6,7 @@ CorruptError with their own messages. band_values does a band's whole sample sta
 one call, so that a file of many tiny bands pays no per-array numpy overhead there."""
 
 from libc.math cimport rint, sqrt
-from libc.stdint cimport int64_t, uint8_t, uint64_t
+from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
 
 import numpy as np
 
@@ -16,14 +16,34 @@ cpdef enum Varints:
     VARINTS_LONG = 2    # a number is longer than the longest allowed
 
 
+cdef int64_t _leb128(const uint8_t[::1] data, int64_t longest, int64_t[::1] out) noexcept nogil:
+    """The LEB128 numbers of data into out (room for each number data ends); stops
+    inside a number that reaches `longest` bytes unfinished and returns its bytes so
+    far (0: every number ended)."""
+    cdef int64_t i, k = 0, length = 0
+    cdef uint64_t value = 0
+    cdef int shift = 0
+    for i in range(data.shape[0]):
+        value |= <uint64_t>(data[i] & 0x7F) << shift
+        shift += 7
+        length += 1
+        if data[i] < 0x80:
+            out[k] = <int64_t>value
+            k += 1
+            value = 0
+            shift = 0
+            length = 0
+        elif length >= longest:
+            break
+    return length
+
+
 def unvarints(const uint8_t[::1] data, int64_t count, int64_t longest):
     """(status, values): exactly `count` unsigned LEB128 numbers filling `data`, none
     longer than `longest` bytes (<= 9, so every value fits an int64). The count is
     checked before anything is allocated: a file cannot make it allocate more than
     its own length (values is None on an error)."""
-    cdef int64_t n = data.shape[0], i, k = 0, ends = 0, length = 0
-    cdef uint64_t value = 0
-    cdef int shift = 0
+    cdef int64_t n = data.shape[0], i, ends = 0, length = 0
     if longest > 9 or count < 0:
         raise ValueError("unvarints: at most 9 bytes a number, and a count >= 0")
     with nogil:
@@ -35,18 +55,7 @@ def unvarints(const uint8_t[::1] data, int64_t count, int64_t longest):
     out = np.empty(count, dtype=np.int64)
     cdef int64_t[::1] o = out
     with nogil:
-        for i in range(n):
-            value |= <uint64_t>(data[i] & 0x7F) << shift
-            shift += 7
-            length += 1
-            if data[i] < 0x80:
-                o[k] = <int64_t>value
-                k += 1
-                value = 0
-                shift = 0
-                length = 0
-            elif length >= longest:
-                break
+        length = _leb128(data, longest, o)
     if length:  # stopped inside a number longer than `longest`
         return VARINTS_LONG, None
     return VARINTS_OK, out
@@ -215,41 +224,94 @@ def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int6
     return None if bad else steps
 
 
+cpdef enum MeshCheck:
+    MESH_OK = 0
+    MESH_OUTSIDE = 1      # a vertex lies outside the image
+    MESH_INDEX = 2        # a triangle refers to a vertex beyond those stored
+    MESH_DEGENERATE = 3   # a triangle's doubled area is not positive
+
+
 cpdef enum Values:
     VALUES_OK = 0
     VALUES_CORNER = 1     # a triangle refers to a vertex beyond those stored
     VALUES_RESIDUAL = 2   # a stored residual exceeds the sample type's range
     VALUES_ORDER = 3      # the sample order is no permutation of the vertices
     VALUES_SAMPLE = 4     # a decoded sample leaves the sample type's range
+    VALUES_COUNT = 5      # the samples field does not hold one varint per vertex and channel
+    VALUES_LONG = 6       # a sample's varint is longer than the longest allowed
+
+
+cdef int _vertices_inside(const int64_t[:, ::1] vertices, int64_t w, int64_t h, bint* increasing) noexcept nogil:
+    """mesh_checks' vertex pass: MESH_OUTSIDE at the first vertex outside w x h, and
+    whether the keys y * w + x increase up to there."""
+    cdef int64_t j, key, last = -1
+    increasing[0] = True
+    for j in range(vertices.shape[0]):
+        if not (0 <= vertices[j, 0] < w and 0 <= vertices[j, 1] < h):
+            return MESH_OUTSIDE
+        key = vertices[j, 1] * w + vertices[j, 0]
+        if key <= last:
+            increasing[0] = False
+        last = key
+    return MESH_OK
+
+
+cdef int _varint_count(const uint8_t[::1] data, int64_t count, int64_t longest) noexcept nogil:
+    """unvarints' refusals of `data` without decoding it: VALUES_COUNT unless it holds
+    exactly `count` numbers (checked first, as unvarints does), VALUES_LONG if a number
+    has more than `longest` bytes (a run of `longest` continuation bytes)."""
+    cdef int64_t n = data.shape[0], i, ends = 0, run = 0
+    cdef bint long_ = False
+    for i in range(n):
+        if data[i] < 0x80:
+            ends += 1
+            run = 0
+        else:
+            run += 1
+            long_ |= run >= longest
+    if ends != count or (n and data[n - 1] >= 0x80):
+        return VALUES_COUNT
+    return VALUES_LONG if long_ else VALUES_OK
 
 
 def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
-                const int64_t[::1] zigzags, const int64_t[::1] seq_order, int64_t step,
-                double bound, bint top_pinned, int64_t top):
-    """(status, values, areas): a band's samples from its stored residuals (ATM.md
-    §4.2.4), what meshcode.decode_band did in numpy passes: each zigzag residual (of
-    n * channels, in sequence order) checked against 2 * top, unzigzagged, times its
-    vertex's step (vertex_steps, the rows at y = 0 step 1 when top_pinned), added to
-    its parent's sample (sample_parents) and checked within 0..top; values (n x
-    channels, int64) in vertex order, areas the triangles' doubled areas. Every index
-    is checked before it is used; values and areas are None on an error."""
+                const uint8_t[::1] samples, int64_t channels, const int64_t[::1] seq_order, int64_t step,
+                double bound, bint top_pinned, int64_t top, int64_t longest, int64_t width, int64_t rows):
+    """(status, values, areas, checks): a band's samples from its samples field (ATM.md
+    §4.2.4), in one call: the field's n * channels LEB128 varints (refused as
+    coding.unvarints refuses them, none longer than `longest` <= 9 bytes; nothing is
+    allocated for them before their count is known to match), each zigzag residual in
+    sequence order checked against 2 * top, unzigzagged, times its vertex's step
+    (vertex_steps, the rows at y = 0 step 1 when top_pinned), added to its parent's
+    sample (sample_parents) and checked within 0..top. values: n (one channel) or n x
+    channels samples in vertex order, uint8 for top < 2**8, uint16 for top < 2**16,
+    else int64; areas the triangles' doubled areas; checks what mesh_checks(vertices,
+    triangles, areas, width, rows) returns, from the same pass over the triangles (so
+    that mesh.validate need not read them again). Every index is checked before it is
+    used; values, areas and checks are None on an error."""
     cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q, a, b, c, xa, ya, area
-    cdef int64_t channels = zigzags.shape[0] // n if n else 1
+    cdef int64_t total = 0, crossed = 0, lo, hi, y
     cdef uint64_t u
     cdef int64_t r
-    if zigzags.shape[0] != n * channels or seq_order.shape[0] != n or channels < 1:
-        raise ValueError("band_values: one residual per vertex and channel, and one place per vertex")
+    cdef bint increasing = True
+    cdef int checks = MESH_OK
+    if seq_order.shape[0] != n or channels < 1 or longest > 9 or n * channels < 0:
+        raise ValueError("band_values: one place per vertex, at least one channel, at most 9 bytes a varint")
+    cdef int status = _varint_count(samples, n * channels, longest)
+    if status != VALUES_OK:
+        return status, None, None, None
     areas = np.empty(m, dtype=np.int64)
-    values = np.empty((n, channels), dtype=np.int64)
+    zig_arr = np.empty(n * channels, dtype=np.int64)
     scratch = np.full(n, -1, dtype=np.int64)
     steps_arr = np.empty(n, dtype=np.int64)
     parent_arr = np.empty(n, dtype=np.int64)
     seq_arr = np.empty((n, channels), dtype=np.int64)
     fan_arr = np.empty(n, dtype=np.int64)
-    cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr, fan = fan_arr
-    cdef int64_t[:, ::1] out = values, seq = seq_arr
-    cdef int status = VALUES_OK
+    cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr, fan = fan_arr, zigzags = zig_arr
+    cdef int64_t[:, ::1] seq = seq_arr
     with nogil:
+        # the varints (their count and lengths known good)
+        _leb128(samples, longest, zigzags)
         if m and _corners_beyond(&triangles[0, 0], 3 * m, n):
             status = VALUES_CORNER
         for j in range(n * channels):
@@ -262,9 +324,10 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 break
             pos[k] = j
         if status == VALUES_OK:
-            # one pass over the triangles: their doubled areas, the vertices' fan areas
-            # and the samples' parents (_doubled_areas, _vertex_steps' sums and
-            # _parents, each of which would read the corners again)
+            checks = _vertices_inside(vertices, width, rows, &increasing)  # mesh_checks' vertex pass
+            # one pass over the triangles: their doubled areas, the vertices' fan areas,
+            # the samples' parents (_doubled_areas, _vertex_steps' sums and _parents,
+            # each of which would read the corners again) and mesh_checks' sums
             for j in range(n):
                 fan[j] = 0
                 p[j] = -1
@@ -277,6 +340,17 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 fan[b] += area
                 fan[c] += area
                 _parent_of(pos[a], pos[b], pos[c], p)
+                if area <= 0 and checks == MESH_OK:
+                    checks = MESH_DEGENERATE
+                total += area
+                lo = hi = ya
+                y = vertices[b, 1]
+                lo = y if y < lo else lo
+                hi = y if y > hi else hi
+                y = vertices[c, 1]
+                lo = y if y < lo else lo
+                hi = y if y > hi else hi
+                crossed += hi - lo + 1
             for j in range(n):
                 if p[j] < 0:
                     p[j] = j - 1
@@ -296,12 +370,54 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                     if r < 0 or r > top:
                         status = VALUES_SAMPLE
                     seq[j, ch] = r
-                    out[seq_order[j], ch] = r
                 if status != VALUES_OK:
                     break
     if status != VALUES_OK:
-        return status, None, None
-    return status, values, areas
+        return status, None, None, None
+    values = _in_vertex_order(seq_arr, seq_order, top)
+    if channels == 1:
+        values = values.reshape(n)
+    if checks != MESH_OK:
+        return status, values, areas, (checks, increasing, 0, 0)
+    return status, values, areas, (checks, increasing, total, crossed)
+
+
+ctypedef fused _sample_t:
+    uint8_t
+    uint16_t
+    int64_t
+
+
+cdef void _scatter(const int64_t[:, ::1] seq, const int64_t[::1] seq_order, _sample_t[:, ::1] out) noexcept nogil:
+    """out[seq_order[j]] = seq[j], each sample already within out's type."""
+    cdef int64_t j, ch, k
+    for j in range(seq.shape[0]):
+        k = seq_order[j]
+        for ch in range(seq.shape[1]):
+            out[k, ch] = <_sample_t>seq[j, ch]
+
+
+cdef object _in_vertex_order(const int64_t[:, ::1] seq, const int64_t[::1] seq_order, int64_t top):
+    """The samples of seq (in sequence order, each within 0..top) in vertex order, in
+    the narrowest of uint8, uint16 and int64 that holds top."""
+    out = np.empty((seq.shape[0], seq.shape[1]),
+                   dtype=np.uint8 if top < 1 << 8 else np.uint16 if top < 1 << 16 else np.int64)
+    cdef uint8_t[:, ::1] o8
+    cdef uint16_t[:, ::1] o16
+    cdef int64_t[:, ::1] o64
+    if top < 1 << 8:
+        o8 = out
+        with nogil:
+            _scatter(seq, seq_order, o8)
+    elif top < 1 << 16:
+        o16 = out
+        with nogil:
+            _scatter(seq, seq_order, o16)
+    else:
+        o64 = out
+        with nogil:
+            _scatter(seq, seq_order, o64)
+    return out
 
 
 def hilbert_keys(const int64_t[::1] x, const int64_t[::1] y, const int64_t[::1] digit,
@@ -481,19 +597,12 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
     return xs, ys
 
 
-cpdef enum MeshCheck:
-    MESH_OK = 0
-    MESH_OUTSIDE = 1      # a vertex lies outside the image
-    MESH_INDEX = 2        # a triangle refers to a vertex beyond those stored
-    MESH_DEGENERATE = 3   # a triangle's doubled area is not positive
-
-
 def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, areas, int64_t w, int64_t h):
     """mesh.validate's per-element checks in one pass: (status, keys increasing, total
     doubled area, rows crossed by all triangles plus their count). Vertices are
     checked first, then corners, then areas (given, or computed here once the corners
     are known good); the totals are 0 unless status is MESH_OK."""
-    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, key, last = -1, total = 0, rows = 0
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, total = 0, rows = 0
     cdef int64_t lo, hi, y
     cdef bint increasing = True, given = areas is not None
     cdef int status = MESH_OK
@@ -506,14 +615,7 @@ def mesh_checks(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
         if ar.shape[0] != m:
             raise ValueError("mesh_checks: one area per triangle")
     with nogil:
-        for j in range(n):
-            if not (0 <= vertices[j, 0] < w and 0 <= vertices[j, 1] < h):
-                status = MESH_OUTSIDE
-                break
-            key = vertices[j, 1] * w + vertices[j, 0]
-            if key <= last:
-                increasing = False
-            last = key
+        status = _vertices_inside(vertices, w, h, &increasing)
         if status == MESH_OK and m and _corners_beyond(&triangles[0, 0], 3 * m, n):
             status = MESH_INDEX
         if status == MESH_OK and not given:

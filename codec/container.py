@@ -596,11 +596,11 @@ class Reader:
             raise CorruptError(f"MESH chunk at byte {offset} starts at row {m.y0}, expected {y0_expected}")
         if m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
             raise CorruptError(f"MESH chunk at byte {offset} has {m.rows} rows from row {m.y0}")
-        mesh, areas = meshcode.decode_band(m, h.width, h.storage, h.channels, f"MESH chunk at byte {offset}")
+        mesh, areas, checked = meshcode.decode_band(m, h.width, h.storage, h.channels, f"MESH chunk at byte {offset}")
         # a rebuilt triangulation tiles the band and has the walls as edges (decode_band
         # checked them)
         rebuilt = m.connectivity == schema.DELAUNAY
-        validate(mesh, walls_are_edges=rebuilt, tiles=rebuilt, areas=areas)
+        validate(mesh, walls_are_edges=rebuilt, tiles=rebuilt, areas=areas, checked=checked)
         return int(m.y0), mesh
 
     def __iter__(self) -> Iterator[tuple[int, Mesh]]:

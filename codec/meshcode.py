@@ -443,10 +443,10 @@ def _largest(dtype: np.dtype) -> int:
     return int(np.iinfo(dtype).max)
 
 
-def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray]:
-    """The Mesh of a parsed MeshPayload and its triangles' doubled areas (for
-    mesh.validate); CorruptError if any field is inconsistent. Structural checks of
-    the result are left to mesh.validate."""
+def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray, tuple]:
+    """The Mesh of a parsed MeshPayload, its triangles' doubled areas and the element
+    checks of _fields.mesh_checks (both for mesh.validate); CorruptError if any field
+    is inconsistent. Structural checks of the result are left to mesh.validate."""
     n, rows = int(m.vertex_count), int(m.rows)
     if n > limits.max_vertices(width, rows):
         raise LimitError(f"{where}: {n:,} vertices is too many for {width}x{rows} pixels")
@@ -510,7 +510,6 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
     top = _largest(dtype)
-    zigzags = unvarints(m.samples, n * channels, f"{where} samples")
     # the encoder's _sample_order, from the parts known here: the positions along the
     # curve are already in its order
     if by_rows:
@@ -522,11 +521,15 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index
     seq_order = np.concatenate([on_line, curve]) if total else curve
-    # steps, parents and running sums in one compiled pass (vertex_steps, sample_parents
-    # and tree_sums' arithmetic), every index checked there
-    status, values, areas = _fields.band_values(
-        vertices, np.ascontiguousarray(triangles, dtype=np.int64), zigzags, seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top
+    # the samples' varints, steps, parents and running sums in one compiled pass
+    # (unvarints, vertex_steps, sample_parents and tree_sums' arithmetic), every index
+    # checked there; with mesh.validate's element checks from its pass over the triangles
+    status, values, areas, checks = _fields.band_values(
+        vertices, np.ascontiguousarray(triangles, dtype=np.int64), np.frombuffer(m.samples, np.uint8), channels,
+        seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top, MAX_VARINT_BYTES, width, rows,
     )
+    if status == _fields.Values.VALUES_COUNT or status == _fields.Values.VALUES_LONG:
+        unvarints(m.samples, n * channels, f"{where} samples")  # raises its error
     if status == _fields.Values.VALUES_CORNER:
         raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
     if status == _fields.Values.VALUES_RESIDUAL:
@@ -535,7 +538,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         raise CorruptError(f"{where}: the sample order is no permutation of the vertices")
     if status == _fields.Values.VALUES_SAMPLE:
         raise CorruptError(f"{where}: a sample leaves the {dtype} range")
-    values = values.astype(dtype)
-    values = values[:, 0] if channels == 1 else values
+    if values.dtype != dtype:  # storage is uint8 or uint16: the kernel's own types
+        values = values.astype(dtype)
 
-    return Mesh(vertices, values, triangles, width, rows, lines), areas
+    return Mesh(vertices, values, triangles, width, rows, lines), areas, checks
