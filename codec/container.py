@@ -108,6 +108,11 @@ _FILE_HEAD = struct.Struct("<8sH")
 assert _FILE_HEAD.size == schema.FileHeader.sizeof()
 _HEADER = struct.Struct("<IIBB")
 assert _HEADER.size == schema.Header.sizeof()
+#: schema.Quantisation (offset, scale) and schema.NoData (value) as structs, likewise
+_QUANT = struct.Struct("<dd")
+assert _QUANT.size == schema.Quantisation.sizeof()
+_NODATA = struct.Struct("<d")
+assert _NODATA.size == schema.NoData.sizeof()
 
 #: Frames up to this size are decompressed whole at once (cheaper than reading their
 #: fixed fields first); larger ones have their fixed fields checked first.
@@ -448,9 +453,9 @@ class Reader:
 
     @staticmethod
     def _parse_quant(raw: "_RawHeader", payload: bytes) -> "_RawHeader":
-        if len(payload) != schema.Quantisation.sizeof():
-            raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {schema.Quantisation.sizeof()}")
-        q = schema.Quantisation.parse(payload)
+        if len(payload) != _QUANT.size:
+            raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {_QUANT.size}")
+        q = Quantiser(*_QUANT.unpack(payload))
         top = abs(q.offset) + q.scale * 65535 if np.isfinite(q.offset) and np.isfinite(q.scale) else np.inf
         if not (q.scale > 0 and top <= float(np.finfo(np.float32).max)):
             raise CorruptError(
@@ -495,9 +500,9 @@ class Reader:
 
     @staticmethod
     def _parse_nodata(h: Header, payload: bytes) -> Header:
-        if len(payload) != schema.NoData.sizeof():
-            raise CorruptError(f"NDAT chunk has {len(payload)} bytes, not {schema.NoData.sizeof()}")
-        value = schema.NoData.parse(payload).value
+        if len(payload) != _NODATA.size:
+            raise CorruptError(f"NDAT chunk has {len(payload)} bytes, not {_NODATA.size}")
+        (value,) = _NODATA.unpack(payload)
         if np.dtype(h.dtype).kind in "ui":
             info = np.iinfo(h.dtype)
             if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):

@@ -432,7 +432,8 @@ def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
     if status == _fields.Chains.CHAINS_LEAVES:
         raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
     # the distinct pixels, each point's rank among them and their first-reached order
-    line_keys, ranks, appear = _fields.line_ranks(chain_keys, np.argsort(chain_keys))
+    # (keys below width * rows, the chains checked: sorted in linear passes)
+    line_keys, ranks, appear = _fields.line_ranks(chain_keys, _fields.argsort_keys(chain_keys, width * rows))
     return lengths, line_keys, ranks, appear
 
 
@@ -476,7 +477,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         if free and (x.max() >= width or y.max() >= rows):
             raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
         free_keys = y * width + x
-        by_curve = np.argsort(free_keys)
+        by_curve = _fields.argsort_keys(free_keys, pixels)  # distinct keys below pixels: linear passes
         free_keys = free_keys[by_curve]
     # Both key lists are increasing: merged in one compiled pass, which also finds
     # each polyline point's vertex (flat) and the walls as vertex pairs

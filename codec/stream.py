@@ -16,6 +16,7 @@ from . import slack as slack_rule
 from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
+from .native import _fields
 from .settings import Settings
 
 
@@ -421,19 +422,34 @@ class StreamDecoder:
             rows = lossless_float.floats(rows) if steps is None else steps.dequantise(rows)
             if mesh.holes is not None:
                 # the hole value's exact bits (a NaN's payload too, ATM.md §4.10)
-                rows.view(np.uint32)[mesh.holes[: len(rows)]] = lossless_float.hole_bits(nodata)
+                _fill(rows, mesh.holes[: len(rows)], int(lossless_float.hole_bits(nodata)))
         elif quant is not None and integers.is_signed(self.dtype):
             rows = integers.restore(rows, quant, self.dtype)
         elif quant is not None:
             rows = quant.dequantise(rows)
         if mesh.holes is not None and not self._reader.header.exact:
-            rows[mesh.holes[: len(rows)]] = nodata
+            # nodata is a sample of the image's type (the reader checked NDAT)
+            _fill(rows, mesh.holes[: len(rows)], int(np.array(nodata, rows.dtype).view(_BITS[rows.dtype.itemsize])))
         if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.9)
             rows = rows[:, :, None]
         last = y0 + mesh.height == self.height
         # the last row is the next band's first: emit it once, from there (a residual
         # layer already leaves it out)
         return y0, rows if last or len(rows) < mesh.height else rows[:-1]
+
+
+#: The unsigned type of each sample width: holes are filled with the nodata value's bits.
+_BITS = {1: np.uint8, 2: np.uint16, 4: np.uint32}
+
+
+def _fill(rows: np.ndarray, holes: np.ndarray, bits: int) -> None:
+    """rows[holes] = the sample whose bits are `bits`, in every channel (one compiled
+    pass without a branch per pixel)."""
+    if not rows.flags.c_contiguous:  # not a decoder's own rows
+        rows.view(_BITS[rows.dtype.itemsize])[holes] = bits
+        return
+    pixels = rows.view(_BITS[rows.dtype.itemsize]).reshape(holes.size, -1)
+    _fields.fill_holes(pixels, np.ascontiguousarray(holes).reshape(-1).view(np.uint8), bits)
 
 
 #: Most pixels of the consecutive bands a whole-file decode renders in one call.

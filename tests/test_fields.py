@@ -414,3 +414,41 @@ def test_argsort_keys_sorts_distinct_keys_as_numpy(bits: int, n: int, seed: int)
             wrong = keys.copy()
             wrong[-1] = bad
             assert _fields.argsort_keys(wrong, span) is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 3000), st.integers(0, 2**32 - 1))
+def test_argsort_keys_is_a_stable_argsort(bits: int, n: int, seed: int) -> None:
+    """With keys repeated (polyline points on shared pixels), the radix sort is numpy's
+    stable argsort, which line_ranks takes for one."""
+    from codec.native import _fields
+
+    span = 1 << bits
+    rng = np.random.default_rng(seed)
+    keys = rng.integers(0, min(span, max(1, n // 3)), n, dtype=np.int64)
+    assert np.array_equal(_fields.argsort_keys(keys, span), np.argsort(keys, kind="stable"))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int8, np.uint16, np.int16, np.int32, np.float32])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_fill_holes_is_numpys_masked_assignment(dtype, channels: int) -> None:
+    """stream._fill (the fill_holes kernel) sets every channel of the hole pixels to the
+    value, bit for bit (a NaN too), and leaves the others, as rows[holes] = value."""
+    from codec import stream
+
+    rng = np.random.default_rng(channels)
+    shape = (37, 23) + ((channels,) if channels > 1 else ())
+    rows = rng.integers(0, 100, shape).astype(dtype)
+    holes = rng.random((37, 23)) < 0.4
+    for value in ([0, -5, 7] if np.dtype(dtype).kind != "u" else [0, 7]) + ([np.nan] if dtype == np.float32 else []):
+        expected = rows.copy()
+        expected[holes] = value
+        got = rows.copy()
+        bits = np.dtype(f"u{np.dtype(dtype).itemsize}")
+        stream._fill(got, holes, int(np.array(value, dtype).view(bits)))
+        assert np.array_equal(got.view(bits), expected.view(bits))
+    strided = rows.copy()[::2]  # not a decoder's own rows: numpy's assignment
+    expected = strided.copy()
+    expected[holes[::2]] = 3
+    stream._fill(strided, holes[::2], int(np.array(3, dtype).view(bits)))
+    assert np.array_equal(strided, expected)
