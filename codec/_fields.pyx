@@ -880,16 +880,24 @@ def argsort_keys(const int64_t[::1] keys, int64_t span):
     passes = (bits + 10) // 11
     digit = (bits + passes - 1) // passes if passes else 1
     mask = (<int64_t>1 << digit) - 1
-    order = np.arange(n, dtype=np.int64)
-    arrays = [np.array(keys, dtype=np.int64), np.empty(n, dtype=np.int64), order, np.empty(n, dtype=np.int64),
-              np.empty(mask + 1, dtype=np.int64)]
-    cdef int64_t[::1] k_src = arrays[0], k_dst = arrays[1], i_src = arrays[2], i_dst = arrays[3], tmp
-    cdef int64_t[::1] count = arrays[4]
+    # one buffer: keys and indices, each twice, and the bucket counts; raw pointers
+    # (memoryview indexing reloads its base at each of the scatter's stores)
+    buf = np.empty(4 * n + mask + 1, dtype=np.int64)
+    cdef int64_t[::1] whole = buf
+    cdef int64_t* k_src = &whole[0]
+    cdef int64_t* k_dst = k_src + n
+    cdef int64_t* i_src = k_src + 2 * n
+    cdef int64_t* i_dst = k_src + 3 * n
+    cdef int64_t* count = k_src + 4 * n
+    cdef int64_t* tmp
     with nogil:
         for j in range(n):
             bad |= <uint64_t>keys[j] >= <uint64_t>span
+            k_src[j] = keys[j]
+            i_src[j] = j
         while not bad and passes > 0:
-            count[:] = 0
+            for b in range(mask + 1):
+                count[b] = 0
             for j in range(n):
                 count[(k_src[j] >> shift) & mask] += 1
             total = 0
@@ -912,7 +920,8 @@ def argsort_keys(const int64_t[::1] keys, int64_t span):
             passes -= 1
     if bad:
         return None
-    return np.asarray(i_src)
+    # a view of the buffer (its indices' half)
+    return buf[i_src - &whole[0] : i_src - &whole[0] + n]
 
 
 ctypedef fused _bits_t:

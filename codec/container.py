@@ -493,7 +493,7 @@ class Reader:
                 f"{limits.MAX_METADATA_BYTES:,} (codec.limits.MAX_METADATA_BYTES)"
             )
         self._meta_budget -= size
-        meta = meta_json.parse(frames.decompress(payload, size, where), where)
+        meta = meta_json.parse(frames.decompress(payload, size, where, self._dctx), where)
         h = self.header
         merged = dict(h.metadata or {}, **meta)
         self.header = dataclasses.replace(h, metadata=merged)
@@ -518,7 +518,7 @@ class Reader:
         where = f"MASK chunk at byte {offset}"
         if frames.declared_size(payload, where) > limits.max_payload(len(payload)):
             raise LimitError(f"{where} would decompress to more than {limits.MAX_PAYLOAD_EXPANSION} times its size")
-        raw = frames.decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where)
+        raw = frames.decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where, self._dctx)
         stream = io.BytesIO(raw)
         try:
             m = schema.MaskPayload.parse_stream(stream)
@@ -564,8 +564,9 @@ class Reader:
             raise LimitError(f"{where} would decompress to {size:,} bytes, more than its image can need")
         if frames.frame_length(payload, where) != len(payload):  # codec.info decompresses no more
             raise CorruptError(f"{where} has bytes after its zstd frame (ATM.md §4: one frame)")
-        raw = frames.decompress(payload, size, where, self._dctx) if size <= _WHOLE_FRAME else b""
-        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where)
+        # (the frame's length checked just above: decompress need not walk its blocks again)
+        raw = frames.decompress(payload, size, where, self._dctx, one_frame=True) if size <= _WHOLE_FRAME else b""
+        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where, self._dctx)
         if len(fixed) < _MESH_FIXED.size:
             raise CorruptError(f"{where} is malformed: it ends inside its fixed fields")
         y0, rows, n, nt, lines, points, connectivity, _, _, _ = _MESH_FIXED.unpack(fixed)
@@ -589,7 +590,7 @@ class Reader:
         if size > need:
             raise CorruptError(f"{where} declares {size:,} bytes; its counts can use at most {need:,}")
         if whole and not raw:
-            raw = frames.decompress(payload, size, where, self._dctx)
+            raw = frames.decompress(payload, size, where, self._dctx, one_frame=True)
         return fixed, raw
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
