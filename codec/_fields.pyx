@@ -432,30 +432,68 @@ cdef object _in_vertex_order(const int64_t[:, ::1] seq, const int64_t[::1] seq_o
     return out
 
 
+cdef inline int64_t _hilbert_key(int64_t x, int64_t y, const int64_t* digit, const int64_t* nxt, int g,
+                                 int64_t groups, int64_t start) noexcept nogil:
+    """hilbert_keys of one point (the tables' sizes checked by the caller)."""
+    cdef int64_t k = (groups - 1) * g, i, d = 0, state = start
+    cdef int64_t mask = (1 << g) - 1, size = 4 << (2 * g)
+    while k >= 0:
+        i = ((((x >> k) & mask) << g) | ((y >> k) & mask) | state) & (size - 1)
+        d = (d << (2 * g)) | digit[i]
+        state = nxt[i]
+        k -= g
+    return d
+
+
 def hilbert_keys(const int64_t[::1] x, const int64_t[::1] y, const int64_t[::1] digit,
                  const int64_t[::1] nxt, int g, int64_t groups, int64_t start):
     """coding.hilbert_keys' state machine, a point at a time: for each group of g
     levels from the top, look up (state, g bits of x, g bits of y) in the group tables
     (digit, nxt: 4 << 2g entries; nxt holds the next state shifted by 2g). Every lookup
     is masked into the tables, whatever x and y hold."""
-    cdef int64_t n = x.shape[0], j, k, i, d, state
-    cdef int64_t mask = (1 << g) - 1, size = 4 << (2 * g)
+    cdef int64_t n = x.shape[0], j
+    cdef int64_t size = 4 << (2 * g)
     if y.shape[0] != n or digit.shape[0] != size or nxt.shape[0] != size or not 0 <= start < size:
         raise ValueError("hilbert_keys: x and y of one length, tables of 4 << 2g entries")
     out = np.empty(n, dtype=np.int64)
     cdef int64_t[::1] o = out
     with nogil:
         for j in range(n):
-            d = 0
-            state = start
-            k = (groups - 1) * g
-            while k >= 0:
-                i = (((x[j] >> k) & mask) << g) | ((y[j] >> k) & mask) | state
-                i &= size - 1
-                d = (d << (2 * g)) | digit[i]
-                state = nxt[i]
-                k -= g
-            o[j] = d
+            o[j] = _hilbert_key(x[j], y[j], &digit[0], &nxt[0], g, groups, start)
+    return out
+
+
+def curve_order(const int64_t[:, ::1] vertices, const int64_t[::1] places, const int64_t[::1] digit,
+                const int64_t[::1] nxt, int g, int64_t groups, int64_t start, int64_t span):
+    """The vertices at `places` (each checked to be a vertex) ordered along the
+    Hilbert curve: hilbert_keys of their (x, y), sorted by argsort_keys' radix passes
+    (keys below `span`), in one call (the sample order of a band whose free vertices
+    are stored in raster order, ATM.md §4.2.4). None if a place is no vertex or a key
+    not below span; equal keys keep their order."""
+    cdef int64_t n = places.shape[0], j, nv = vertices.shape[0]
+    cdef int64_t size = 4 << (2 * g)
+    cdef bint bad = False
+    if digit.shape[0] != size or nxt.shape[0] != size or not 0 <= start < size:
+        raise ValueError("curve_order: tables of 4 << 2g entries")
+    keys = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] k = keys
+    with nogil:
+        for j in range(n):
+            if <uint64_t>places[j] >= <uint64_t>nv:
+                bad = True
+                break
+            k[j] = _hilbert_key(vertices[places[j], 0], vertices[places[j], 1], &digit[0], &nxt[0], g, groups,
+                                start)
+    if bad:
+        return None
+    along = argsort_keys(keys, span)
+    if along is None:
+        return None
+    out = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] o = out, a = along
+    with nogil:
+        for j in range(n):
+            o[j] = places[a[j]]
     return out
 
 

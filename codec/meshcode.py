@@ -27,6 +27,7 @@ from .coding import (
     hilbert_keys,
     hilbert_levels,
     hilbert_points,
+    hilbert_tables,
     triangle_crc,
     unvarints,
     unzigzag,
@@ -514,10 +515,10 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     # the encoder's _sample_order, from the parts known here: the positions along the
     # curve are already in its order
     if by_rows:
-        # distinct keys below 4**levels, in one linear pass instead of a comparison sort
-        along = _fields.argsort_keys(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1], levels),
-                                     1 << 2 * levels)
-        curve = free_index[along]
+        # their Hilbert keys and linear radix passes over them, in one compiled call
+        curve = _fields.curve_order(vertices, free_index, *hilbert_tables(levels), 1 << 2 * levels)
+        if curve is None:  # the merge gave places of vertices inside the band: no file reaches it
+            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index

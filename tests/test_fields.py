@@ -452,3 +452,26 @@ def test_fill_holes_is_numpys_masked_assignment(dtype, channels: int) -> None:
     expected[holes[::2]] = 3
     stream._fill(strided, holes[::2], int(np.array(3, dtype).view(bits)))
     assert np.array_equal(strided, expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 300), st.integers(1, 300))
+def test_curve_order_is_hilbert_keys_then_their_sort(seed: int, width: int, rows: int) -> None:
+    """_fields.curve_order (the sample order of free vertices stored in raster order)
+    is the Hilbert keys of the vertices at the places, stably sorted; a place that is
+    no vertex is refused."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(seed)
+    keys = np.unique(rng.integers(0, width * rows, int(rng.integers(1, 400))))
+    vertices = np.stack([keys % width, keys // width], 1).astype(np.int64)
+    places = np.sort(rng.choice(len(vertices), int(rng.integers(0, len(vertices) + 1)), replace=False)).astype(np.int64)
+    levels = coding.hilbert_levels(width, rows)
+    curve = coding.hilbert_keys(vertices[places, 0], vertices[places, 1], levels)
+    expected = places[np.argsort(curve, kind="stable")]
+    assert np.array_equal(_fields.curve_order(vertices, places, *coding.hilbert_tables(levels), 1 << 2 * levels),
+                          expected)
+    if len(places):
+        wrong = places.copy()
+        wrong[-1] = len(vertices)
+        assert _fields.curve_order(vertices, wrong, *coding.hilbert_tables(levels), 1 << 2 * levels) is None
