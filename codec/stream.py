@@ -11,7 +11,7 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, integers, lossless_float, pipeline, representation, residual
+from . import container, decoding, integers, lossless_float, pipeline, representation, residual
 from . import slack as slack_rule
 from . import holes as hole_stage
 from .errors import ATMError, OptionError
@@ -333,8 +333,6 @@ class StreamDecoder:
     """
 
     def __init__(self, fileobj: BinaryIO, *, backend: str = "cpu"):
-        from . import decoding
-
         if backend not in decoding.BACKENDS:
             raise OptionError(
                 f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
@@ -399,8 +397,6 @@ class StreamDecoder:
     def _rows(self, group: list[tuple[int, Mesh]]) -> tuple[int, np.ndarray]:
         """(y0, rows) of a group of consecutive bands: each row once, the group's last
         row only if it is the image's."""
-        from . import decoding
-
         y0, mesh = group[0][0], stack_bands(group)
         # the Reader's bands passed mesh.validate, so each tiles its rows, and so does
         # their stack: the renderer need not count each row's spans
