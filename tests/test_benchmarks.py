@@ -251,3 +251,19 @@ def test_speed_benchmark_in_cpu_time() -> None:
     assert 0 < float(figures["cores used by one thread"]) <= 1.05
     assert 0 < float(figures["cores used by two threads"]) <= 2.1
     assert float(figures["cores used two / one"]) > 0
+
+
+def test_glue_benchmark_prints_its_table(tmp_path) -> None:
+    """benchmarks/glue.py: per-decode times of each file, the glue the decode less its
+    two kernels (so below the decode and above zero)."""
+    run = subprocess.run(
+        [sys.executable, "benchmarks/glue.py", "--rounds", "1", "--decodes", "1", "--files", str(tmp_path)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, *rows = _table(run.stdout)
+    assert [r[0] for r in rows][:4] == ["camera", "moon", "astronaut", "camera_bands32"]
+    for row in rows:
+        figures = dict(zip(head, row))
+        decode, glue = float(figures["this checkout: decode us"]), float(figures["glue us"])
+        assert 0 < glue < decode
