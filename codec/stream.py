@@ -434,8 +434,9 @@ class StreamDecoder:
         return y0, rows if last or len(rows) < mesh.height else rows[:-1]
 
 
-#: The unsigned type of each sample width: holes are filled with the nodata value's bits.
-_BITS = {1: np.uint8, 2: np.uint16, 4: np.uint32}
+#: The unsigned type of each sample width (index: bytes a sample): holes are filled with
+#: the nodata value's bits.
+_BITS = (None, np.uint8, np.uint16, None, np.uint32)
 
 
 def _fill(rows: np.ndarray, holes: np.ndarray, bits: int) -> None:
