@@ -151,6 +151,13 @@ def hilbert_keys(x: np.ndarray, y: np.ndarray, levels: int) -> np.ndarray:
     return d.reshape(x.shape)
 
 
+def hilbert_tables(levels: int) -> tuple[np.ndarray, np.ndarray, int, int, int]:
+    """(digit table, next-state table, bits a lookup, groups, starting state): what
+    _fields' Hilbert kernels take for keys over the 2**levels square."""
+    digit, nxt = _hilbert_group_tables()
+    return (digit, nxt, _HILBERT_GROUP) + _hilbert_start(levels)
+
+
 def hilbert_points(d: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of each key d < 4**levels along the Hilbert curve over the 2**levels
     square: the inverse of hilbert_keys."""

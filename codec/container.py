@@ -108,6 +108,11 @@ _FILE_HEAD = struct.Struct("<8sH")
 assert _FILE_HEAD.size == schema.FileHeader.sizeof()
 _HEADER = struct.Struct("<IIBB")
 assert _HEADER.size == schema.Header.sizeof()
+#: schema.Quantisation (offset, scale) and schema.NoData (value) as structs, likewise
+_QUANT = struct.Struct("<dd")
+assert _QUANT.size == schema.Quantisation.sizeof()
+_NODATA = struct.Struct("<d")
+assert _NODATA.size == schema.NoData.sizeof()
 
 #: Frames up to this size are decompressed whole at once (cheaper than reading their
 #: fixed fields first); larger ones have their fixed fields checked first.
@@ -450,9 +455,9 @@ class Reader:
 
     @staticmethod
     def _parse_quant(raw: "_RawHeader", payload: bytes) -> "_RawHeader":
-        if len(payload) != schema.Quantisation.sizeof():
-            raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {schema.Quantisation.sizeof()}")
-        q = schema.Quantisation.parse(payload)
+        if len(payload) != _QUANT.size:
+            raise CorruptError(f"QUNT chunk has {len(payload)} bytes, not {_QUANT.size}")
+        q = Quantiser(*_QUANT.unpack(payload))
         top = abs(q.offset) + q.scale * 65535 if np.isfinite(q.offset) and np.isfinite(q.scale) else np.inf
         if not (q.scale > 0 and top <= float(np.finfo(np.float32).max)):
             raise CorruptError(
@@ -490,16 +495,16 @@ class Reader:
                 f"{limits.MAX_METADATA_BYTES:,} (codec.limits.MAX_METADATA_BYTES)"
             )
         self._meta_budget -= size
-        meta = meta_json.parse(frames.decompress(payload, size, where), where)
+        meta = meta_json.parse(frames.decompress(payload, size, where, self._dctx), where)
         h = self.header
         merged = dict(h.metadata or {}, **meta)
         self.header = dataclasses.replace(h, metadata=merged)
 
     @staticmethod
     def _parse_nodata(h: Header, payload: bytes) -> Header:
-        if len(payload) != schema.NoData.sizeof():
-            raise CorruptError(f"NDAT chunk has {len(payload)} bytes, not {schema.NoData.sizeof()}")
-        value = schema.NoData.parse(payload).value
+        if len(payload) != _NODATA.size:
+            raise CorruptError(f"NDAT chunk has {len(payload)} bytes, not {_NODATA.size}")
+        (value,) = _NODATA.unpack(payload)
         if np.dtype(h.dtype).kind in "ui":
             info = np.iinfo(h.dtype)
             if not (np.isfinite(value) and value == int(value) and info.min <= value <= info.max):
@@ -515,7 +520,7 @@ class Reader:
         where = f"MASK chunk at byte {offset}"
         if frames.declared_size(payload, where) > limits.max_payload(len(payload)):
             raise LimitError(f"{where} would decompress to more than {limits.MAX_PAYLOAD_EXPANSION} times its size")
-        raw = frames.decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where)
+        raw = frames.decompress(payload, 12 + 4 + coding.MAX_VARINT_BYTES * (h.width * h.height + 1), where, self._dctx)
         stream = io.BytesIO(raw)
         try:
             m = schema.MaskPayload.parse_stream(stream)
@@ -561,8 +566,9 @@ class Reader:
             raise LimitError(f"{where} would decompress to {size:,} bytes, more than its image can need")
         if frames.frame_length(payload, where) != len(payload):  # codec.info decompresses no more
             raise CorruptError(f"{where} has bytes after its zstd frame (ATM.md §4: one frame)")
-        raw = frames.decompress(payload, size, where, self._dctx) if size <= _WHOLE_FRAME else b""
-        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where)
+        # (the frame's length checked just above: decompress need not walk its blocks again)
+        raw = frames.decompress(payload, size, where, self._dctx, one_frame=True) if size <= _WHOLE_FRAME else b""
+        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where, self._dctx)
         if len(fixed) < _MESH_FIXED.size:
             raise CorruptError(f"{where} is malformed: it ends inside its fixed fields")
         y0, rows, n, nt, lines, points, connectivity, _, _, _ = _MESH_FIXED.unpack(fixed)
@@ -586,23 +592,20 @@ class Reader:
         if size > need:
             raise CorruptError(f"{where} declares {size:,} bytes; its counts can use at most {need:,}")
         if whole and not raw:
-            raw = frames.decompress(payload, size, where, self._dctx)
+            raw = frames.decompress(payload, size, where, self._dctx, one_frame=True)
         return fixed, raw
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:
         h = self.header
         where = f"MESH chunk at byte {offset}"
+        # (_check_frame refused a band not from y0_expected or not within the image)
         _, raw = self._check_frame(payload, where, y0_expected)
         m = _MeshFields(raw, where)
-        if m.y0 != y0_expected:
-            raise CorruptError(f"MESH chunk at byte {offset} starts at row {m.y0}, expected {y0_expected}")
-        if m.rows < min(2, h.height) or m.y0 + m.rows > h.height:
-            raise CorruptError(f"MESH chunk at byte {offset} has {m.rows} rows from row {m.y0}")
-        mesh, areas = meshcode.decode_band(m, h.width, h.storage, h.channels, f"MESH chunk at byte {offset}")
+        mesh, areas, checked = meshcode.decode_band(m, h.width, h.storage, h.channels, f"MESH chunk at byte {offset}")
         # a rebuilt triangulation tiles the band and has the walls as edges (decode_band
-        # checked them)
+        # checked them), whose polylines decode_band made and checked
         rebuilt = m.connectivity == schema.DELAUNAY
-        validate(mesh, walls_are_edges=rebuilt, tiles=rebuilt, areas=areas)
+        validate(mesh, walls_are_edges=rebuilt, tiles=rebuilt, areas=areas, checked=checked, lines_checked=True)
         return int(m.y0), mesh
 
     def __iter__(self) -> Iterator[tuple[int, Mesh]]:

@@ -176,11 +176,11 @@ def declared_size(frame: bytes, what: str) -> int:
     return size
 
 
-def head(frame: bytes, n: int, what: str) -> bytes:
+def head(frame: bytes, n: int, what: str, dctx: zstandard.ZstdDecompressor | None = None) -> bytes:
     """The first n bytes of a frame's data (or all, if fewer), decompressing no more
-    than the blocks that hold them."""
+    than the blocks that hold them; dctx: the caller's own decompressor to reuse."""
     try:
-        with zstandard.ZstdDecompressor().stream_reader(frame) as reader:
+        with (dctx or zstandard.ZstdDecompressor()).stream_reader(frame) as reader:
             return reader.read(n)
     except zstandard.ZstdError as exc:
         raise CorruptError(f"{what} does not decompress: {exc}") from None
@@ -210,9 +210,11 @@ def frame_length(frame: bytes, what: str) -> int:
             return at + checksum
 
 
-def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompressor | None = None) -> bytes:
+def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompressor | None = None,
+               *, one_frame: bool = False) -> bytes:
     """The data of one zstd frame that declares a size of at most `limit` bytes; dctx:
-    the caller's own decompressor to reuse."""
+    the caller's own decompressor to reuse; one_frame: the caller has checked that the
+    frame fills `frame` (frame_length), which is then not walked again."""
     size = declared_size(frame, what)
     if size > min(limit, limits.MAX_PAYLOAD_BYTES):
         raise LimitError(
@@ -225,7 +227,7 @@ def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompre
         raise CorruptError(f"{what} does not decompress: {exc}") from None
     if len(data) != size:
         raise CorruptError(f"{what} decompresses to {len(data)} bytes, not the {size} declared")
-    end = frame_length(frame, what)
+    end = len(frame) if one_frame else frame_length(frame, what)
     if end != len(frame):
         raise CorruptError(f"{what} has {len(frame) - end:,} bytes after its zstd frame (ATM.md §4: one frame)")
     return data

@@ -104,7 +104,7 @@ def orient(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
-             areas: np.ndarray | None = None) -> None:
+             areas: np.ndarray | None = None, checked: tuple | None = None, lines_checked: bool = False) -> None:
     """Raise CorruptError (or LimitError) unless the mesh is one the decoders can render.
 
     Checked: shapes, index ranges, vertices inside the image and distinct, triangle
@@ -112,7 +112,11 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
     area, and edges shared as a tiling shares them, unless the caller knows it: tiles),
     constraint indices, and that every constraint step is a triangle edge (unless the
     caller knows it: walls_are_edges). areas: the triangles' doubled_areas, when the
-    caller has them already.
+    caller has them already; checked: what _fields.mesh_checks gives for these vertices,
+    triangles and areas, when the caller has it (a decoder's band_values makes it in
+    its own pass over the triangles); lines_checked: the caller made the polylines with
+    every length at least 2 and every index a vertex (a decoder's _fields.chains and
+    band_vertices), which with walls_are_edges leaves nothing of them to check.
     """
     w, h = mesh.width, mesh.height
     limits.check_image_size(w, h)
@@ -133,7 +137,7 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
     # the element checks in one compiled pass (their numpy passes cost more than the
     # work on a small band): vertices inside, corners in range, areas positive
     v64, t64 = np.ascontiguousarray(v, dtype=np.int64), np.ascontiguousarray(t, dtype=np.int64)
-    status, increasing, area, extent = _fields.mesh_checks(
+    status, increasing, area, extent = checked if checked is not None else _fields.mesh_checks(
         v64, t64, None if areas is None else np.ascontiguousarray(areas, dtype=np.int64), w, h
     )
     if status == _fields.MeshCheck.MESH_OUTSIDE:
@@ -164,7 +168,7 @@ def validate(mesh: Mesh, *, walls_are_edges: bool = False, tiles: bool = False,
         along = x if h == 1 else y
         if along.min() != 0 or along.max() != max(w, h) - 1:
             raise CorruptError("a one-pixel-wide mesh needs a vertex at each end of the line")
-    if not mesh.constraints:
+    if not mesh.constraints or (lines_checked and walls_are_edges):
         return
     lines = mesh.constraints
     if isinstance(lines, Polylines):  # a decoder's: already one array

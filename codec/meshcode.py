@@ -27,6 +27,7 @@ from .coding import (
     hilbert_keys,
     hilbert_levels,
     hilbert_points,
+    hilbert_tables,
     triangle_crc,
     unvarints,
     unzigzag,
@@ -429,7 +430,8 @@ def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
     if status == _fields.Chains.CHAINS_LEAVES:
         raise CorruptError(f"{where}: a polyline leaves the {width}x{rows} band")
     # the distinct pixels, each point's rank among them and their first-reached order
-    line_keys, ranks, appear = _fields.line_ranks(chain_keys, np.argsort(chain_keys))
+    # (keys below width * rows, the chains checked: sorted in linear passes)
+    line_keys, ranks, appear = _fields.line_ranks(chain_keys, _fields.argsort_keys(chain_keys, width * rows))
     return lengths, line_keys, ranks, appear
 
 
@@ -440,10 +442,10 @@ def _largest(dtype: np.dtype) -> int:
     return int(np.iinfo(dtype).max)
 
 
-def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray]:
-    """The Mesh of a parsed MeshPayload and its triangles' doubled areas (for
-    mesh.validate); CorruptError if any field is inconsistent. Structural checks of
-    the result are left to mesh.validate."""
+def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray, tuple]:
+    """The Mesh of a parsed MeshPayload, its triangles' doubled areas and the element
+    checks of _fields.mesh_checks (both for mesh.validate); CorruptError if any field
+    is inconsistent. Structural checks of the result are left to mesh.validate."""
     n, rows = int(m.vertex_count), int(m.rows)
     if n > limits.max_vertices(width, rows):
         raise LimitError(f"{where}: {n:,} vertices is too many for {width}x{rows} pixels")
@@ -473,7 +475,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         if free and (x.max() >= width or y.max() >= rows):
             raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
         free_keys = y * width + x
-        by_curve = np.argsort(free_keys)
+        by_curve = _fields.argsort_keys(free_keys, pixels)  # distinct keys below pixels: linear passes
         free_keys = free_keys[by_curve]
     # Both key lists are increasing: merged in one compiled pass, which also finds
     # each polyline point's vertex (flat) and the walls as vertex pairs
@@ -507,23 +509,26 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
     top = _largest(dtype)
-    zigzags = unvarints(m.samples, n * channels, f"{where} samples")
     # the encoder's _sample_order, from the parts known here: the positions along the
     # curve are already in its order
     if by_rows:
-        # distinct keys below 4**levels, in one linear pass instead of a comparison sort
-        along = _fields.argsort_keys(hilbert_keys(vertices[free_index, 0], vertices[free_index, 1], levels),
-                                     1 << 2 * levels)
-        curve = free_index[along]
+        # their Hilbert keys and linear radix passes over them, in one compiled call
+        curve = _fields.curve_order(vertices, free_index, *hilbert_tables(levels), 1 << 2 * levels)
+        if curve is None:  # the merge gave places of vertices inside the band: no file reaches it
+            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
     else:
         curve = np.empty(free, np.int64)
         curve[by_curve] = free_index
     seq_order = np.concatenate([on_line, curve]) if total else curve
-    # steps, parents and running sums in one compiled pass (vertex_steps, sample_parents
-    # and tree_sums' arithmetic), every index checked there
-    status, values, areas = _fields.band_values(
-        vertices, np.ascontiguousarray(triangles, dtype=np.int64), zigzags, seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top
+    # the samples' varints, steps, parents and running sums in one compiled pass
+    # (unvarints, vertex_steps, sample_parents and tree_sums' arithmetic), every index
+    # checked there; with mesh.validate's element checks from its pass over the triangles
+    status, values, areas, checks = _fields.band_values(
+        vertices, np.ascontiguousarray(triangles, dtype=np.int64), np.frombuffer(m.samples, np.uint8), channels,
+        seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top, MAX_VARINT_BYTES, width, rows,
     )
+    if status == _fields.Values.VALUES_COUNT or status == _fields.Values.VALUES_LONG:
+        unvarints(m.samples, n * channels, f"{where} samples")  # raises its error
     if status == _fields.Values.VALUES_CORNER:
         raise CorruptError(f"{where}: a triangle refers to a vertex beyond the {n} stored")
     if status == _fields.Values.VALUES_RESIDUAL:
@@ -532,7 +537,7 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         raise CorruptError(f"{where}: the sample order is no permutation of the vertices")
     if status == _fields.Values.VALUES_SAMPLE:
         raise CorruptError(f"{where}: a sample leaves the {dtype} range")
-    values = values.astype(dtype)
-    values = values[:, 0] if channels == 1 else values
+    if values.dtype != dtype:  # storage is uint8 or uint16: the kernel's own types
+        values = values.astype(dtype)
 
-    return Mesh(vertices, values, triangles, width, rows, lines), areas
+    return Mesh(vertices, values, triangles, width, rows, lines), areas, checks

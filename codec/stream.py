@@ -11,11 +11,12 @@ from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, integers, lossless_float, pipeline, representation, residual
+from . import container, decoding, integers, lossless_float, pipeline, representation, residual
 from . import slack as slack_rule
 from . import holes as hole_stage
 from .errors import ATMError, OptionError
 from .mesh import Mesh
+from .native import _fields
 from .settings import Settings
 
 
@@ -332,8 +333,6 @@ class StreamDecoder:
     """
 
     def __init__(self, fileobj: BinaryIO, *, backend: str = "cpu"):
-        from . import decoding
-
         if backend not in decoding.BACKENDS:
             raise OptionError(
                 f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
@@ -398,8 +397,6 @@ class StreamDecoder:
     def _rows(self, group: list[tuple[int, Mesh]]) -> tuple[int, np.ndarray]:
         """(y0, rows) of a group of consecutive bands: each row once, the group's last
         row only if it is the image's."""
-        from . import decoding
-
         y0, mesh = group[0][0], stack_bands(group)
         # the Reader's bands passed mesh.validate, so each tiles its rows, and so does
         # their stack: the renderer need not count each row's spans
@@ -421,19 +418,35 @@ class StreamDecoder:
             rows = lossless_float.floats(rows) if steps is None else steps.dequantise(rows)
             if mesh.holes is not None:
                 # the hole value's exact bits (a NaN's payload too, ATM.md §4.10)
-                rows.view(np.uint32)[mesh.holes[: len(rows)]] = lossless_float.hole_bits(nodata)
+                _fill(rows, mesh.holes[: len(rows)], int(lossless_float.hole_bits(nodata)))
         elif quant is not None and integers.is_signed(self.dtype):
             rows = integers.restore(rows, quant, self.dtype)
         elif quant is not None:
             rows = quant.dequantise(rows)
         if mesh.holes is not None and not self._reader.header.exact:
-            rows[mesh.holes[: len(rows)]] = nodata
+            # nodata is a sample of the image's type (the reader checked NDAT)
+            _fill(rows, mesh.holes[: len(rows)], int(np.array(nodata, rows.dtype).view(_BITS[rows.dtype.itemsize])))
         if len(self.shape) > rows.ndim:  # a gray image with its channel axis (ATM.md §4.9)
             rows = rows[:, :, None]
         last = y0 + mesh.height == self.height
         # the last row is the next band's first: emit it once, from there (a residual
         # layer already leaves it out)
         return y0, rows if last or len(rows) < mesh.height else rows[:-1]
+
+
+#: The unsigned type of each sample width (index: bytes a sample): holes are filled with
+#: the nodata value's bits.
+_BITS = (None, np.uint8, np.uint16, None, np.uint32)
+
+
+def _fill(rows: np.ndarray, holes: np.ndarray, bits: int) -> None:
+    """rows[holes] = the sample whose bits are `bits`, in every channel (one compiled
+    pass without a branch per pixel)."""
+    if not rows.flags.c_contiguous:  # not a decoder's own rows
+        rows.view(_BITS[rows.dtype.itemsize])[holes] = bits
+        return
+    pixels = rows.view(_BITS[rows.dtype.itemsize]).reshape(holes.size, -1)
+    _fields.fill_holes(pixels, np.ascontiguousarray(holes).reshape(-1).view(np.uint8), bits)
 
 
 #: Most pixels of the consecutive bands a whole-file decode renders in one call.

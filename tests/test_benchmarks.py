@@ -230,3 +230,40 @@ def test_slack_benchmark_prints_its_table() -> None:
     # below the threshold the rule keeps every level exact; well above it, it gives slack
     assert [r[8] for r in rows] == ["0", "1"]
     assert all(int(r[3].replace(",", "")) > 0 and int(r[5].replace(",", "")) > 0 for r in rows)
+
+
+def test_speed_benchmark_in_cpu_time() -> None:
+    """--cpu: the decode table in CPU milliseconds, the thread table with each run's CPU
+    time and the cores it used (one thread at most one core, two at most two)."""
+    run = subprocess.run(
+        [sys.executable, "benchmarks/speed.py", "--repeat", "1", "--images", "text", "--no-encode", "--cpu"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    tables = run.stdout.split("\n\n")
+    head, _, row = _table(tables[0])
+    figures = dict(zip(head[3:], map(float, row[3:])))
+    assert {"jpeg CPU ms", "decode CPU ms", "decode / jpeg", "decode / png"} <= figures.keys()
+    assert all(f > 0 for f in figures.values())
+    head, _, row = _table(tables[1])
+    figures = dict(zip(head, row))
+    assert 0 < float(figures["one thread CPU ms"]) and 0 < float(figures["two threads CPU ms"])
+    assert 0 < float(figures["cores used by one thread"]) <= 1.05
+    assert 0 < float(figures["cores used by two threads"]) <= 2.1
+    assert float(figures["cores used two / one"]) > 0
+
+
+def test_glue_benchmark_prints_its_table(tmp_path) -> None:
+    """benchmarks/glue.py: per-decode times of each file, the glue the decode less its
+    two kernels (so below the decode and above zero)."""
+    run = subprocess.run(
+        [sys.executable, "benchmarks/glue.py", "--rounds", "1", "--decodes", "1", "--files", str(tmp_path)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, *rows = _table(run.stdout)
+    assert [r[0] for r in rows][:4] == ["camera", "moon", "astronaut", "camera_bands32"]
+    for row in rows:
+        figures = dict(zip(head, row))
+        decode, glue = float(figures["this checkout: decode us"]), float(figures["glue us"])
+        assert 0 < glue < decode

@@ -437,3 +437,27 @@ def test_a_mesh_given_without_its_triangulation_vouched_for_is_still_checked_for
         writer = container.Writer(io.BytesIO(), container.Header(5, 5, np.dtype(np.uint8), 1))
         with pytest.raises(CorruptError, match="same side|tile"):
             writer.write_band(0, Mesh(v, values, bad, 5, 5, []), 1, delaunay)
+
+
+def test_a_reader_decompresses_every_frame_with_its_own_decompressor(monkeypatch) -> None:
+    """One zstd decompressor a decode, made by the reader and used for all its frames
+    (meta, MASK and each band's MESH), not one per frame."""
+    import zstandard
+
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 200, (40, 30)).astype(np.uint16)
+    image[5:15, 4:12] = 65535  # a compact void: its band's mask as runs (MASK)
+    data = codec.encode(image, points=120, band_height=8, nodata=65535, metadata={"units": "m"})
+    kinds = [kind for _, kind, _ in chunks(data)]
+    assert kinds.count(schema.MESH) > 1 and schema.MASK in kinds and schema.META in kinds
+    made = []
+    real = zstandard.ZstdDecompressor
+
+    def counted(*args, **kwargs):
+        made.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(zstandard, "ZstdDecompressor", counted)
+    decoded = codec.decode(data)
+    assert (decoded[image == 65535] == 65535).all() and decoded.shape == image.shape
+    assert len(made) == 1

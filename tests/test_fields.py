@@ -168,11 +168,55 @@ def test_band_values_is_steps_parents_and_sums(seed: int, step: int, pinned: boo
     residuals = rng.integers(-3, 100, (n, channels))
     residuals[0] = 10**6
     expected = meshcode.tree_sums(residuals * steps, parent)
-    status, out, areas = _fields.band_values(vertices, triangles, coding.zigzag(residuals).astype(np.int64).ravel(),
-                                             order, step, meshcode.STEP_RANGE, pinned, 2**40)
+    samples = np.frombuffer(coding.varints(coding.zigzag(residuals).ravel()), np.uint8)
+    w, h = int(vertices[:, 0].max()) + 1, int(vertices[:, 1].max()) + 1
+    status, out, areas, checks = _fields.band_values(vertices, triangles, samples, channels, order, step,
+                                                     meshcode.STEP_RANGE, pinned, 2**40, 9, w, h)
     assert status == _fields.Values.VALUES_OK
-    assert np.array_equal(out[order], expected)
+    assert out.dtype == np.int64 and out.shape == ((n,) if channels == 1 else (n, channels))
+    assert np.array_equal(out.reshape(n, channels)[order], expected)
     assert np.array_equal(areas, meshcode.doubled_areas(vertices, triangles))
+    assert checks == _fields.mesh_checks(vertices, triangles, None, w, h)
+    for top, dtype in ((255, np.uint8), (65535, np.uint16)):
+        small = np.minimum(residuals, 0) if top == 255 else residuals
+        small[0] = 0
+        stored = np.frombuffer(coding.varints(coding.zigzag(small).ravel()), np.uint8)
+        status, out, _, _ = _fields.band_values(vertices, triangles, stored, channels, order, 1,
+                                                meshcode.STEP_RANGE, False, top, 5, w, h)
+        sums = meshcode.tree_sums(small, meshcode.sample_parents(triangles, order))
+        if (sums < 0).any() or (sums > top).any():
+            assert status == _fields.Values.VALUES_SAMPLE
+        else:
+            assert status == _fields.Values.VALUES_OK and out.dtype == dtype
+            assert np.array_equal(out.reshape(n, channels)[order], sums)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 3))
+def test_band_values_checks_are_mesh_checks(seed: int, damage: int) -> None:
+    """band_values' element checks, made in its pass over the triangles, are
+    mesh_checks' on the same vertices and triangles, bad ones too (a vertex outside,
+    out of raster order, a triangle turned over)."""
+    from codec.native import _fields
+
+    vertices, triangles = _band(seed)
+    vertices, triangles = vertices.copy(), triangles.copy()
+    rng = np.random.default_rng(seed)
+    w, h = int(vertices[:, 0].max()) + 1, int(vertices[:, 1].max()) + 1
+    if damage == 1:
+        triangles[rng.integers(len(triangles))] = triangles[rng.integers(len(triangles))][[0, 2, 1]]
+    elif damage == 2:
+        vertices[rng.integers(len(vertices)), 1] = h
+    elif damage == 3:
+        i = rng.integers(len(vertices) - 1)
+        vertices[[i, i + 1]] = vertices[[i + 1, i]]
+    n = len(vertices)
+    samples = np.zeros(n, np.uint8)
+    status, _, areas, checks = _fields.band_values(vertices, triangles, samples, 1, np.arange(n), 1,
+                                                   meshcode.STEP_RANGE, False, 255, 5, w, h)
+    assert status == _fields.Values.VALUES_OK
+    assert checks == _fields.mesh_checks(vertices, triangles, None, w, h)
+    assert checks == _fields.mesh_checks(vertices, triangles, areas, w, h)
 
 
 def test_band_values_refusals() -> None:
@@ -183,8 +227,9 @@ def test_band_values_refusals() -> None:
     order = np.arange(n)
     zero = np.zeros(n, np.int64)
 
-    def status(tri=triangles, zig=zero, seq=order, top=255):
-        return _fields.band_values(vertices, tri, zig, seq, 1, meshcode.STEP_RANGE, False, top)[0]
+    def status(tri=triangles, zig=zero, seq=order, top=255, raw=None):
+        data = np.frombuffer(coding.varints(zig), np.uint8) if raw is None else np.frombuffer(raw, np.uint8)
+        return _fields.band_values(vertices, tri, data, 1, seq, 1, meshcode.STEP_RANGE, False, top, 5, 100, 100)[0]
 
     assert status() == _fields.Values.VALUES_OK
     bad = triangles.copy()
@@ -193,8 +238,13 @@ def test_band_values_refusals() -> None:
     assert status(zig=np.r_[zero[:-1], 511]) == _fields.Values.VALUES_RESIDUAL
     assert status(seq=np.r_[order[:-1], 0]) == _fields.Values.VALUES_ORDER
     assert status(zig=np.r_[1, zero[1:]]) == _fields.Values.VALUES_SAMPLE  # -1 at the root
+    # the varints' refusals first, as unvarints makes them: the count, then a number too long
+    assert status(zig=zero[:-1]) == _fields.Values.VALUES_COUNT
+    assert status(raw=bytes(n - 1) + b"\x80") == _fields.Values.VALUES_COUNT
+    assert status(tri=bad, raw=bytes(n - 1) + b"\x80\x80\x80\x80\x80\x00") == _fields.Values.VALUES_LONG
+    assert status(raw=bytes(n - 1) + b"\x80\x80\x80\x80\x00") == _fields.Values.VALUES_OK
     with pytest.raises(ValueError):
-        status(zig=zero[:-1])
+        status(seq=order[:-1])
 
 
 @settings(max_examples=60, deadline=None)
@@ -364,3 +414,64 @@ def test_argsort_keys_sorts_distinct_keys_as_numpy(bits: int, n: int, seed: int)
             wrong = keys.copy()
             wrong[-1] = bad
             assert _fields.argsort_keys(wrong, span) is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(0, 3000), st.integers(0, 2**32 - 1))
+def test_argsort_keys_is_a_stable_argsort(bits: int, n: int, seed: int) -> None:
+    """With keys repeated (polyline points on shared pixels), the radix sort is numpy's
+    stable argsort, which line_ranks takes for one."""
+    from codec.native import _fields
+
+    span = 1 << bits
+    rng = np.random.default_rng(seed)
+    keys = rng.integers(0, min(span, max(1, n // 3)), n, dtype=np.int64)
+    assert np.array_equal(_fields.argsort_keys(keys, span), np.argsort(keys, kind="stable"))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int8, np.uint16, np.int16, np.int32, np.float32])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_fill_holes_is_numpys_masked_assignment(dtype, channels: int) -> None:
+    """stream._fill (the fill_holes kernel) sets every channel of the hole pixels to the
+    value, bit for bit (a NaN too), and leaves the others, as rows[holes] = value."""
+    from codec import stream
+
+    rng = np.random.default_rng(channels)
+    shape = (37, 23) + ((channels,) if channels > 1 else ())
+    rows = rng.integers(0, 100, shape).astype(dtype)
+    holes = rng.random((37, 23)) < 0.4
+    for value in ([0, -5, 7] if np.dtype(dtype).kind != "u" else [0, 7]) + ([np.nan] if dtype == np.float32 else []):
+        expected = rows.copy()
+        expected[holes] = value
+        got = rows.copy()
+        bits = np.dtype(f"u{np.dtype(dtype).itemsize}")
+        stream._fill(got, holes, int(np.array(value, dtype).view(bits)))
+        assert np.array_equal(got.view(bits), expected.view(bits))
+    strided = rows.copy()[::2]  # not a decoder's own rows: numpy's assignment
+    expected = strided.copy()
+    expected[holes[::2]] = 3
+    stream._fill(strided, holes[::2], int(np.array(3, dtype).view(bits)))
+    assert np.array_equal(strided, expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 300), st.integers(1, 300))
+def test_curve_order_is_hilbert_keys_then_their_sort(seed: int, width: int, rows: int) -> None:
+    """_fields.curve_order (the sample order of free vertices stored in raster order)
+    is the Hilbert keys of the vertices at the places, stably sorted; a place that is
+    no vertex is refused."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(seed)
+    keys = np.unique(rng.integers(0, width * rows, int(rng.integers(1, 400))))
+    vertices = np.stack([keys % width, keys // width], 1).astype(np.int64)
+    places = np.sort(rng.choice(len(vertices), int(rng.integers(0, len(vertices) + 1)), replace=False)).astype(np.int64)
+    levels = coding.hilbert_levels(width, rows)
+    curve = coding.hilbert_keys(vertices[places, 0], vertices[places, 1], levels)
+    expected = places[np.argsort(curve, kind="stable")]
+    assert np.array_equal(_fields.curve_order(vertices, places, *coding.hilbert_tables(levels), 1 << 2 * levels),
+                          expected)
+    if len(places):
+        wrong = places.copy()
+        wrong[-1] = len(vertices)
+        assert _fields.curve_order(vertices, wrong, *coding.hilbert_tables(levels), 1 << 2 * levels) is None

@@ -1,0 +1,160 @@
+"""The decode's glue: the CPU time of a whole codec.decode outside its two kernels (the
+triangulation, codec._cdt.triangulate, and the rasteriser, codec._rasterise.rasterise),
+per decode, for a set of files; against another checkout of the codec in the same
+interleaved rounds with --against.
+
+The files (made once into --files, default benchmarks/out/glue): camera, moon and
+astronaut at 2.8 % vertices, camera in bands of 32 rows, and TUM's 16-bit depth map
+with its holes (nodata 0). Each build runs in a worker process of its own (the two
+`codec` packages cannot share one); a round asks each worker for --decodes decodes of
+every file, timed by thread CPU time (steadier than wall time where others load the
+machine), the kernels timed inside each decode by wrapping their entry points. Every
+worker checks that each file decodes to the same pixels every time, and the table
+says whether the builds' pixels agree.
+
+    python benchmarks/glue.py [--rounds 7] [--decodes 20] [--against /path/to/other/checkout]
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+DENSITY = 0.028
+
+
+def make_files(folder: Path) -> list[Path]:
+    """The measured files, written into `folder` unless there already."""
+    import cv2
+    import numpy as np
+
+    sys.path.insert(0, str(ROOT))
+    import codec
+    from tests.corpus import load_corpus
+
+    folder.mkdir(parents=True, exist_ok=True)
+    corpus = None
+    wanted = ["camera", "moon", "astronaut", "camera_bands32", "tum_depth16"]
+    for name in wanted:
+        path = folder / f"{name}.atm"
+        if path.exists():
+            continue
+        corpus = corpus or load_corpus()
+        if name == "tum_depth16":
+            image = cv2.imread(str(ROOT.parent / "shared" / "range-data" / "tum_depth.png"), cv2.IMREAD_UNCHANGED)
+            if image is None:
+                continue
+            data = codec.encode(image, points=round(DENSITY * image.size), nodata=0)
+        else:
+            image = corpus[name.split("_")[0]]
+            bands = {"band_height": 32} if name == "camera_bands32" else {}
+            data = codec.encode(image, points=round(DENSITY * np.prod(image.shape[:2])), **bands)
+        path.write_bytes(data)
+    return [folder / f"{name}.atm" for name in wanted if (folder / f"{name}.atm").exists()]
+
+
+def worker(files: list[str]) -> None:
+    """A round per line on stdin (the number of decodes): prints, as JSON, each file's
+    [whole, triangulation, rasteriser] thread CPU ns per decode and its pixels' hash."""
+    import numpy as np
+
+    import codec
+    from codec.native import _cdt, _rasterise
+
+    spent = {"cdt": 0, "raster": 0}
+    clock = time.thread_time_ns
+
+    def timed(module, name: str, key: str) -> None:
+        kernel = getattr(module, name)
+
+        def run(*args, **kwargs):
+            t0 = clock()
+            try:
+                return kernel(*args, **kwargs)
+            finally:
+                spent[key] += clock() - t0
+
+        setattr(module, name, run)
+
+    timed(_cdt, "triangulate", "cdt")
+    timed(_rasterise, "rasterise", "raster")
+    data = {f: Path(f).read_bytes() for f in files}
+    first = {f: codec.decode(d) for f, d in data.items()}
+    digest = {f: hashlib.sha256(str(img.dtype).encode() + img.tobytes()).hexdigest()[:12] for f, img in first.items()}
+    for line in sys.stdin:
+        n = int(line)
+        out = {}
+        for f, d in data.items():
+            spent.update(cdt=0, raster=0)
+            t0 = clock()
+            for _ in range(n):
+                image = codec.decode(d)
+            whole = clock() - t0
+            assert np.array_equal(image, first[f]), f"{f} decoded to other pixels"
+            out[f] = [whole / n, spent["cdt"] / n, spent["raster"] / n, digest[f]]
+        print(json.dumps(out), flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--decodes", type=int, default=20, help="decodes of each file a round")
+    parser.add_argument("--against", help="another checkout with its kernels built (e.g. a git worktree of main)")
+    parser.add_argument("--files", default=str(ROOT / "benchmarks" / "out" / "glue"), help="where the files are made")
+    args = parser.parse_args(argv)
+    files = [str(p) for p in make_files(Path(args.files))]
+    builds = [str(ROOT)] + ([str(Path(args.against).resolve())] if args.against else [])
+    # each worker imports its own checkout's codec (its folder first on the path)
+    procs = [subprocess.Popen([sys.executable, __file__, "--worker", b, *files],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=b)
+             for b in builds]
+    results: list[list[dict]] = [[] for _ in builds]
+    for round_ in range(args.rounds + 1):  # the first round warms up
+        for proc, got in zip(procs, results):
+            proc.stdin.write(f"{args.decodes if round_ else 2}\n")
+            proc.stdin.flush()
+            line = json.loads(proc.stdout.readline())
+            if round_:
+                got.append(line)
+    for proc in procs:
+        proc.stdin.close()
+        proc.wait()
+    names = ["this checkout"] + (["--against"] if args.against else [])
+    head = ["file"]
+    for name in names:
+        head += [f"{name}: decode us", "triangulation us", "rasteriser us", "glue us"]
+    if args.against:
+        head += ["glue this / against", "same pixels"]
+    print(f"{args.rounds} interleaved rounds of {args.decodes} decodes a file; thread CPU time per decode, "
+          "medians over the rounds; glue = decode - triangulation - rasteriser")
+    print("| " + " | ".join(head) + " |")
+    print("|---|" + "---:|" * (len(head) - 1))
+    for f in files:
+        row = [Path(f).stem]
+        glue = []
+        for got in results:
+            rounds = [r[f] for r in got]
+            glue.append([w - c - r for w, c, r, _ in rounds])
+            for k in range(3):
+                row.append(f"{statistics.median(x[k] for x in rounds) / 1e3:.0f}")
+            row.append(f"{statistics.median(glue[-1]) / 1e3:.0f}")
+        if args.against:
+            row.append(f"{statistics.median(a / b for a, b in zip(*glue)):.2f}")
+            row.append("yes" if results[0][0][f][3] == results[1][0][f][3] else "NO")
+        print("| " + " | ".join(row) + " |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["--worker"]:  # a build's worker: glue.py --worker CHECKOUT FILE...
+        sys.path.insert(0, sys.argv[2])
+        worker(sys.argv[3:])
+    else:
+        sys.exit(main())
