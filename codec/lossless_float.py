@@ -250,17 +250,21 @@ def _exact_steps(image: np.ndarray, masked: np.ndarray, nodata: float | None, le
         unmasked = image[holes & ~masked]
         nan = common_nan(unmasked)
         nodata = quantise.hole_value([unmasked]) if nan is None else nodata_of_bits(nan)
-    # every hole not masked by the caller must decode to its own bits, as the
-    # decoder fills it (sample_type 2: NumPy's binary64 -> binary32 conversion;
-    # 6: ATM.md §4.10's bits h)
-    filled = np.empty(1, np.float32)
-    filled[0] = nodata
-    bits = int(filled.view(np.uint32)[0]) if levels <= quantise.LEVELS else hole_bits(nodata)
-    if (image[holes & ~masked].view(np.uint32) != bits).any():
-        return None
     valid = image[~holes]
     top = float(valid.max()) if valid.size else offset
-    if levels <= quantise.LEVELS:
+    # the steps of a wide search may still fit 16 bits, and wide_steps then writes
+    # sample_type 2, whose holes follow its rule, not §4.10's
+    sixteen = levels <= quantise.LEVELS or _sixteen_bits(offset, top, scale)
+    # every hole not masked by the caller must decode to its own bits, as the
+    # decoder fills it (sample_type 2: NumPy's binary64 -> binary32 conversion, which
+    # quiets a signalling NaN; 6: ATM.md §4.10's bits h, which keep it)
+    filled = np.empty(1, np.float32)
+    with np.errstate(invalid="ignore"):
+        filled[0] = nodata
+    bits = int(filled.view(np.uint32)[0]) if sixteen else hole_bits(nodata)
+    if (image[holes & ~masked].view(np.uint32) != bits).any():
+        return None
+    if sixteen:
         try:
             quantise.plan(offset, top, precision=scale)
         except OptionError:
@@ -274,9 +278,15 @@ def wide_steps(settings) -> quantise.Quantiser | None:
     if not (settings.lossless and settings.precision is not None and settings.value_range is not None):
         return None
     lo, hi = settings.value_range
-    if settings.precision >= (hi - lo) / quantise.LEVELS * (1 - 1e-12):
-        return None  # 16 bits hold it: sample_type 2 (quantise.plan's own test)
+    if _sixteen_bits(lo, hi, settings.precision):
+        return None  # sample_type 2
     if abs(lo) + WIDE_LEVELS * settings.precision > quantise.F32_MAX or (hi - lo) / settings.precision > WIDE_LEVELS:
         raise OptionError(f"lossless: precision {settings.precision:g} needs more than 2^32 levels, or values "
                           "beyond float32's range, over the value range; leave it out to store the float bits")
     return quantise.Quantiser(float(lo), float(settings.precision), float(hi))
+
+
+def _sixteen_bits(lo: float, hi: float, precision: float) -> bool:
+    """Whether steps of `precision` over lo .. hi fit the 16-bit samples of
+    sample_type 2 (quantise.plan's own test)."""
+    return precision >= (hi - lo) / quantise.LEVELS * (1 - 1e-12)

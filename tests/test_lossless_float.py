@@ -385,3 +385,14 @@ def test_reference_decoder_agrees(seed, h, w, keys):
     image[rng.random((h, w)) < 0.2] = np.nan
     data = codec.encode(image, lossless=True, band_height=3)
     assert np.array_equal(_bits(_reference().decode(data)), _bits(image))
+
+
+def test_a_signalling_nan_hole_keeps_its_bits_when_wide_steps_fit_16_bits():
+    """Steps found by the wide (32-bit) search that turn out to fit 16 bits are written
+    as sample_type 2, whose holes decode by NumPy's conversion, which quiets a
+    signalling NaN: the hole check must follow that rule, so that such an image goes
+    the binary32 route instead (hypothesis found it: 0x7F800001 came back 0x7FC00001)."""
+    image = np.array([[0x7F800001, 0, 0]], np.uint32).view(np.float32).copy()
+    image[0, 1] = np.float32(3.04e22)
+    data = codec.encode(image, lossless=True)
+    _decodes_exactly(image, data)
