@@ -125,6 +125,9 @@ def tile_samples(const double[:, ::1] dens, const int64_t[::1] xb, const int64_t
     for t in range(nv):
         if yb[t + 1] <= yb[t]:
             raise ValueError("tile_samples: tile bounds must increase")
+    # the buffer sizes below in Python integers first: as C products they could wrap
+    if (<object>nv) * nh * r * z > 2 ** 40 or (<object>nh) * r * max(h, z) > 2 ** 40:
+        raise ValueError("tile_samples: more samples asked for than can be held")
     out_a = np.empty((nv * nh * r * z, 2), dtype=np.int64)
     colsum_a = np.empty(w, dtype=np.float64)
     cum_a = np.empty(w, dtype=np.float64)

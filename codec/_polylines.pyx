@@ -307,14 +307,15 @@ def thin_split(uint8_t[::1] on, Py_ssize_t stride, const uint8_t[::1] redundant)
     # time), each with its colour (x + y) % 2
     cdef const uint8_t* o = &on[0]
     cdef uint64_t word
-    for y in range(1, rows - 1):
-        for x in range(y * stride, y * stride + stride - 7, 8):
-            memcpy(&word, o + x, 8)
-            if word:
-                for k in range(x, x + 8):
-                    n += o[k] != 0
-        for x in range(y * stride + stride - stride % 8, y * stride + stride):
-            n += o[x] != 0
+    with nogil:
+        for y in range(1, rows - 1):
+            for x in range(y * stride, y * stride + stride - 7, 8):
+                memcpy(&word, o + x, 8)
+                if word:
+                    for k in range(x, x + 8):
+                        n += o[k] != 0
+            for x in range(y * stride + stride - stride % 8, y * stride + stride):
+                n += o[x] != 0
     pixels_a = np.empty(n, np.intp)
     colour_a = np.empty(n, np.uint8)
     gone_a = np.empty(n, np.intp)

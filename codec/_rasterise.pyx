@@ -173,11 +173,11 @@ cdef inline void _write1(sample_t* p, uint64_t a, uint64_t step, int64_t lo, int
 cdef extern from *:
     """
     /* Eight 8-bit samples (v + k*s) >> 54, k = 0..7, in one little-endian word: with
-       SSE2 (every x86-64) four 2-lane adds and shifts and three packs instead of some
+       SSE2 on x86-64 (_mm_cvtsi128_si64 is 64-bit only: a 32-bit x86 build takes the scalar form) four 2-lane adds and shifts and three packs instead of some
        thirty scalar operations; elsewhere the scalar form. A sample beyond a span may
        reach 10 bits: the packs saturate it, the scalar form carries it into the later
        bytes, which the caller masks out with it. */
-    #if defined(__SSE2__) || defined(_M_X64) || defined(_M_AMD64)
+    #if defined(__x86_64__) || defined(_M_X64) || defined(_M_AMD64)
     #include <emmintrin.h>
     static inline uint64_t atm_pack8_u8(uint64_t v, uint64_t s) {
         __m128i st = _mm_set1_epi64x((long long)s);

@@ -382,3 +382,19 @@ def test_piecewise_smooth_images_are_told_from_photos():
         assert off_edges(range_scene(200, 150, seed=seed, dtype=np.uint16)) < adaptive.SMOOTH_OFF_EDGES
     for photo in (data.camera(), data.moon(), data.coins()):
         assert off_edges(photo) > 2 * adaptive.SMOOTH_OFF_EDGES
+
+
+@pytest.mark.parametrize("per_tile", [(1, 2**62), (2, 2**61), (2**40, 2**30)])
+def test_per_tile_asking_for_more_samples_than_can_be_held_is_refused(per_tile):
+    """The sampling kernel sizes its buffers from tiles x per_tile: products that wrapped
+    int64 made tiny buffers and a crash (SIGSEGV), now an OptionError naming the option."""
+    img = np.zeros((64, 64), np.uint8)
+    img[:, 32:] = 200
+    with pytest.raises(codec.OptionError, match="per_tile"):
+        codec.encode(img, tiles=(4, 1), per_tile=per_tile)
+    from codec import native
+
+    dens = np.ones((8, 8))
+    bounds = np.array([0, 8], np.int64)
+    with pytest.raises(ValueError, match="more samples"):
+        native._gradients.tile_samples(dens, bounds, bounds, per_tile[0], per_tile[1])

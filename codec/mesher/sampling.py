@@ -69,11 +69,22 @@ def check_pair(value, name: str) -> tuple[int, int]:
     return int(a), int(b)
 
 
+#: Most region samples asked for a pixel: more can only repeat pixels (and their count
+#: would overflow the sampling kernel's buffer sizes long before memory runs out).
+_SAMPLES_A_PIXEL = 16
+#: ... unless there are fewer than this many in all (small images, many tiles).
+_SAMPLES_ANY = 1 << 24
+
+
 def sample(dens: np.ndarray, tiles: tuple[int, int], per_tile: tuple[int, int]) -> np.ndarray:
     """Sample pixels (N x 2 int64 (x, y), distinct, in scan-line order) of a density."""
     h, w = dens.shape
     nh, nv = min(tiles[0], w), min(tiles[1], h)
     r, z = per_tile
+    asked = nh * nv * int(r) * int(z)  # exact in Python integers: the kernel's sizes are such products
+    if asked > max(_SAMPLES_A_PIXEL * h * w, _SAMPLES_ANY):
+        raise OptionError(f"per_tile {tuple(per_tile)} asks for {asked:,} region samples in a {w}x{h} image, more "
+                          f"than {_SAMPLES_A_PIXEL} a pixel; choose fewer")
     xb = np.round(np.linspace(0, w, nh + 1)).astype(np.int64)
     yb = np.round(np.linspace(0, h, nv + 1)).astype(np.int64)
     # tile row after tile row in one compiled pass (_inverse_cdf's arithmetic on the
