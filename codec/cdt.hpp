@@ -853,7 +853,9 @@ class CDT {
         if (ov < 0) { rv.push_back(v); re.push_back(nxt(f)); h = prv(f); }
         else { lv.push_back(v); le.push_back(prv(f)); h = nxt(f); }
       }
-      if (!simple) {
+      // a long polygon too: cavity() tests each remaining vertex for each triangle,
+      // so a fan of k is k^2 / 2 tests (a wall past two columns of 32,000 vertices: 4 s)
+      if (!simple || rv.size() > CAVITY_MOST || lv.size() > CAVITY_MOST) {
         Status st = flip_in(a, b, h0, end);
         if (st != CDT_OK) return st;
         a = end;
@@ -875,6 +877,9 @@ class CDT {
     }
     return CDT_OK;
   }
+  //: Longest polygon side of a segment piece that goes in by cavity(); a longer one
+  //: goes in by flips (flip_in, whose work grows about linearly on such fans).
+  static const size_t CAVITY_MOST = 64;
   std::vector<uint32_t> seen;  // constrain's polygon vertices: stamp when seen
   uint32_t stamp = 0;
 

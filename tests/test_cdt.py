@@ -500,3 +500,34 @@ def test_a_wall_whose_right_side_meets_itself_is_flipped_in():
         found += 1
         np.testing.assert_array_equal(tris, by_triangle(pts, wall))
     assert found >= 5
+
+
+def _wall_past_two_columns(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices at (0, 2i + 1) and (2, 2i + 2), i < k, the corners of a 3 x (2k + 3) band
+    and (1, 0), (1, H - 1), in raster order; the wall between the last two."""
+    h = 2 * k + 3
+    pts = {(0, 2 * i + 1) for i in range(k)} | {(2, 2 * i + 2) for i in range(k)}
+    pts |= {(1, 0), (1, h - 1), (0, 0), (2, 0), (0, h - 1), (2, h - 1)}
+    v = np.array(sorted(pts, key=lambda p: (p[1], p[0])), np.int64)
+    index = {p: j for j, p in enumerate(map(tuple, v.tolist()))}
+    return v, np.array([[index[(1, 0)], index[(1, h - 1)]]], np.int64)
+
+
+def test_a_wall_through_a_long_fan_costs_linear_time():
+    """A wall crossing a long fan leaves polygons of k vertices on its sides; cavity()
+    tests every remaining vertex for each triangle it makes (k^2 / 2 tests: a 137-byte
+    file of two columns of 32,000 vertices decoded for 4.4 s, a reviewer found it), so
+    a long polygon goes in by flips: the same triangles, in about linear time."""
+    import time
+
+    from codec import _cdt
+
+    v, wall = _wall_past_two_columns(150)  # polygons over the cavity bound: the flip path
+    status, tris, _ = _cdt.triangulate(v, wall, True)
+    assert status == _cdt.OK
+    np.testing.assert_array_equal(tris, canonical_triangles(triangle_and_pass(v, wall)))
+    v, wall = _wall_past_two_columns(32000)
+    start = time.process_time()
+    status, tris, _ = _cdt.triangulate(v, wall, True)
+    assert status == _cdt.OK
+    assert time.process_time() - start < 1.0  # 4.3 s of CPU by cavity()
