@@ -393,17 +393,18 @@ class CDT {
     return t;
   }
 
-  // The Delaunay triangulation of the vertices (distinct): by sweep() when they are in
-  // raster order and their first row spans them (a band's: 2x faster), otherwise the
-  // convex hull's corners fanned and flipped, then every other vertex inserted with
-  // Lawson flips, in rounds of growing size (a biased randomised insertion order), each
-  // round along a Hilbert curve, so that point location walks are short.
+  // The Delaunay triangulation of the vertices (CDT_DUPLICATE if two share a position):
+  // by sweep() when they are in raster order and their first row spans them (a band's:
+  // 2x faster), otherwise the convex hull's corners fanned and flipped, then every other
+  // vertex inserted with Lawson flips, in rounds of growing size (a biased randomised
+  // insertion order), each round along a Hilbert curve, so that point location walks
+  // are short.
   Status build() {
     if ((i64)pt.size() > MAX_VERTICES) return CDT_MEMORY;
     i32 n = (i32)pt.size();
     vinc.assign(n, -1);
     V.reserve(6 * (size_t)n); T.reserve(6 * (size_t)n); C.reserve(6 * (size_t)n);
-    if (n < 3) return CDT_OK;
+    if (n < 3) return n == 2 && !before(0, 1) && !before(1, 0) ? CDT_DUPLICATE : CDT_OK;
     // Andrew's monotone chain in raster order, corners only (collinear points dropped);
     // triangulate() passes the vertices in that order already
     bool in_order = true;
@@ -429,6 +430,10 @@ class CDT {
       ranked.resize(n);
       for (i32 i = 0; i < n; ++i) ranked[i] = i;
       std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+      // the same position twice: neighbours once sorted (in raster order, each comes
+      // strictly before the next)
+      for (i32 i = 1; i < n; ++i)
+        if (!before(ranked[i - 1], ranked[i])) return CDT_DUPLICATE;
     }
     std::vector<i32> hull;
     hull.reserve(n + 1);

@@ -276,6 +276,30 @@ def test_the_incremental_triangulation_refuses_bad_points():
         tri.changes()  # not kept unless asked for
 
 
+@pytest.mark.parametrize("order", ["raster", "shuffled", "two"])
+def test_the_first_vertices_twice_at_one_position_are_refused(order):
+    """Triangulation's first vertices with one position twice are refused before any
+    triangle is made, whether they come in raster order (the sweep), shuffled
+    (insertion), or are only two; a refused start leaves nothing to insert into."""
+    from codec import _cdt
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(11)
+    grid = np.stack(np.meshgrid(np.arange(0, 60, 3), np.arange(0, 40, 4)), -1).reshape(-1, 2)
+    if order == "two":
+        vertices = np.array([[5, 7], [5, 7]])
+    else:
+        vertices = np.concatenate([grid, grid[[17]]])  # the twin far from the first
+        vertices = vertices[np.lexsort((vertices[:, 0], vertices[:, 1]))] if order == "raster" else rng.permutation(vertices)
+    with pytest.raises(ATMError, match="share a position"):
+        Triangulation(vertices)
+    kernel = _cdt.Triangulation()
+    assert kernel.start(np.ascontiguousarray(vertices, np.int64)) == _cdt.DUPLICATE
+    assert kernel.insert(np.array([[1, 1]], np.int64))[0] == _cdt.OUTSIDE
+    if order != "two":
+        Triangulation(np.unique(vertices, axis=0))  # once each: fine
+
+
 @pytest.mark.parametrize("bad, message", [("again", "share a position"), ("vertex", "share a position"),
                                           ("outside", "outside"), ("negative", "2\\^28")])
 def test_a_batch_stops_at_its_first_refused_point(bad, message):
