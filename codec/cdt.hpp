@@ -394,7 +394,7 @@ class CDT {
   }
 
   // The Delaunay triangulation of the vertices (CDT_DUPLICATE if two share a position):
-  // by sweep() when they are in raster order and their first row spans them (a band's:
+  // by sweep() when their first row in raster order spans them (a band's, in any order:
   // 2x faster), otherwise the convex hull's corners fanned and flipped, then every other
   // vertex inserted with Lawson flips, in rounds of growing size (a biased randomised
   // insertion order), each round along a Hilbert curve, so that point location walks
@@ -409,22 +409,6 @@ class CDT {
     // triangulate() passes the vertices in that order already
     bool in_order = true;
     for (i32 i = 1; i < n && in_order; ++i) in_order = before(i - 1, i);
-    if (in_order) {
-      i32 k = 1;
-      while (k < n && pt[k].y == pt[0].y) ++k;
-      i32 xmin = pt[0].x, xmax = pt[0].x;
-      for (i32 i = 1; i < n; ++i) { xmin = std::min(xmin, pt[i].x); xmax = std::max(xmax, pt[i].x); }
-      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) {
-        Status st = sweep(k);
-        if (st != CDT_BUDGET) return st;
-        // an input the sweep takes quadratic time on (a long first row fanned from one
-        // vertex: a file of 200 bytes took minutes): start again by insertion, whose
-        // expected time does not depend on the input
-        V.clear(); T.clear(); C.clear(); stack.clear();
-        vinc.assign(n, -1);
-        dirty.clear(); old.clear(); std::fill(dirty_mark.begin(), dirty_mark.end(), 0);
-      }
-    }
     std::vector<i32> ranked;
     if (!in_order) {
       ranked.resize(n);
@@ -434,6 +418,40 @@ class CDT {
       // strictly before the next)
       for (i32 i = 1; i < n; ++i)
         if (!before(ranked[i - 1], ranked[i])) return CDT_DUPLICATE;
+    }
+    {
+      // vertices in any order (an encoder's Triangulation of a band's) are swept in
+      // raster order and the triangles numbered back after: the triangulation is the
+      // same (unique, and the predicates see positions only)
+      std::vector<Pt> given;
+      if (!in_order) {
+        given = pt;
+        for (i32 i = 0; i < n; ++i) pt[i] = given[ranked[i]];
+      }
+      i32 k = 1;
+      while (k < n && pt[k].y == pt[0].y) ++k;
+      i32 xmin = pt[0].x, xmax = pt[0].x;
+      for (i32 i = 1; i < n; ++i) { xmin = std::min(xmin, pt[i].x); xmax = std::max(xmax, pt[i].x); }
+      Status st = CDT_BUDGET;
+      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) st = sweep(k);
+      if (!in_order) {
+        pt.swap(given);
+        if (st == CDT_OK) {
+          for (size_t e = 0; e < V.size(); ++e) V[e] = ranked[V[e]];
+          std::vector<i32> swept;
+          swept.swap(vinc);
+          vinc.resize(n);
+          for (i32 i = 0; i < n; ++i) vinc[ranked[i]] = swept[i];
+          last = ranked[last];
+        }
+      }
+      if (st != CDT_BUDGET) return st;
+      // no sweep, or an input the sweep takes quadratic time on (a long first row
+      // fanned from one vertex: a file of 200 bytes took minutes): start again by
+      // insertion, whose expected time does not depend on the input
+      V.clear(); T.clear(); C.clear(); stack.clear();
+      vinc.assign(n, -1);
+      dirty.clear(); old.clear(); std::fill(dirty_mark.begin(), dirty_mark.end(), 0);
     }
     std::vector<i32> hull;
     hull.reserve(n + 1);

@@ -471,6 +471,46 @@ def test_a_long_first_row_costs_linear_flips():
             np.testing.assert_array_equal(tris, canonical_triangles(triangle_and_pass(pts)))
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_a_band_in_any_order_is_swept_to_the_same_triangles(seed):
+    """Triangulation's first vertices in any order (the encoder's): a band's (its first
+    row spans it) are swept in raster order and numbered back; the triangles, vertex
+    numbers and later insertions, walls and changes are those of delaunay() and of
+    Triangle with the canonical pass, ties included (points on a lattice). A long first
+    row fanned from one end, shuffled, still goes over to insertion."""
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(seed)
+    w, h = int(rng.integers(20, 120)), int(rng.integers(6, 50))
+    step = int(rng.choice([1, 2, 5]))
+    pts = np.unique(rng.integers(0, [w // step, h // step], (w * h // 12, 2)) * step, axis=0)
+    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+    pts = pts[~((pts[:, 0] % w == 0) & (pts[:, 1] % h == 0))]
+    first = np.concatenate([corners, pts[: len(pts) // 2]])
+    first = first[rng.permutation(len(first))]
+    later = pts[len(pts) // 2:]
+    tri = Triangulation(first, track_changes=True)
+    np.testing.assert_array_equal(tri.triangles(), delaunay(first))
+    np.testing.assert_array_equal(canonical_triangles(tri.triangles()), canonical_triangles(triangle_and_pass(first)))
+    before = {tuple(t) for t in tri.triangles().tolist()}
+    assert tri.changes()[0].shape == (0, 3)
+    tri.insert(later)
+    everything = np.concatenate([first, later])
+    removed, added = tri.changes()
+    before -= {tuple(t) for t in canonical_triangles(removed).tolist()}
+    before |= {tuple(t) for t in canonical_triangles(added).tolist()}
+    assert before == {tuple(t) for t in tri.triangles().tolist()}
+    walls = many_walls(rng, everything, 0.3)
+    if walls is not None:
+        tri.constrain(walls)
+    np.testing.assert_array_equal(tri.triangles(), delaunay(everything, walls))
+
+    x = np.arange(3000)
+    row = np.concatenate([np.stack([x, 0 * x], 1), np.stack([x[:1800], 0 * x[:1800] + 1], 1)])
+    row = row[rng.permutation(len(row))]
+    np.testing.assert_array_equal(Triangulation(row).triangles(), delaunay(row))
+
+
 def many_walls(rng: np.random.Generator, pts: np.ndarray, share: float) -> np.ndarray | None:
     """Many walls that never cross: a random share of the edges of a triangulation of a
     random half of pts; long ones cross many edges of pts' triangulation."""
