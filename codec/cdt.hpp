@@ -412,8 +412,22 @@ class CDT {
     std::vector<i32> ranked;
     if (!in_order) {
       ranked.resize(n);
-      for (i32 i = 0; i < n; ++i) ranked[i] = i;
-      std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+      i64 xmax = 0, ymax = 0;  // (coordinates are never negative here)
+      for (i32 i = 0; i < n; ++i) { xmax = std::max(xmax, (i64)pt[i].x); ymax = std::max(ymax, (i64)pt[i].y); }
+      int bits = 1;
+      while (bits < 64 && (uint64_t(1) << bits) <= (uint64_t)(ymax * (xmax + 1) + xmax)) ++bits;
+      if (bits + INDEX_BITS <= 64) {
+        // each vertex's pixel number above its index, radix sorted (2 passes for a
+        // 512 x 512 image; std::sort with before() took a sixth of an encoder's start)
+        std::vector<uint64_t> keys((size_t)n), spare;
+        for (i32 i = 0; i < n; ++i)
+          keys[i] = (uint64_t)(pt[i].y * (xmax + 1) + pt[i].x) << INDEX_BITS | (uint64_t)i;
+        radix_sort(&keys, &spare, INDEX_BITS, bits);
+        for (i32 i = 0; i < n; ++i) ranked[i] = (i32)(keys[i] & INDEX_MASK);
+      } else {
+        for (i32 i = 0; i < n; ++i) ranked[i] = i;
+        std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+      }
       // the same position twice: neighbours once sorted (in raster order, each comes
       // strictly before the next)
       for (i32 i = 1; i < n; ++i)

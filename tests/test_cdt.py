@@ -276,11 +276,12 @@ def test_the_incremental_triangulation_refuses_bad_points():
         tri.changes()  # not kept unless asked for
 
 
-@pytest.mark.parametrize("order", ["raster", "shuffled", "two"])
+@pytest.mark.parametrize("order", ["raster", "shuffled", "wide", "two"])
 def test_the_first_vertices_twice_at_one_position_are_refused(order):
     """Triangulation's first vertices with one position twice are refused before any
-    triangle is made, whether they come in raster order (the sweep), shuffled
-    (insertion), or are only two; a refused start leaves nothing to insert into."""
+    triangle is made, whether they come in raster order, shuffled (sorted by pixel
+    number), shuffled over 2^27 (pixel numbers too wide for that: sorted by compares)
+    or are only two; a refused start leaves nothing to insert into."""
     from codec import _cdt
     from codec.triangulate import Triangulation
 
@@ -289,6 +290,8 @@ def test_the_first_vertices_twice_at_one_position_are_refused(order):
     if order == "two":
         vertices = np.array([[5, 7], [5, 7]])
     else:
+        if order == "wide":
+            grid = grid * (1 << 21) + grid[::-1]
         vertices = np.concatenate([grid, grid[[17]]])  # the twin far from the first
         vertices = vertices[np.lexsort((vertices[:, 0], vertices[:, 1]))] if order == "raster" else rng.permutation(vertices)
     with pytest.raises(ATMError, match="share a position"):
@@ -296,8 +299,9 @@ def test_the_first_vertices_twice_at_one_position_are_refused(order):
     kernel = _cdt.Triangulation()
     assert kernel.start(np.ascontiguousarray(vertices, np.int64)) == _cdt.DUPLICATE
     assert kernel.insert(np.array([[1, 1]], np.int64))[0] == _cdt.OUTSIDE
-    if order != "two":
-        Triangulation(np.unique(vertices, axis=0))  # once each: fine
+    if order != "two":  # once each: the triangles of delaunay()
+        once = rng.permutation(np.unique(vertices, axis=0))
+        np.testing.assert_array_equal(Triangulation(once).triangles(), delaunay(once))
 
 
 @pytest.mark.parametrize("bad, message", [("again", "share a position"), ("vertex", "share a position"),
