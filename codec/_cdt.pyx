@@ -97,21 +97,25 @@ cdef class Triangulation:
         distinct, not all on one line); their indices are their rows. track: keep
         what changes() reports (each changed triangle slot's old corners)."""
         cdef int64_t n = vertices.shape[0], i
+        cdef int64_t xmin = MAX_EXTENT, xmax = 0, ymin = MAX_EXTENT, ymax = 0
         cdef Pt p
+        cdef Status status
         if self.cdt.pt.size():
             raise ValueError("Triangulation.start: already started")
+        if vertices.shape[1] != 2:
+            raise ValueError("vertices are N x 2")
+        self.cdt.pt.reserve(n)
         for i in range(n):
             if not (0 <= vertices[i, 0] <= MAX_EXTENT and 0 <= vertices[i, 1] <= MAX_EXTENT):
                 return CDT_EXTENT
             p.x = <int>vertices[i, 0]
             p.y = <int>vertices[i, 1]
+            xmin = min(xmin, p.x); xmax = max(xmax, p.x)
+            ymin = min(ymin, p.y); ymax = max(ymax, p.y)
             self.cdt.pt.push_back(p)
-        keys = np.asarray(vertices[:, 1]) * (MAX_EXTENT + 1) + np.asarray(vertices[:, 0])
-        if len(np.unique(keys)) != n:
-            return CDT_DUPLICATE
         # later points lie inside the hull, so this extent holds for good
-        self.cdt.narrow = n > 0 and max(np.ptp(np.asarray(vertices), axis=0)) < (1 << 14)
-        with nogil:
+        self.cdt.narrow = n > 0 and xmax - xmin < (1 << 14) and ymax - ymin < (1 << 14)
+        with nogil:  # build() refuses two vertices at one position (CDT_DUPLICATE)
             status = self.cdt.build()
         if status == CDT_OK and self.cdt.V.size() == 0:
             return CDT_OUTSIDE  # all on one line: nothing to insert into

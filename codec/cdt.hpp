@@ -393,42 +393,79 @@ class CDT {
     return t;
   }
 
-  // The Delaunay triangulation of the vertices (distinct): by sweep() when they are in
-  // raster order and their first row spans them (a band's: 2x faster), otherwise the
-  // convex hull's corners fanned and flipped, then every other vertex inserted with
-  // Lawson flips, in rounds of growing size (a biased randomised insertion order), each
-  // round along a Hilbert curve, so that point location walks are short.
+  // The Delaunay triangulation of the vertices (CDT_DUPLICATE if two share a position):
+  // by sweep() when their first row in raster order spans them (a band's, in any order:
+  // 2x faster), otherwise the convex hull's corners fanned and flipped, then every other
+  // vertex inserted with Lawson flips, in rounds of growing size (a biased randomised
+  // insertion order), each round along a Hilbert curve, so that point location walks
+  // are short.
   Status build() {
     if ((i64)pt.size() > MAX_VERTICES) return CDT_MEMORY;
     i32 n = (i32)pt.size();
     vinc.assign(n, -1);
     V.reserve(6 * (size_t)n); T.reserve(6 * (size_t)n); C.reserve(6 * (size_t)n);
-    if (n < 3) return CDT_OK;
+    if (n < 3) return n == 2 && !before(0, 1) && !before(1, 0) ? CDT_DUPLICATE : CDT_OK;
     // Andrew's monotone chain in raster order, corners only (collinear points dropped);
     // triangulate() passes the vertices in that order already
     bool in_order = true;
     for (i32 i = 1; i < n && in_order; ++i) in_order = before(i - 1, i);
-    if (in_order) {
+    std::vector<i32> ranked;
+    if (!in_order) {
+      ranked.resize(n);
+      i64 xmax = 0, ymax = 0;  // (coordinates are never negative here)
+      for (i32 i = 0; i < n; ++i) { xmax = std::max(xmax, (i64)pt[i].x); ymax = std::max(ymax, (i64)pt[i].y); }
+      int bits = 1;
+      while (bits < 64 && (uint64_t(1) << bits) <= (uint64_t)(ymax * (xmax + 1) + xmax)) ++bits;
+      if (bits + INDEX_BITS <= 64) {
+        // each vertex's pixel number above its index, radix sorted (2 passes for a
+        // 512 x 512 image; std::sort with before() took a sixth of an encoder's start)
+        std::vector<uint64_t> keys((size_t)n), spare;
+        for (i32 i = 0; i < n; ++i)
+          keys[i] = (uint64_t)(pt[i].y * (xmax + 1) + pt[i].x) << INDEX_BITS | (uint64_t)i;
+        radix_sort(&keys, &spare, INDEX_BITS, bits);
+        for (i32 i = 0; i < n; ++i) ranked[i] = (i32)(keys[i] & INDEX_MASK);
+      } else {
+        for (i32 i = 0; i < n; ++i) ranked[i] = i;
+        std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+      }
+      // the same position twice: neighbours once sorted (in raster order, each comes
+      // strictly before the next)
+      for (i32 i = 1; i < n; ++i)
+        if (!before(ranked[i - 1], ranked[i])) return CDT_DUPLICATE;
+    }
+    {
+      // vertices in any order (an encoder's Triangulation of a band's) are swept in
+      // raster order and the triangles numbered back after: the triangulation is the
+      // same (unique, and the predicates see positions only)
+      std::vector<Pt> given;
+      if (!in_order) {
+        given = pt;
+        for (i32 i = 0; i < n; ++i) pt[i] = given[ranked[i]];
+      }
       i32 k = 1;
       while (k < n && pt[k].y == pt[0].y) ++k;
       i32 xmin = pt[0].x, xmax = pt[0].x;
       for (i32 i = 1; i < n; ++i) { xmin = std::min(xmin, pt[i].x); xmax = std::max(xmax, pt[i].x); }
-      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) {
-        Status st = sweep(k);
-        if (st != CDT_BUDGET) return st;
-        // an input the sweep takes quadratic time on (a long first row fanned from one
-        // vertex: a file of 200 bytes took minutes): start again by insertion, whose
-        // expected time does not depend on the input
-        V.clear(); T.clear(); C.clear(); stack.clear();
-        vinc.assign(n, -1);
-        dirty.clear(); old.clear(); std::fill(dirty_mark.begin(), dirty_mark.end(), 0);
+      Status st = CDT_BUDGET;
+      if (k >= 2 && k < n && pt[0].x == xmin && pt[k - 1].x == xmax) st = sweep(k);
+      if (!in_order) {
+        pt.swap(given);
+        if (st == CDT_OK) {
+          for (size_t e = 0; e < V.size(); ++e) V[e] = ranked[V[e]];
+          std::vector<i32> swept;
+          swept.swap(vinc);
+          vinc.resize(n);
+          for (i32 i = 0; i < n; ++i) vinc[ranked[i]] = swept[i];
+          last = ranked[last];
+        }
       }
-    }
-    std::vector<i32> ranked;
-    if (!in_order) {
-      ranked.resize(n);
-      for (i32 i = 0; i < n; ++i) ranked[i] = i;
-      std::sort(ranked.begin(), ranked.end(), [&](i32 p, i32 q) { return before(p, q); });
+      if (st != CDT_BUDGET) return st;
+      // no sweep, or an input the sweep takes quadratic time on (a long first row
+      // fanned from one vertex: a file of 200 bytes took minutes): start again by
+      // insertion, whose expected time does not depend on the input
+      V.clear(); T.clear(); C.clear(); stack.clear();
+      vinc.assign(n, -1);
+      dirty.clear(); old.clear(); std::fill(dirty_mark.begin(), dirty_mark.end(), 0);
     }
     std::vector<i32> hull;
     hull.reserve(n + 1);

@@ -276,6 +276,34 @@ def test_the_incremental_triangulation_refuses_bad_points():
         tri.changes()  # not kept unless asked for
 
 
+@pytest.mark.parametrize("order", ["raster", "shuffled", "wide", "two"])
+def test_the_first_vertices_twice_at_one_position_are_refused(order):
+    """Triangulation's first vertices with one position twice are refused before any
+    triangle is made, whether they come in raster order, shuffled (sorted by pixel
+    number), shuffled over 2^27 (pixel numbers too wide for that: sorted by compares)
+    or are only two; a refused start leaves nothing to insert into."""
+    from codec import _cdt
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(11)
+    grid = np.stack(np.meshgrid(np.arange(0, 60, 3), np.arange(0, 40, 4)), -1).reshape(-1, 2)
+    if order == "two":
+        vertices = np.array([[5, 7], [5, 7]])
+    else:
+        if order == "wide":
+            grid = grid * (1 << 21) + grid[::-1]
+        vertices = np.concatenate([grid, grid[[17]]])  # the twin far from the first
+        vertices = vertices[np.lexsort((vertices[:, 0], vertices[:, 1]))] if order == "raster" else rng.permutation(vertices)
+    with pytest.raises(ATMError, match="share a position"):
+        Triangulation(vertices)
+    kernel = _cdt.Triangulation()
+    assert kernel.start(np.ascontiguousarray(vertices, np.int64)) == _cdt.DUPLICATE
+    assert kernel.insert(np.array([[1, 1]], np.int64))[0] == _cdt.OUTSIDE
+    if order != "two":  # once each: the triangles of delaunay()
+        once = rng.permutation(np.unique(vertices, axis=0))
+        np.testing.assert_array_equal(Triangulation(once).triangles(), delaunay(once))
+
+
 @pytest.mark.parametrize("bad, message", [("again", "share a position"), ("vertex", "share a position"),
                                           ("outside", "outside"), ("negative", "2\\^28")])
 def test_a_batch_stops_at_its_first_refused_point(bad, message):
@@ -445,6 +473,46 @@ def test_a_long_first_row_costs_linear_flips():
         assert flips < 60 * len(pts)  # the sweep alone made len(pts)**2 / 4
         if k == 300:
             np.testing.assert_array_equal(tris, canonical_triangles(triangle_and_pass(pts)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_band_in_any_order_is_swept_to_the_same_triangles(seed):
+    """Triangulation's first vertices in any order (the encoder's): a band's (its first
+    row spans it) are swept in raster order and numbered back; the triangles, vertex
+    numbers and later insertions, walls and changes are those of delaunay() and of
+    Triangle with the canonical pass, ties included (points on a lattice). A long first
+    row fanned from one end, shuffled, still goes over to insertion."""
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(seed)
+    w, h = int(rng.integers(20, 120)), int(rng.integers(6, 50))
+    step = int(rng.choice([1, 2, 5]))
+    pts = np.unique(rng.integers(0, [w // step, h // step], (w * h // 12, 2)) * step, axis=0)
+    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+    pts = pts[~((pts[:, 0] % w == 0) & (pts[:, 1] % h == 0))]
+    first = np.concatenate([corners, pts[: len(pts) // 2]])
+    first = first[rng.permutation(len(first))]
+    later = pts[len(pts) // 2:]
+    tri = Triangulation(first, track_changes=True)
+    np.testing.assert_array_equal(tri.triangles(), delaunay(first))
+    np.testing.assert_array_equal(canonical_triangles(tri.triangles()), canonical_triangles(triangle_and_pass(first)))
+    before = {tuple(t) for t in tri.triangles().tolist()}
+    assert tri.changes()[0].shape == (0, 3)
+    tri.insert(later)
+    everything = np.concatenate([first, later])
+    removed, added = tri.changes()
+    before -= {tuple(t) for t in canonical_triangles(removed).tolist()}
+    before |= {tuple(t) for t in canonical_triangles(added).tolist()}
+    assert before == {tuple(t) for t in tri.triangles().tolist()}
+    walls = many_walls(rng, everything, 0.3)
+    if walls is not None:
+        tri.constrain(walls)
+    np.testing.assert_array_equal(tri.triangles(), delaunay(everything, walls))
+
+    x = np.arange(3000)
+    row = np.concatenate([np.stack([x, 0 * x], 1), np.stack([x[:1800], 0 * x[:1800] + 1], 1)])
+    row = row[rng.permutation(len(row))]
+    np.testing.assert_array_equal(Triangulation(row).triangles(), delaunay(row))
 
 
 def many_walls(rng: np.random.Generator, pts: np.ndarray, share: float) -> np.ndarray | None:
