@@ -4,7 +4,8 @@
     python fuzz/fuzz_decode.py -max_total_time=600         # or: fuzz/run.sh 600
 
 Every input must decode or raise codec.ATMError; anything else is a crash and
-libFuzzer writes the input to crash-*. Copy such files to tests/regressions/.
+libFuzzer writes the input to crash-* (fuzz/run.sh: in fuzz/crashes/). Once fixed, a
+crash becomes a test that builds its input (fuzz/README.md).
 Most mutations come from fuzz/mutate.py, which keeps the chunk framing, zstd and the
 CRCs valid so that the decoder's validation is reached; the rest are libFuzzer's own.
 """
