@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import native
 from ..errors import OptionError
 
 #: Gaussian smoothing before differentiation; keeps texture and noise from breaking
@@ -30,8 +31,6 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
     fixed point (int16, _SCALE per level, clipped to fit), from one compiled pass over
     OpenCV's Sobel derivatives (codec._gradients.edge_gradient)."""
     import cv2
-
-    from .. import native
 
     # one pass: the float32 product numpy's astype-then-multiply made in two
     g = np.multiply(gray, np.float32(255.0 / peak), dtype=np.float32)

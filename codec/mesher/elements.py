@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import native
+
 
 def _segments(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Concatenated aranges: starts[k] + 0 .. counts[k]-1."""
@@ -79,8 +81,6 @@ class Raster:
     def reduce(self, per_span: np.ndarray) -> np.ndarray:
         """Sum the columns of a K x S array over each element's spans (E x K), span
         after span (a compiled pass, codec._elements.span_totals)."""
-        from .. import native
-
         return native._elements.span_totals(
             np.ascontiguousarray(per_span, dtype=np.float64), np.ascontiguousarray(self.bounds, dtype=np.int64)
         )
@@ -114,8 +114,6 @@ class Raster:
     def evaluate(self, affine: np.ndarray, elem: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The mesh value (unrounded) at pixels (x, y) of their elements (a compiled
         pass: no E x 3 gather per pixel)."""
-        from .. import native
-
         return native._elements.evaluate(
             np.ascontiguousarray(affine, dtype=np.float64), np.ascontiguousarray(self.origin, dtype=np.int64),
             *(np.ascontiguousarray(a, dtype=np.int64) for a in (elem, x, y)),
@@ -157,8 +155,6 @@ class Planes:
     integer or float type), summed in one compiled pass (codec._elements.prefix_table)."""
 
     def __init__(self, structure: np.ndarray, channels: list[np.ndarray]):
-        from .. import native
-
         h, w = structure.shape
         self.stride = w + 1
         stack = np.stack(channels) if channels else np.zeros((0, h, w), structure.dtype)
@@ -240,8 +236,6 @@ class Statistics:
         triangle_raster; with vertex_values, also element_sse's squared error of each
         against the mesh through them, else None), from one compiled walk over their
         pixels (codec._elements.triangle_statistics) instead of span arrays."""
-        from .. import native
-
         h, w = self.shape
         z = np.zeros(0) if vertex_values is None else np.ascontiguousarray(vertex_values, dtype=np.float64)
         return native._elements.triangle_statistics(
@@ -287,8 +281,6 @@ def element_sse(raster: Raster, stats: np.ndarray, vertex_values: np.ndarray) ->
     structure plane, summed over each element's pixels (`stats` from Statistics): the
     numbers squared_error(raster.affine(vertex_values), ...) gives, from one compiled
     pass (codec._lsq.plane_errors)."""
-    from .. import native
-
     return native._lsq.plane_errors(
         np.ascontiguousarray(raster.corners, dtype=np.int64), np.asarray(raster.coef, dtype=np.int64),
         np.asarray(raster.den, dtype=np.int64), np.ascontiguousarray(vertex_values, dtype=np.float64),
@@ -383,8 +375,6 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
     the same statistics whichever corner it is listed from and however the vertices
     are numbered. spans=False: the weights only (no spans, for statistics measured
     before)."""
-    from .. import native
-
     v = np.ascontiguousarray(vertices, dtype=np.int64)
     t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     # origins and weight coefficients in one compiled pass (integers: the same numbers)
@@ -401,8 +391,6 @@ def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
     through `vertex_values`, the first in raster order of those tied, as
     Raster.worst_pixels finds it, from one compiled walk over the triangles' pixels.
     Returns (index into `triangles`, x, y, |error|)."""
-    from .. import native
-
     v = np.ascontiguousarray(vertices, dtype=np.int64)
     t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
     if plane.dtype != np.float32:
@@ -418,8 +406,6 @@ def triangle_pixels(vertices: np.ndarray, triangles: np.ndarray, width: int,
                     height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(triangle, x, y) of every pixel the triangles own, as triangle_raster(...).pixels()
     lists them, from a compiled walk over their rows (no span arrays)."""
-    from .. import native
-
     return native._elements.triangle_pixels(
         np.ascontiguousarray(vertices, dtype=np.int64),
         np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), width, height,

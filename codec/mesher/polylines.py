@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import native
 from ..errors import OptionError
 
 # 8-neighbour offsets (dy, dx) in a fixed order; bit k of a pixel's code is neighbour k
@@ -81,8 +82,6 @@ def thin_split(grid: _Grid) -> tuple[np.ndarray, np.ndarray]:
     (junction, simple) flat masks, the pixels with three or more neighbours and the
     others. One compiled pass over the edge pixels (codec._polylines.thin_split)
     instead of three image filters and two look-up passes over every pixel."""
-    from .. import native
-
     return native._polylines.thin_split(grid.on.view(np.uint8), grid.stride, _REDUNDANT_U8)
 
 
@@ -127,8 +126,6 @@ def _order_chains(simple: np.ndarray, offsets: np.ndarray):
     Returns (flat, chain, closed): padded pixel indices in chain order, the chain of
     each, and for each chain whether it is a closed loop.
     """
-    from .. import native
-
     return native._polylines.order_chains(
         np.ascontiguousarray(simple, dtype=bool).view(np.uint8), np.ascontiguousarray(offsets, dtype=np.int64)
     )
@@ -159,8 +156,6 @@ def _control_points(xy: np.ndarray, first: np.ndarray, last: np.ndarray, k: int,
     """The paper's segment rule (section 3.3.2.1) on every chain, one after another
     (codec._polylines.control_points): indices into xy of the control points, in chain
     order."""
-    from .. import native
-
     return native._polylines.control_points(
         np.ascontiguousarray(xy, dtype=np.float64), np.ascontiguousarray(first, dtype=np.int64),
         np.ascontiguousarray(last, dtype=np.int64), k, d,

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import native
 from .polylines import Polylines
 
 
@@ -62,8 +63,6 @@ def opposite_points(
     lines: Polylines, gray: np.ndarray, *, reach: int = 3, min_step: float = 4.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """(left, right): the two wall feet at each control point, N x 2 int64 each."""
-    from .. import native
-
     _, normal = _directions(lines)
     if gray.dtype not in (np.float32, np.float64):
         gray = gray.astype(np.float64)
@@ -81,8 +80,6 @@ def drop_conflicts(points: np.ndarray, segments: np.ndarray, cell: int = 8) -> n
     boxes share a cell of a `cell`-pixel grid; the test is exact (integer orientations;
     collinear segments by their overlap), in a compiled pass
     (codec._polylines.later_conflicts)."""
-    from .. import native
-
     if len(segments) < 2:
         return np.ones(len(segments), dtype=bool)
     return ~native._polylines.later_conflicts(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import OptionError
+from ..native import _elements, _lsq
 
 METHODS = ("sample", "lsq")
 
@@ -47,8 +48,6 @@ def normal_equations(coef: np.ndarray, den: np.ndarray, moments: np.ndarray, ima
     (E x C x 3), from its weighted moments (E x 6: 1, u, v, uu, uv, vv) and image sums
     (E x C x 3: b, ub, vb), where a pixel's row of A holds its corners' weights
     w_i = (alpha_i u + beta_i v + gamma_i) / D."""
-    from ..native import _lsq
-
     # one compiled pass (the same float64 operations in the same order as the numpy
     # expressions it replaced: about fifty passes over the elements)
     return _lsq.element_normals(np.asarray(coef, dtype=np.int64), np.asarray(den, dtype=np.int64),
@@ -68,8 +67,6 @@ def solve(corners: np.ndarray, gram: np.ndarray, rhs: np.ndarray, start: np.ndar
 
     Compiled (codec._lsq): in numpy each step's gathers and scatter-adds over the
     elements took a fifth of a refit's time after refinement's rounds."""
-    from ..native import _lsq
-
     anchor = start if anchor is None else anchor
     n = len(start)
     ridge = np.ascontiguousarray(np.broadcast_to(np.asarray(ridge, dtype=np.float64), (n,)))
@@ -97,7 +94,6 @@ def _planar_refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray
     the planar parts of the image. Elsewhere the first fit, the smaller squared error
     overall, stays.
     """
-    from ..native import _elements
     from .elements import squared_error
 
     m, n, t = len(raster), len(values), len(triangles)
@@ -216,7 +212,6 @@ def refit(image: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, previo
     minimise the squared error over the pixels of the triangles that touch them (plus
     the bottom row and right column elements), the held ones entering as known terms;
     conjugate gradients start from `previous`."""
-    from ..native import _lsq
     from .elements import line_raster
 
     height, width = image.shape[:2]
