@@ -267,6 +267,43 @@ def test_the_hessian_kernel_gives_numpys_numbers() -> None:
         _gradients.hessian_norm(planes[0], planes[1], np.ascontiguousarray(planes[2][:, :-1]))
 
 
+def _off_edge_by_numpy(lap: np.ndarray, found: np.ndarray) -> float:
+    """adaptive._off_edge_curvature's share as its numpy steps made it."""
+    import cv2
+
+    energy = np.square(lap, dtype=np.float64)
+    total = float(energy.sum())
+    if total == 0:
+        return 0.0
+    near = cv2.dilate(found.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    return float(energy[~near].sum()) / total
+
+
+def test_the_off_edge_share_kernel_gives_numpys_share() -> None:
+    """#20: codec._gradients.off_edge_share replaced the squared, dilated and masked
+    images; the share is numpy's to rounding (its sums are pairwise), with the 3 x 3
+    neighbourhood clipped at every border as cv2.dilate's is."""
+    from codec.native import _gradients
+
+    rng = np.random.default_rng(11)
+    for h, w in ((1, 1), (1, 7), (6, 1), (2, 2), (17, 23), (64, 300)):
+        lap = (rng.standard_normal((h, w)) * 40).astype(np.float32)
+        for density in (0.0, 0.03, 0.3, 1.0):
+            found = rng.random((h, w)) < density
+            share = _gradients.off_edge_share(lap, found.view(np.uint8))
+            assert share == pytest.approx(_off_edge_by_numpy(lap, found), rel=1e-12, abs=1e-15)
+    # an edge on each border pixel in turn: only its clipped neighbourhood is near
+    lap = np.ones((5, 6), np.float32)
+    for y in range(5):
+        for x in range(6):
+            found = np.zeros((5, 6), bool)
+            found[y, x] = True
+            assert _gradients.off_edge_share(lap, found.view(np.uint8)) == _off_edge_by_numpy(lap, found)
+    assert _gradients.off_edge_share(np.zeros((4, 4), np.float32), np.zeros((4, 4), np.uint8)) == 0.0
+    with pytest.raises(ValueError, match="differ"):
+        _gradients.off_edge_share(lap, np.zeros((5, 5), np.uint8))
+
+
 def _without_in_a_loop(mesh: Mesh, keep: np.ndarray) -> list[np.ndarray]:
     """codec.mesh.without_vertices' walls as its loop over the polylines made them."""
     remap = np.full(len(mesh.vertices), -1, dtype=np.int64)

@@ -25,6 +25,7 @@ from . import edges as edge_stage
 from . import polylines as polyline_stage
 from . import sampling
 from . import values as vertex_values
+from .. import native
 from ..errors import OptionError
 from ..image import structure
 from ..mesh import Mesh
@@ -114,12 +115,9 @@ def _off_edge_curvature(gray: np.ndarray, found: np.ndarray) -> float:
     from its edges."""
     import cv2
 
-    energy = np.square(cv2.Laplacian(gray, cv2.CV_32F), dtype=np.float64)
-    total = float(energy.sum())
-    if total == 0:
-        return 0.0
-    near = cv2.dilate(found.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    return float(energy[~near].sum()) / total
+    # one compiled pass: the squared, dilated and masked images were 13 bytes a pixel
+    lap = cv2.Laplacian(gray, cv2.CV_32F)
+    return native._gradients.off_edge_share(lap, np.ascontiguousarray(found).view(np.uint8))
 
 
 def _corners(width: int, height: int) -> np.ndarray:

@@ -31,7 +31,7 @@ def curvature(gray: np.ndarray) -> np.ndarray:
     in one compiled pass, codec._gradients.hessian_norm)."""
     import cv2
 
-    g = cv2.GaussianBlur(gray.astype(np.float32), (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
+    g = cv2.GaussianBlur(gray.astype(np.float32, copy=False), (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
     dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REPLICATE)
     dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
