@@ -561,3 +561,29 @@ def test_opposite_feet_refuses_points_outside_the_image() -> None:
         native._polylines.opposite_feet(np.array([[1, 1]], np.int64), normal, gray, 0, 4.0)
     with pytest.raises(ValueError, match="64"):
         native._polylines.opposite_feet(np.array([[1, 1]], np.int64), normal, gray, 65, 4.0)
+
+
+def test_8bit_planes_go_to_the_gradient_unscaled_and_untouched(corpus) -> None:
+    """#20: an 8-bit image's structure plane is already on the 255 scale, so
+    edges.gradient blurs it as it is (its product by 1 was a copy): the same numbers
+    as through the product, and the plane is left as it was."""
+    import cv2
+
+    from codec.image import structure
+
+    gray = structure(corpus["camera"])
+    before = gray.copy()
+    mag, ix, iy = edges.gradient(gray, 255.0)
+    assert np.array_equal(gray, before)
+    g = cv2.GaussianBlur(np.multiply(gray, np.float32(1.0), dtype=np.float32), (0, 0), edges.SIGMA,
+                         borderType=cv2.BORDER_REPLICATE)
+    sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    for a, b in zip((mag, ix, iy), _gradients_of(sx, sy)):
+        assert np.array_equal(a, b)
+
+
+def _gradients_of(sx: np.ndarray, sy: np.ndarray):
+    from codec.native import _gradients
+
+    return _gradients.edge_gradient(sx, sy, 32767 / edges._SCALE, edges._SCALE)

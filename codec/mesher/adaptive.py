@@ -208,7 +208,8 @@ def build(
             max_pixels=TRACED * budget,
         )
         lines = _select_lines(lines, budget)
-        walls = unfold(lines, gray * np.float32(255.0 / peak))
+        # 8-bit data is on the 255 scale already (its product by 1 would be a copy)
+        walls = unfold(lines, gray if peak == 255 else gray * np.float32(255.0 / peak))
         wall_pts, segments = walls.points, walls.segments
         excluded = _excluded(lines, walls, (height, width))
     if region_share is None:

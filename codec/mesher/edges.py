@@ -32,8 +32,9 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
     OpenCV's Sobel derivatives (codec._gradients.edge_gradient)."""
     import cv2
 
-    # one pass: the float32 product numpy's astype-then-multiply made in two
-    g = np.multiply(gray, np.float32(255.0 / peak), dtype=np.float32)
+    # one pass: the float32 product numpy's astype-then-multiply made in two; none for
+    # 8-bit data, whose product by 1 is the plane itself (GaussianBlur only reads it)
+    g = gray if peak == 255 and gray.dtype == np.float32 else np.multiply(gray, np.float32(255.0 / peak), dtype=np.float32)
     g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
     sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
