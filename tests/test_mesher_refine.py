@@ -46,3 +46,21 @@ def test_merging_keeps_the_first_point_of_each_pixel_in_group_order() -> None:
         pts = np.concatenate(groups)
         _, first = np.unique(pts[:, 1] * width + pts[:, 0], return_index=True)
         assert np.array_equal(refine.merge(width, *groups), pts[np.sort(first)])
+
+
+def test_the_kept_statistics_are_gathered_part_by_part_as_from_the_joined_store() -> None:
+    """#20: _Cache.statistics gathers the last triangulation's rows from each round's
+    part of the store into one array, with the border lines' rows after them, instead
+    of joining the parts and then appending: the same rows in the same order."""
+    from codec.mesher.elements import Statistics
+
+    layout = Statistics(range_scene(40, 30, seed=1), "structure")
+    rng = np.random.default_rng(8)
+    for parts in ([5], [3, 0, 7], [1, 1, 1, 9]):
+        cache = refine._Cache(layout)
+        cache._parts = [rng.standard_normal((n, layout.width)) for n in parts]
+        joined = np.concatenate(cache._parts)
+        cache._last = rng.integers(0, len(joined), 23)
+        after = rng.standard_normal((4, layout.width))
+        assert np.array_equal(cache.statistics(), joined[cache._last])
+        assert np.array_equal(cache.statistics(after), np.concatenate([joined[cache._last], after]))

@@ -89,12 +89,26 @@ class _Cache:
             self.keys, self.rows, self.sse = keys, rows, sse
         return sse
 
-    def statistics(self) -> np.ndarray:
-        """The statistics of the triangles last measured, in their order."""
-        if len(self._parts) > 1:
-            self._parts = [np.concatenate(self._parts)]
-        store = self._parts[0] if self._parts else np.zeros((0, self.layout.width))
-        return np.take(store, self._last, axis=0)  # a row gather: 3x quicker than store[rows]
+    def statistics(self, after: np.ndarray | None = None) -> np.ndarray:
+        """The statistics of the triangles last measured, in their order, followed by the
+        rows of `after` if given. Gathered part by part into one array: no store of
+        every part joined, no second copy to append `after` (each a megabyte of
+        fresh pages at 512 x 512)."""
+        rows = self._last
+        tail = 0 if after is None else len(after)
+        out = np.empty((len(rows) + tail, self.layout.width))
+        head = out[: len(rows)]
+        if len(self._parts) == 1:
+            np.take(self._parts[0], rows, axis=0, out=head)  # a row gather: 3x quicker than store[rows]
+        else:
+            first = 0
+            for part in self._parts:
+                mine = np.flatnonzero((rows >= first) & (rows < first + len(part)))
+                head[mine] = np.take(part, rows[mine] - first, axis=0)
+                first += len(part)
+        if tail:
+            out[len(rows):] = after
+        return out
 
 
 class _Growing:
@@ -236,4 +250,4 @@ def refine_to_budget(
         vertices = merge(width, vertices, np.stack([x[big], y[big]], axis=1))
     lines = line_raster(vertices, width, height)
     elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, segments, tris, elements, np.concatenate([cache.statistics(), layout(lines)]), ordered
+    return vertices, segments, tris, elements, cache.statistics(layout(lines)), ordered
