@@ -213,6 +213,36 @@ def test_last_row_gets_a_vertex_where_it_bends_and_none_where_it_is_straight():
     assert 6 in xs.tolist() and vals[xs.tolist().index(6)] == 250
 
 
+def test_the_last_rows_new_vertices_split_the_walls_along_that_row_and_only_those():
+    """#20: sample_last_row splits only the walls with a step along the last row (the
+    only steps a new vertex of that row can lie inside), not every wall of the band:
+    the walls along the row pass through the new vertices as before; the others are
+    left as given (here one passes an older vertex, which the band's last
+    triangulation splits it at, as it splits every wall), so that split at every
+    vertex all walls are what splitting all of them here gave."""
+    from codec.mesh import segments
+    from codec.triangulate import through_vertices
+
+    rng = np.random.default_rng(12)
+    band = rng.integers(0, 256, (9, 40), dtype=np.uint8)  # rough: the row gets many vertices
+    vertices = np.array([[0, 0], [39, 0], [0, 8], [39, 8], [3, 8], [30, 8], [10, 2], [16, 4], [13, 3],
+                         [25, 1], [15, 7]], np.int64)
+    walls = [np.array([4, 5]), np.array([6, 7]), np.array([9, 7, 10]), np.array([0, 10, 2])]
+    mesh = Mesh(vertices, band[vertices[:, 1], vertices[:, 0]], triangulate(vertices, segments(walls)), 40, 9, walls)
+    grown = banding.sample_last_row(mesh, band, 0.5)
+    new = grown.vertices[len(vertices):]
+    assert len(new) and (new[:, 1] == 8).all()
+    on_wall = new[(new[:, 0] > 3) & (new[:, 0] < 30), 0]
+    assert len(on_wall)
+    # the wall along the row now steps through each new vertex on it, in order
+    along = grown.vertices[grown.constraints[0]]
+    assert along[:, 0].tolist() == sorted([3, 30] + on_wall.tolist()) and (along[:, 1] == 8).all()
+    for k in (1, 2, 3):
+        assert np.array_equal(grown.constraints[k], walls[k])  # (13, 3) still inside wall 1
+    everything = through_vertices(grown.vertices, walls)
+    assert [c.tolist() for c in through_vertices(grown.vertices, grown.constraints)] == [c.tolist() for c in everything]
+
+
 def _derivative_planes(rng: np.random.Generator, h: int, w: int) -> list[np.ndarray]:
     """float32 planes as Sobel gives them, with what the rounding rules meet: halves
     after scaling (Canny's fixed point rounds them to even), values past the int16
