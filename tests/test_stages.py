@@ -202,6 +202,22 @@ def test_pinned_first_row_is_exactly_the_row_given():
     assert len(pinned.triangles) == 0  # triangulated once, when the band is final
 
 
+def test_pinned_first_row_renumbers_the_walls_below_it():
+    """#20: pin_top_row renumbers the walls left below the first row all at once: each
+    is its kept vertices' new numbers, as an addition per wall gave them."""
+    from codec.mesh import without_vertices
+
+    vertices = np.array([[0, 0], [9, 0], [0, 6], [9, 6], [2, 0], [2, 3], [6, 3], [6, 5], [4, 2]], np.int64)
+    walls = [np.array([4, 5, 6]), np.array([6, 7]), np.array([8, 5])]
+    mesh = Mesh(vertices, np.arange(9, dtype=np.uint8), np.zeros((0, 3), np.int64), 10, 7, walls)
+    pinned = banding.pin_top_row(mesh, np.array([0, 3, 5, 9]), np.array([1, 2, 3, 4], np.uint8))
+    base = without_vertices(mesh, vertices[:, 1] > 0)
+    assert [c.tolist() for c in pinned.constraints] == [(c + 4).tolist() for c in base.constraints]
+    # the same positions through the walls as before the pinning
+    assert [pinned.vertices[c].tolist() for c in pinned.constraints] == [[[2, 3], [6, 3]], [[6, 3], [6, 5]],
+                                                                           [[4, 2], [2, 3]]]
+
+
 def test_last_row_gets_a_vertex_where_it_bends_and_none_where_it_is_straight():
     vertices = np.array([[0, 0], [15, 0], [0, 4], [15, 4]], np.int64)
     band = np.tile(np.arange(16, dtype=np.uint8) * 10, (5, 1))  # linear along x
