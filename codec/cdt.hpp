@@ -18,6 +18,8 @@
 #include <utility>
 #include <vector>
 
+#include "crc32.hpp"
+
 namespace atmcdt {
 // Internal linkage (one translation unit, the Cython wrapper's): the compiler sees every
 // call, so the predicates and flips inline instead of going through the shared object's
@@ -1055,7 +1057,9 @@ class CDT {
 // cdt.V.size() values; vertex i of cdt is order[i], or i itself when order is null):
 // each rotated to start at its smallest index, placed by a counting sort on that index,
 // then each run of one first index (a fan of a few) sorted by insertion on the other two.
-inline void canonical(const CDT& cdt, const i64* order, i64* out) {
+// Returns the CRC-32 of the list as ATM.md's u32 little-endian values (the decoder
+// then makes no u32 copy of it for zlib).
+inline uint32_t canonical(const CDT& cdt, const i64* order, i64* out) {
   i64 n = (i64)cdt.pt.size(), m = (i64)cdt.V.size() / 3;
   std::vector<i64> start(n + 1, 0);
   const i32* V = cdt.V.data();
@@ -1084,6 +1088,7 @@ inline void canonical(const CDT& cdt, const i64* order, i64* out) {
       out[3 * k + 1] = b; out[3 * k + 2] = c;
     }
   }
+  return atmcrc::crc32_low_halves(out, 3 * (size_t)m);
 }
 
 // The constrained Delaunay triangulation of ATM.md §4.2.5 of n vertices (xy, n x 2)
