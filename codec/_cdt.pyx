@@ -36,7 +36,7 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         Status insert(const int64_t* xy, int64_t k, int64_t* done) except + nogil
         Status constrain(int a, int b) except + nogil
         bint legalise() nogil
-    uint32_t cdt_canonical "atmcdt::canonical" (const CDT& cdt, const int64_t* order,
+    uint32_t cdt_canonical "atmcdt::canonical" (CDT& cdt, const int64_t* order,
                                                int64_t* out) nogil
     int64_t MAX_EXTENT
     Status cdt_triangulate "atmcdt::triangulate" (
@@ -77,7 +77,7 @@ def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, 
     return 0, triangles, int(flips), int(crc)
 
 
-cdef object triangle_array(const CDT& cdt, const int64_t* order, uint32_t* crc):
+cdef object triangle_array(CDT& cdt, const int64_t* order, uint32_t* crc):
     """The canonical triangles of cdt, written straight into a new M x 3 array; *crc
     their list's CRC-32 (0 for none, as zlib's of no bytes)."""
     result = np.empty((cdt.V.size() // 3, 3), dtype=np.int64)
