@@ -39,6 +39,7 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
     uint32_t cdt_canonical "atmcdt::canonical" (CDT& cdt, const int64_t* order,
                                                int64_t* out) nogil
     int64_t MAX_EXTENT
+    void cdt_recycle "atmcdt::recycle" (CDT* cdt) nogil
     Status cdt_triangulate "atmcdt::triangulate" (
         int64_t n, const int64_t* xy, int64_t s, const int64_t* seg, bint strict,
         CDT* cdt, vector[int64_t]* order, int64_t* flips) nogil
@@ -60,21 +61,50 @@ def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, 
     (S x 2 vertex indices, checked here) an edge, cut at the vertices on it (strict:
     refused, status OVER), and the CRC-32 of their list as u32 little-endian values
     (ATM.md's triangle_crc); triangles is None and crc 0 unless status is OK."""
+    cdef CDT cdt
+    cdef vector[int64_t] order
+    return _triangulate(&cdt, &order, vertices, segments, strict)
+
+
+cdef object _triangulate(CDT* cdt, vector[int64_t]* order, const int64_t[:, ::1] vertices,
+                         const int64_t[:, ::1] segments, bint strict):
+    """triangulate() in *cdt (empty), its vertex order in *order."""
     if vertices.shape[1] != 2 or segments.shape[1] != 2:
         raise ValueError("vertices and segments are N x 2")
     cdef int64_t n = vertices.shape[0], s = segments.shape[0], flips = 0
-    cdef CDT cdt
-    cdef vector[int64_t] order
     cdef const int64_t* xy = &vertices[0, 0] if n else NULL
     cdef const int64_t* seg = &segments[0, 0] if s else NULL
     cdef Status status
     cdef uint32_t crc = 0
     with nogil:
-        status = cdt_triangulate(n, xy, s, seg, strict, &cdt, &order, &flips)
+        status = cdt_triangulate(n, xy, s, seg, strict, cdt, order, &flips)
     if status != CDT_OK:
         return int(status), None, int(flips), 0
-    triangles = triangle_array(cdt, order.data() if order.size() else NULL, &crc)
+    triangles = triangle_array(cdt[0], order.data() if order.size() else NULL, &crc)
     return 0, triangles, int(flips), int(crc)
+
+
+cdef class Delaunay:
+    """triangulate() again and again in buffers it owns: each call after the first
+    reuses the memory of the arrays that grow with the vertices (a decoder's band after
+    band, file after file), where a fresh call faults in and zeroes new pages for them.
+    One thread at a time (another's call meanwhile raises RuntimeError)."""
+
+    cdef CDT cdt
+    cdef vector[int64_t] order
+    cdef bint busy
+
+    def triangulate(self, const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, bint strict=False):
+        """As the module's triangulate(): (status, triangles, flips, crc)."""
+        if self.busy:
+            raise RuntimeError("Delaunay.triangulate: the object is in use by another thread")
+        self.busy = True
+        try:
+            cdt_recycle(&self.cdt)
+            self.order.clear()
+            return _triangulate(&self.cdt, &self.order, vertices, segments, strict)
+        finally:
+            self.busy = False
 
 
 cdef object triangle_array(CDT& cdt, const int64_t* order, uint32_t* crc):

@@ -1062,6 +1062,29 @@ class CDT {
   }
 };
 
+// recycle()'s: from's memory (not its contents) to `to`
+template <class A>
+inline void keep(A& to, A& from) {
+  to = std::move(from);
+  to.clear();
+}
+
+// Make *cdt a new, empty triangulation that keeps the memory of the arrays that grow
+// with the vertices (their capacity, not their contents): an owner that triangulates
+// band after band, or file after file (_cdt.Delaunay), touches no fresh pages for them,
+// and fresh pages cost a decode more than its flips (each a fault and a zeroed page).
+inline void recycle(CDT* cdt) {
+  CDT fresh;
+  keep(fresh.pt, cdt->pt); keep(fresh.vinc, cdt->vinc);
+  keep(fresh.V, cdt->V); keep(fresh.T, cdt->T); keep(fresh.C, cdt->C);
+  keep(fresh.fnext, cdt->fnext); keep(fresh.fprev, cdt->fprev); keep(fresh.fedge, cdt->fedge);
+  keep(fresh.seen, cdt->seen); keep(fresh.counts, cdt->counts); keep(fresh.queue, cdt->queue);
+  keep(fresh.stack, cdt->stack); keep(fresh.slots, cdt->slots); keep(fresh.jobs, cdt->jobs);
+  keep(fresh.rv, cdt->rv); keep(fresh.re, cdt->re); keep(fresh.rt, cdt->rt); keep(fresh.rc, cdt->rc);
+  keep(fresh.lv, cdt->lv); keep(fresh.le, cdt->le); keep(fresh.lt, cdt->lt); keep(fresh.lc, cdt->lc);
+  *cdt = std::move(fresh);
+}
+
 // The triangles of `cdt` in canonical order into out (3 per triangle, room for
 // cdt.V.size() values; vertex i of cdt is order[i], or i itself when order is null):
 // each rotated to start at its smallest index, placed by a counting sort on that index,

@@ -4,6 +4,7 @@ large extents and every conformance file; bad input refused with ATMError."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -620,3 +621,35 @@ def test_the_kernel_gives_the_crc_of_the_triangles_it_writes(count):
         fan = np.array([[0, 0]] + [[40 * j, 1600 - j * j] for j in range(k)])
         t, c = delaunay_and_crc(fan)
         assert c == triangle_crc(t)
+
+
+def test_a_reused_triangulator_gives_what_fresh_calls_give():
+    """codec.triangulate.Delaunay keeps its kernel's buffers from call to call (a
+    decoder's, band after band): a run of inputs of growing and shrinking size, with
+    refusals (crossing walls, a wall over a vertex, a vertex twice) between them, gives
+    each the triangles, CRC and refusal of a fresh call."""
+    from codec.triangulate import Delaunay, delaunay_and_crc
+
+    rng = np.random.default_rng(20)
+    owner = Delaunay()
+    refused = 0
+    for trial in range(60):
+        n = int(rng.choice([3, 40, 900, 5000]))
+        pts = np.unique(rng.integers(0, int(rng.choice([8, 300, 1 << 16])), (n, 2)), axis=0)
+        if trial % 2:
+            pts = pts[np.lexsort((pts[:, 0], pts[:, 1]))]  # raster order: the sweep
+        walls = rng.integers(0, len(pts), (int(rng.integers(0, 4)), 2)) if trial % 3 else None
+        if trial % 7 == 0:
+            pts = np.concatenate([pts, pts[:1]])  # a vertex twice
+        strict = bool(trial % 5 == 0)
+        try:
+            expected = delaunay_and_crc(pts, walls, strict=strict)
+        except ATMError as exc:
+            refused += 1
+            with pytest.raises(ATMError, match=re.escape(str(exc))):
+                owner.triangles_and_crc(pts, walls, strict=strict)
+            continue
+        triangles, crc = owner.triangles_and_crc(pts, walls, strict=strict)
+        np.testing.assert_array_equal(triangles, expected[0])
+        assert crc == expected[1]
+    assert 5 < refused < 50
