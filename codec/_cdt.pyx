@@ -3,7 +3,7 @@
 the canonical triangles straight from integer vertices and segments, with the GIL
 released while they are built. codec.triangulate turns the status codes into ATMError."""
 
-from libc.stdint cimport int64_t
+from libc.stdint cimport int64_t, uint32_t
 from libcpp.vector cimport vector
 
 import numpy as np
@@ -36,9 +36,10 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         Status insert(const int64_t* xy, int64_t k, int64_t* done) except + nogil
         Status constrain(int a, int b) except + nogil
         bint legalise() nogil
-    void cdt_canonical "atmcdt::canonical" (const CDT& cdt, const int64_t* order,
-                                           int64_t* out) nogil
+    uint32_t cdt_canonical "atmcdt::canonical" (CDT& cdt, const int64_t* order,
+                                               int64_t* out) nogil
     int64_t MAX_EXTENT
+    void cdt_recycle "atmcdt::recycle" (CDT* cdt) nogil
     Status cdt_triangulate "atmcdt::triangulate" (
         int64_t n, const int64_t* xy, int64_t s, const int64_t* seg, bint strict,
         CDT* cdt, vector[int64_t]* order, int64_t* flips) nogil
@@ -55,32 +56,66 @@ OUTSIDE = CDT_OUTSIDE
 
 
 def triangulate(const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, bint strict=False):
-    """(status, triangles, flips): the triangles (M x 3 int64, canonical order of ATM.md
-    §4.2.3, positively oriented) of the N x 2 integer vertices with every segment (S x 2
-    vertex indices, checked here) an edge, cut at the vertices on it (strict: refused,
-    status OVER); triangles is None unless status is OK."""
+    """(status, triangles, flips, crc): the triangles (M x 3 int64, canonical order of
+    ATM.md §4.2.3, positively oriented) of the N x 2 integer vertices with every segment
+    (S x 2 vertex indices, checked here) an edge, cut at the vertices on it (strict:
+    refused, status OVER), and the CRC-32 of their list as u32 little-endian values
+    (ATM.md's triangle_crc); triangles is None and crc 0 unless status is OK."""
+    cdef CDT cdt
+    cdef vector[int64_t] order
+    return _triangulate(&cdt, &order, vertices, segments, strict)
+
+
+cdef object _triangulate(CDT* cdt, vector[int64_t]* order, const int64_t[:, ::1] vertices,
+                         const int64_t[:, ::1] segments, bint strict):
+    """triangulate() in *cdt (empty), its vertex order in *order."""
     if vertices.shape[1] != 2 or segments.shape[1] != 2:
         raise ValueError("vertices and segments are N x 2")
     cdef int64_t n = vertices.shape[0], s = segments.shape[0], flips = 0
-    cdef CDT cdt
-    cdef vector[int64_t] order
     cdef const int64_t* xy = &vertices[0, 0] if n else NULL
     cdef const int64_t* seg = &segments[0, 0] if s else NULL
     cdef Status status
+    cdef uint32_t crc = 0
     with nogil:
-        status = cdt_triangulate(n, xy, s, seg, strict, &cdt, &order, &flips)
+        status = cdt_triangulate(n, xy, s, seg, strict, cdt, order, &flips)
     if status != CDT_OK:
-        return int(status), None, int(flips)
-    return 0, triangle_array(cdt, order.data() if order.size() else NULL), int(flips)
+        return int(status), None, int(flips), 0
+    triangles = triangle_array(cdt[0], order.data() if order.size() else NULL, &crc)
+    return 0, triangles, int(flips), int(crc)
 
 
-cdef object triangle_array(const CDT& cdt, const int64_t* order):
-    """The canonical triangles of cdt, written straight into a new M x 3 array."""
+cdef class Delaunay:
+    """triangulate() again and again in buffers it owns: each call after the first
+    reuses the memory of the arrays that grow with the vertices (a decoder's band after
+    band, file after file), where a fresh call faults in and zeroes new pages for them.
+    One thread at a time (another's call meanwhile raises RuntimeError)."""
+
+    cdef CDT cdt
+    cdef vector[int64_t] order
+    cdef bint busy
+
+    def triangulate(self, const int64_t[:, ::1] vertices, const int64_t[:, ::1] segments, bint strict=False):
+        """As the module's triangulate(): (status, triangles, flips, crc)."""
+        if self.busy:
+            raise RuntimeError("Delaunay.triangulate: the object is in use by another thread")
+        self.busy = True
+        try:
+            cdt_recycle(&self.cdt)
+            self.order.clear()
+            return _triangulate(&self.cdt, &self.order, vertices, segments, strict)
+        finally:
+            self.busy = False
+
+
+cdef object triangle_array(CDT& cdt, const int64_t* order, uint32_t* crc):
+    """The canonical triangles of cdt, written straight into a new M x 3 array; *crc
+    their list's CRC-32 (0 for none, as zlib's of no bytes)."""
     result = np.empty((cdt.V.size() // 3, 3), dtype=np.int64)
     cdef int64_t[:, ::1] view = result
+    crc[0] = 0
     if cdt.V.size():
         with nogil:
-            cdt_canonical(cdt, order, &view[0, 0])
+            crc[0] = cdt_canonical(cdt, order, &view[0, 0])
     return result
 
 
@@ -171,7 +206,8 @@ cdef class Triangulation:
 
     def triangles(self):
         """All triangles, M x 3, canonical order (ATM.md §4.2.3)."""
-        return triangle_array(self.cdt, NULL)
+        cdef uint32_t crc
+        return triangle_array(self.cdt, NULL, &crc)
 
     def changes(self):
         """(removed, added): the triangles (K x 3 each, corners in their stored

@@ -18,6 +18,8 @@
 #include <utility>
 #include <vector>
 
+#include "crc32.hpp"
+
 namespace atmcdt {
 // Internal linkage (one translation unit, the Cython wrapper's): the compiler sees every
 // call, so the predicates and flips inline instead of going through the shared object's
@@ -459,6 +461,12 @@ class CDT {
           last = ranked[last];
         }
       }
+      if (st == CDT_OK) {
+        // the front is done: its arrays' pages serve constrain's stamps and
+        // canonical()'s counts (fresh pages are much of a decode's cost)
+        seen.swap(fprev); seen.clear();
+        counts.swap(fnext); counts.clear();
+      }
       if (st != CDT_BUDGET) return st;
       // no sweep, or an input the sweep takes quadratic time on (a long first row
       // fanned from one vertex: a file of 200 bytes took minutes): start again by
@@ -543,6 +551,7 @@ class CDT {
     const i64 budget = SWEEP_FLIPS * (i64)n + 4096, before_flips = flips, saved_limit = flip_limit;
     if (flip_limit < 0 || flip_limit > budget) flip_limit = budget;
     auto over = [&]() { return flips - before_flips > budget; };
+    fnext.reserve(n + 1);  // (canonical()'s counts later: n + 1)
     fnext.assign(n, -1); fprev.assign(n, -1); fedge.assign(n, -1);
     sweeping = true;
     for (i32 j = 0; j + 1 < k; ++j) {
@@ -863,7 +872,8 @@ class CDT {
       }
       // walk across the triangles the segment enters, to b or a vertex on it: h crosses
       // it from right (V[h]) to left, in the triangle (a, V[h], V[nxt(h)])
-      if (++stamp == 0) { std::fill(seen.begin(), seen.end(), 0); stamp = 1; }
+      if (stamp == INT32_MAX) { std::fill(seen.begin(), seen.end(), 0); stamp = 0; }
+      ++stamp;
       i32 h0 = h, end = -1;
       bool simple = true;
       slots.clear(); rv.clear(); re.clear(); lv.clear(); le.clear();
@@ -917,8 +927,9 @@ class CDT {
   //: Longest polygon side of a segment piece that goes in by cavity(); a longer one
   //: goes in by flips (flip_in, whose work grows about linearly on such fans).
   static const size_t CAVITY_MOST = 64;
-  std::vector<uint32_t> seen;  // constrain's polygon vertices: stamp when seen
-  uint32_t stamp = 0;
+  std::vector<i32> seen;  // constrain's polygon vertices: stamp when seen
+  i32 stamp = 0;
+  std::vector<i32> counts;  // canonical()'s, triangles by first corner
 
   bool crosses(i32 a, i32 b, i32 c, i32 d) const {
     // whether the open segments ab and cd cross (no vertex lies inside either)
@@ -1051,13 +1062,39 @@ class CDT {
   }
 };
 
+// recycle()'s: from's memory (not its contents) to `to`
+template <class A>
+inline void keep(A& to, A& from) {
+  to = std::move(from);
+  to.clear();
+}
+
+// Make *cdt a new, empty triangulation that keeps the memory of the arrays that grow
+// with the vertices (their capacity, not their contents): an owner that triangulates
+// band after band, or file after file (_cdt.Delaunay), touches no fresh pages for them,
+// and fresh pages cost a decode more than its flips (each a fault and a zeroed page).
+inline void recycle(CDT* cdt) {
+  CDT fresh;
+  keep(fresh.pt, cdt->pt); keep(fresh.vinc, cdt->vinc);
+  keep(fresh.V, cdt->V); keep(fresh.T, cdt->T); keep(fresh.C, cdt->C);
+  keep(fresh.fnext, cdt->fnext); keep(fresh.fprev, cdt->fprev); keep(fresh.fedge, cdt->fedge);
+  keep(fresh.seen, cdt->seen); keep(fresh.counts, cdt->counts); keep(fresh.queue, cdt->queue);
+  keep(fresh.stack, cdt->stack); keep(fresh.slots, cdt->slots); keep(fresh.jobs, cdt->jobs);
+  keep(fresh.rv, cdt->rv); keep(fresh.re, cdt->re); keep(fresh.rt, cdt->rt); keep(fresh.rc, cdt->rc);
+  keep(fresh.lv, cdt->lv); keep(fresh.le, cdt->le); keep(fresh.lt, cdt->lt); keep(fresh.lc, cdt->lc);
+  *cdt = std::move(fresh);
+}
+
 // The triangles of `cdt` in canonical order into out (3 per triangle, room for
 // cdt.V.size() values; vertex i of cdt is order[i], or i itself when order is null):
 // each rotated to start at its smallest index, placed by a counting sort on that index,
 // then each run of one first index (a fan of a few) sorted by insertion on the other two.
-inline void canonical(const CDT& cdt, const i64* order, i64* out) {
+// Returns the CRC-32 of the list as ATM.md's u32 little-endian values (the decoder
+// then makes no u32 copy of it for zlib).
+inline uint32_t canonical(CDT& cdt, const i64* order, i64* out) {
   i64 n = (i64)cdt.pt.size(), m = (i64)cdt.V.size() / 3;
-  std::vector<i64> start(n + 1, 0);
+  std::vector<i32>& start = cdt.counts;  // (m < 2^31: MAX_VERTICES)
+  start.assign(n + 1, 0);
   const i32* V = cdt.V.data();
   for (i64 t = 0; t < m; ++t) {
     i64 a = V[3 * t], b = V[3 * t + 1], c = V[3 * t + 2];
@@ -1070,7 +1107,7 @@ inline void canonical(const CDT& cdt, const i64* order, i64* out) {
     if (order) { a = order[a]; b = order[b]; c = order[c]; }
     if (b < a && b < c) { i64 r = a; a = b; b = c; c = r; }
     else if (c < a && c < b) { i64 r = c; c = b; b = a; a = r; }
-    i64* o = out + 3 * start[a]++;
+    i64* o = out + 3 * (i64)start[a]++;
     o[0] = a; o[1] = b; o[2] = c;
   }
   // start[a] is now the end of a's run, which begins where a - 1's ends
@@ -1084,6 +1121,7 @@ inline void canonical(const CDT& cdt, const i64* order, i64* out) {
       out[3 * k + 1] = b; out[3 * k + 2] = c;
     }
   }
+  return atmcrc::crc32_low_halves(out, 3 * (size_t)m);
 }
 
 // The constrained Delaunay triangulation of ATM.md §4.2.5 of n vertices (xy, n x 2)

@@ -37,7 +37,7 @@ from .coding import (
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, Polylines, chain_steps, doubled_areas
 from .native import _fields, _renumber, _samples
-from .triangulate import delaunay, triangulate
+from .triangulate import delaunay_and_crc, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
@@ -493,14 +493,16 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         # the triangulation adds no vertex, and strict refuses a step over a vertex, so
         # every step is an edge (mesh.validate need not search the edges)
         try:
-            triangles = delaunay(vertices, walls, strict=True)  # in canonical order
+            # in canonical order, with their CRC from the kernel's pass that wrote them
+            triangles, crc = delaunay_and_crc(vertices, walls, strict=True)
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:
         t = unvarints(m.triangles, 3 * m.triangle_count, f"{where} triangles").reshape(-1, 3)
         a = np.cumsum(t[:, 0])
         triangles = np.stack([a, a + t[:, 1] + 1, a + t[:, 2] + 1], 1)
-    if len(triangles) != m.triangle_count or triangle_crc(triangles) != m.triangle_crc:
+        crc = triangle_crc(triangles)
+    if len(triangles) != m.triangle_count or crc != m.triangle_crc:
         raise CorruptError(
             # ATM.md 4.2.5 defines the Delaunay triangles uniquely: the CRC only checks
             f"{where}: the triangles differ from the encoder's (CRC mismatch): the file is damaged"

@@ -37,15 +37,43 @@ def delaunay(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     (crossing segments) is refused, because vertices must stay on pixel centres. The
     GIL is released while the kernel works.
     """
+    return delaunay_and_crc(vertices, segments, strict=strict)[0]
+
+
+def delaunay_and_crc(vertices: np.ndarray, segments: np.ndarray | None = None, *,
+                     strict: bool = False) -> tuple[np.ndarray, int]:
+    """delaunay's triangles and the CRC-32 of their list as u32 little-endian values
+    (ATM.md's triangle_crc, coding.triangle_crc's value), which the kernel computes as
+    it writes them: the decoder's check needs no copy of the triangles."""
+    return _run(_cdt.triangulate, vertices, segments, strict)
+
+
+class Delaunay:
+    """delaunay_and_crc again and again in buffers this object owns: after its first
+    call, the kernel's arrays that grow with the vertices reuse their memory instead of
+    faulting in fresh pages (a decoder's, for band after band and file after file). One
+    thread at a time."""
+
+    def __init__(self) -> None:
+        self._kernel = _cdt.Delaunay()
+
+    def triangles_and_crc(self, vertices: np.ndarray, segments: np.ndarray | None = None, *,
+                          strict: bool = False) -> tuple[np.ndarray, int]:
+        """delaunay_and_crc(vertices, segments, strict=strict), in this object's buffers."""
+        return _run(self._kernel.triangulate, vertices, segments, strict)
+
+
+def _run(kernel, vertices: np.ndarray, segments: np.ndarray | None, strict: bool) -> tuple[np.ndarray, int]:
+    """(triangles, crc) of a kernel entry point (_cdt.triangulate's signature)."""
     v = np.ascontiguousarray(vertices, dtype=np.int64).reshape(-1, 2)
     if segments is None:
         s = np.zeros((0, 2), np.int64)
     else:
         s = np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2)
-    status, triangles, _ = _cdt.triangulate(v, s, strict)
+    status, triangles, _, crc = kernel(v, s, strict)
     if status != _cdt.OK:
         _refuse(status, len(v))
-    return triangles
+    return triangles, crc
 
 
 def _refuse(status: int, n: int) -> None:

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import codec
 from codec import canonical, encoder, meshcode
 from codec import triangulate as triangulate_module
-from codec.coding import canonical_triangles
+from codec.coding import canonical_triangles, triangle_crc
 from codec.errors import ATMError, UnsupportedError
 from codec.mesh import Mesh, segments
 from codec.triangulate import triangulate
@@ -51,9 +51,13 @@ def shuffled_triangle(rng: np.random.Generator, algorithm: str):
 
 def decode_by_triangle(monkeypatch) -> None:
     """Within the test, codec.decode rebuilds Delaunay bands by Triangle and the
-    canonical pass (codec.triangulate.by_triangle) instead of the compiled kernel."""
-    monkeypatch.setattr(meshcode, "delaunay",
-                        lambda v, w, strict=False: canonical_triangles(triangulate_module.by_triangle(v, w)))
+    canonical pass (codec.triangulate.by_triangle) instead of the compiled kernel (the
+    CRC too: zlib's of their u32 list, not the kernel's)."""
+    def by_triangle(v, w, strict=False):
+        triangles = canonical_triangles(triangulate_module.by_triangle(v, w))
+        return triangles, triangle_crc(triangles)
+
+    monkeypatch.setattr(meshcode, "delaunay_and_crc", by_triangle)
 
 
 def lattice(w: int, h: int, sx: int = 1, sy: int = 1) -> np.ndarray:

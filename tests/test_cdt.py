@@ -4,6 +4,7 @@ large extents and every conformance file; bad input refused with ATMError."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -468,7 +469,7 @@ def test_a_long_first_row_costs_linear_flips():
         x = np.arange(k)
         pts = np.concatenate([np.stack([x, 0 * x], 1), np.stack([x[: k * 3 // 5], 0 * x[: k * 3 // 5] + 1], 1)])
         pts = np.ascontiguousarray(pts, dtype=np.int64)
-        status, tris, flips = _cdt.triangulate(pts, np.zeros((0, 2), np.int64), True)
+        status, tris, flips, _ = _cdt.triangulate(pts, np.zeros((0, 2), np.int64), True)
         assert status == _cdt.OK
         assert flips < 60 * len(pts)  # the sweep alone made len(pts)**2 / 4
         if k == 300:
@@ -560,9 +561,9 @@ def test_a_wall_whose_right_side_meets_itself_is_flipped_in():
         pts = np.unique(rng.integers(0, 12, (14, 2)), axis=0)
         pts = np.unique(np.concatenate([pts, [[0, 0], [11, 0], [0, 11], [11, 11]]]), axis=0)
         pts = np.ascontiguousarray(pts[np.lexsort((pts[:, 0], pts[:, 1]))])
-        status, _, swept = _cdt.triangulate(pts, np.zeros((0, 2), np.int64), True)
+        status, _, swept, _ = _cdt.triangulate(pts, np.zeros((0, 2), np.int64), True)
         wall = np.ascontiguousarray(rng.choice(len(pts), (1, 2), replace=False))
-        status, tris, flips = _cdt.triangulate(pts, wall, False)
+        status, tris, flips, _ = _cdt.triangulate(pts, wall, False)
         if status != _cdt.OK or flips == swept:
             continue
         found += 1
@@ -591,11 +592,64 @@ def test_a_wall_through_a_long_fan_costs_linear_time():
     from codec import _cdt
 
     v, wall = _wall_past_two_columns(150)  # polygons over the cavity bound: the flip path
-    status, tris, _ = _cdt.triangulate(v, wall, True)
+    status, tris, _, _ = _cdt.triangulate(v, wall, True)
     assert status == _cdt.OK
     np.testing.assert_array_equal(tris, canonical_triangles(triangle_and_pass(v, wall)))
     v, wall = _wall_past_two_columns(32000)
     start = time.process_time()
-    status, tris, _ = _cdt.triangulate(v, wall, True)
+    status, tris, _, _ = _cdt.triangulate(v, wall, True)
     assert status == _cdt.OK
     assert time.process_time() - start < 1.0  # 4.3 s of CPU by cavity()
+
+
+@pytest.mark.parametrize("count", [0, 1, 2, 3, 4, 5, 6, 10, 11, 21, 22, 40, 300, 5000])
+def test_the_kernel_gives_the_crc_of_the_triangles_it_writes(count):
+    """The kernel's CRC of its canonical triangles (ATM.md's triangle_crc, which the
+    decoder checks without a u32 copy) equals zlib's over their u32 little-endian
+    list, whatever their number against the 16 values the fast path takes a step
+    (a vertex count gives about twice as many triangles)."""
+    from codec.coding import triangle_crc
+    from codec.triangulate import delaunay_and_crc
+
+    rng = np.random.default_rng(count)
+    pts = np.unique(rng.integers(0, 70000, (count + 2, 2)), axis=0) if count else np.zeros((0, 2), np.int64)
+    triangles, crc = delaunay_and_crc(pts)
+    assert np.array_equal(triangles, delaunay(pts))
+    assert crc == triangle_crc(triangles)
+    # fans of 2 to 22 triangles: one fast step and the rest, or none
+    for k in range(3, 24):
+        fan = np.array([[0, 0]] + [[40 * j, 1600 - j * j] for j in range(k)])
+        t, c = delaunay_and_crc(fan)
+        assert c == triangle_crc(t)
+
+
+def test_a_reused_triangulator_gives_what_fresh_calls_give():
+    """codec.triangulate.Delaunay keeps its kernel's buffers from call to call (a
+    decoder's, band after band): a run of inputs of growing and shrinking size, with
+    refusals (crossing walls, a wall over a vertex, a vertex twice) between them, gives
+    each the triangles, CRC and refusal of a fresh call."""
+    from codec.triangulate import Delaunay, delaunay_and_crc
+
+    rng = np.random.default_rng(20)
+    owner = Delaunay()
+    refused = 0
+    for trial in range(60):
+        n = int(rng.choice([3, 40, 900, 5000]))
+        pts = np.unique(rng.integers(0, int(rng.choice([8, 300, 1 << 16])), (n, 2)), axis=0)
+        if trial % 2:
+            pts = pts[np.lexsort((pts[:, 0], pts[:, 1]))]  # raster order: the sweep
+        walls = rng.integers(0, len(pts), (int(rng.integers(0, 4)), 2)) if trial % 3 else None
+        if trial % 7 == 0:
+            pts = np.concatenate([pts, pts[:1]])  # a vertex twice
+        strict = bool(trial % 5 == 0)
+        try:
+            expected = delaunay_and_crc(pts, walls, strict=strict)
+        except ATMError as exc:
+            refused += 1
+            with pytest.raises(ATMError, match=re.escape(str(exc))):
+                owner.triangles_and_crc(pts, walls, strict=strict)
+            continue
+        triangles, crc = owner.triangles_and_crc(pts, walls, strict=strict)
+        np.testing.assert_array_equal(triangles, expected[0])
+        assert crc == expected[1]
+    assert 5 < refused < 50
