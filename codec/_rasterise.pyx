@@ -36,8 +36,10 @@ and n*e / (d * 2**s) < V*d*d / (d * 2**s) <= 1/d. And n*M < V*2**s + V*d.
   instead (atm_walk_avx512): the same span ends and fixed-point samples, eight
   computed in two 256-bit registers, narrowed and stored under a byte or word mask,
   with no load of the row and no room needed past the span; a walk for each
-  orientation, so no select a row. rasterise(portable=True) takes the portable walk
-  (the tests compare the two).
+  orientation, so no select a row. The set-up of those triangles is in C too
+  (atm_run_avx512: _triangles' arithmetic, line for line), a loop that hands back
+  the rare triangle it does not take. rasterise(portable=True) takes the portable
+  code (the tests compare the two).
 
 Triangles beyond those bounds (d2 over 2**23 for 8-bit samples, 2**15 for 16-bit: 2
 million and 8,192 pixels; taller edges, or over 2**16 rows; images 2**22 wide), with a
@@ -352,6 +354,96 @@ cdef extern from *:
     #undef ATM_WALKS
     #undef ATM_WALK
     }
+    /* _triangles' loop over one-channel triangles k, k + 1, ... with the walk above:
+       the same set-up as its own (_sort3's order, the plane with the table's
+       multiplier, _fixed_edges' edges), here so that the compiler sees the set-up
+       and the walk together. Stops at the first triangle the fast walk does not take
+       (|D| over the table's 2048, a corner in the last column, an edge over
+       edge_lim rows), which the caller renders its own way: the index where it
+       stopped (m at the end); the pixels written are added to *written. */
+    static inline ATM_TARGET int64_t atm_run(const int64_t* v, const void* values, const int64_t* tris,
+                                             int64_t k, int64_t m, void* pixels, const uint64_t* recip,
+                                             int64_t edge_lim, const uint64_t* table, int64_t w, int64_t h,
+                                             uint16_t* counts, int64_t* spans, int64_t* written,
+                                             int wide) {
+        int64_t a, b, c, t, ka, kb, kc, kt, tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl;
+        int64_t d, half, vt, vm, vb, ga, gb, last, turn, xmin, xmax, total = 0;
+        uint64_t mult, arow, adx, ady, ea, sa, eb, sb, ec, sc;
+        int s, border;
+        for (; k < m; k++) {
+            a = tris[3 * k]; b = tris[3 * k + 1]; c = tris[3 * k + 2];
+            ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c];
+            s = kb < ka;
+            t = s ? b : a; b = s ? a : b; a = t;
+            kt = s ? kb : ka; kb = s ? ka : kb; ka = kt;
+            s = kc < kb;
+            t = s ? c : b; c = s ? b : c; b = t;
+            kt = s ? kc : kb; kc = s ? kb : kc; kb = kt;
+            s = kb < ka;
+            t = s ? b : a; b = s ? a : b; a = t;
+            tx = v[2 * a]; ty = v[2 * a + 1];
+            mx = v[2 * b]; my = v[2 * b + 1];
+            bx = v[2 * c]; by = v[2 * c + 1];
+            dxm = mx - tx; dym = my - ty; dxb = bx - tx; dyb = by - ty;
+            dxl = bx - mx; dyl = by - my;
+            d = dxm * dyb - dxb * dym;
+            if (d == 0)
+                continue;
+            half = d > 0 ? d : -d;
+            border = (tx == w - 1) | (mx == w - 1) | (bx == w - 1);
+            if (half > 2048 || border || dyb > edge_lim)
+                break;
+            mult = wide ? (table[half] + 255) >> 8 : table[half];
+            if (wide) {
+                vt = ((const uint16_t*)values)[a]; vm = ((const uint16_t*)values)[b]; vb = ((const uint16_t*)values)[c];
+            } else {
+                vt = ((const uint8_t*)values)[a]; vm = ((const uint8_t*)values)[b]; vb = ((const uint8_t*)values)[c];
+            }
+            ga = 2 * (dyb * vm - dyl * vt - dym * vb);
+            gb = 2 * (dxl * vt - dxb * vm + dxm * vb);
+            if (d < 0) {
+                ga = -ga;
+                gb = -gb;
+            }
+            arow = (uint64_t)((2 * vt + 1) * half - ga * tx) * mult;
+            adx = (uint64_t)ga * mult;
+            ady = (uint64_t)gb * mult;
+            last = by == h - 1 ? by : by - 1;
+            ea = (uint64_t)(tx * dyb + dyb - 1) * recip[dyb];
+            sa = (uint64_t)dxb * recip[dyb];
+            if (dym > 0) {
+                eb = (uint64_t)(tx * dym + dym - 1) * recip[dym];
+                sb = (uint64_t)dxm * recip[dym];
+                ec = (uint64_t)(mx * dyl + dyl - 1) * recip[dyl];
+                sc = (uint64_t)dxl * recip[dyl];
+                ec -= (uint64_t)dym * sc;
+                turn = by > my ? my : last + 1;
+            } else {
+                eb = (uint64_t)(mx * dyl + dyl - 1) * recip[dyl];
+                sb = (uint64_t)dxl * recip[dyl];
+                ec = eb;
+                sc = sb;
+                turn = last + 1;
+            }
+            xmin = tx < mx ? tx : mx; xmin = xmin < bx ? xmin : bx;
+            xmax = tx > mx ? tx : mx; xmax = xmax > bx ? xmax : bx;
+            /* the walk a call of its own: inlined here, its eight forms made the loop
+               slower than the call */
+            total += atm_walk_avx512(pixels, wide, xmax - xmin <= 8, ty, last, turn, arow, adx, ady, ea, sa,
+                                     eb, sb, ec, sc, d > 0, w, counts, spans);
+        }
+        *written += total;
+        return k;
+    }
+    static ATM_TARGET int64_t atm_run_avx512(const int64_t* v, const void* values, const int64_t* tris,
+                                             int64_t k, int64_t m, void* pixels, int wide,
+                                             const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
+                                             int64_t w, int64_t h, uint16_t* counts, int64_t* spans,
+                                             int64_t* written) {
+        /* a loop for each sample size */
+        return wide ? atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, written, 1)
+                    : atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, written, 0);
+    }
     #else
     #define ATM_AVX512 0
     static int atm_has_avx512(void) { return 0; }
@@ -360,9 +452,16 @@ cdef extern from *:
                                    uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
                                    uint64_t ec, uint64_t sc, int long_left, int64_t w,
                                    uint16_t* counts, int64_t* spans) { return -1; }
+    static int64_t atm_run_avx512(const int64_t* v, const void* values, const int64_t* tris, int64_t k,
+                                  int64_t m, void* pixels, int wide, const uint64_t* recip, int64_t edge_lim,
+                                  const uint64_t* table, int64_t w, int64_t h, uint16_t* counts,
+                                  int64_t* spans, int64_t* written) { return k; }
     #endif
     """
     int atm_has_avx512() noexcept nogil
+    int64_t atm_run_avx512(const int64_t* v, const void* values, const int64_t* tris, int64_t k, int64_t m,
+                           void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
+                           int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written) noexcept nogil
     int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last, int64_t turn,
                             uint64_t arow, uint64_t adx, uint64_t ady, uint64_t ea, uint64_t sa, uint64_t eb,
                             uint64_t sb, uint64_t ec, uint64_t sc, int long_left, int64_t w, uint16_t* counts,
@@ -685,12 +784,12 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     module's docstring) and `spans` (non-empty spans per row, or NULL), MODE_COVER by
     counting each pixel's writes in `cover` (capped at 2). Returns the number of pixels
     written. Vertices and corners are checked by the caller."""
-    cdef int64_t k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
+    cdef int64_t j, k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
     cdef int64_t tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl, vt, vm, vb, mult
     cdef int64_t corner[3]
     cdef Edge lng, top, bottom
     cdef Planes pl
-    cdef bint long_left, border
+    cdef bint long_left, border, run
     cdef int bits
     cdef int64_t edge_lim
     cdef uint64_t* recip
@@ -718,8 +817,19 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
             recip[1] = <uint64_t>1 << 40
         for k in range(2, edge_lim + 1):
             recip[k] = _reciprocal(k, 40)
-    for k in range(m):
-        corner[0] = tris[3 * k]; corner[1] = tris[3 * k + 1]; corner[2] = tris[3 * k + 2]
+    # with AVX-512, atm_run_avx512 renders the one-channel triangles it can, up to
+    # one it cannot, which the loop's body renders
+    run = simd and c == 1 and recip != NULL and mode != MODE_COVER
+    k = 0
+    while k < m:
+        if run:
+            k = atm_run_avx512(v, vals, tris, k, m, pixels, sample_t is uint16_t, recip, edge_lim, _RECIPROCAL, w,
+                               h, counts if mode == MODE_COUNTS else NULL, spans, &written)
+            if k >= m:
+                break
+        j = k
+        k += 1
+        corner[0] = tris[3 * j]; corner[1] = tris[3 * j + 1]; corner[2] = tris[3 * j + 2]
         _sort3(corner, v, w)  # T, M, B
         tx = v[2 * corner[0]]; ty = v[2 * corner[0] + 1]
         mx = v[2 * corner[1]]; my = v[2 * corner[1] + 1]
