@@ -70,13 +70,18 @@ than 2**15 spans (a tiling's row has at most W), which is counted when there are
 fails the image is rasterised again counting each pixel's writes, to name the first
 pixel uncovered or covered twice."""
 
-from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint64_t
 from libc.stdlib cimport calloc, free, malloc
 from libc.string cimport memcpy
 
 ctypedef fused sample_t:
     uint8_t
     uint16_t
+
+# the triangles' corner indices: int64, or int32 (half the memory to read)
+ctypedef fused index_t:
+    int32_t
+    int64_t
 
 # rasterise()'s status codes; the caller turns them into CorruptError
 cpdef enum Status:
@@ -361,17 +366,21 @@ cdef extern from *:
        (|D| over the table's 2048, a corner in the last column, an edge over
        edge_lim rows), which the caller renders its own way: the index where it
        stopped (m at the end); the pixels written are added to *written. */
-    static inline ATM_TARGET int64_t atm_run(const int64_t* v, const void* values, const int64_t* tris,
+    static inline ATM_TARGET int64_t atm_run(const int64_t* v, const void* values, const void* tris,
                                              int64_t k, int64_t m, void* pixels, const uint64_t* recip,
                                              int64_t edge_lim, const uint64_t* table, int64_t w, int64_t h,
                                              uint16_t* counts, int64_t* spans, int64_t* written,
-                                             int wide) {
+                                             int wide, int idx32) {
         int64_t a, b, c, t, ka, kb, kc, kt, tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl;
         int64_t d, half, vt, vm, vb, ga, gb, last, turn, xmin, xmax, total = 0;
         uint64_t mult, arow, adx, ady, ea, sa, eb, sb, ec, sc;
         int s, border;
         for (; k < m; k++) {
-            a = tris[3 * k]; b = tris[3 * k + 1]; c = tris[3 * k + 2];
+            if (idx32) {
+                a = ((const int32_t*)tris)[3 * k]; b = ((const int32_t*)tris)[3 * k + 1]; c = ((const int32_t*)tris)[3 * k + 2];
+            } else {
+                a = ((const int64_t*)tris)[3 * k]; b = ((const int64_t*)tris)[3 * k + 1]; c = ((const int64_t*)tris)[3 * k + 2];
+            }
             ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c];
             s = kb < ka;
             t = s ? b : a; b = s ? a : b; a = t;
@@ -435,14 +444,18 @@ cdef extern from *:
         *written += total;
         return k;
     }
-    static ATM_TARGET int64_t atm_run_avx512(const int64_t* v, const void* values, const int64_t* tris,
+    static ATM_TARGET int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32,
                                              int64_t k, int64_t m, void* pixels, int wide,
                                              const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
                                              int64_t w, int64_t h, uint16_t* counts, int64_t* spans,
                                              int64_t* written) {
-        /* a loop for each sample size */
-        return wide ? atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, written, 1)
-                    : atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, written, 0);
+        /* a loop for each sample size and index width */
+    #define ATM_RUN(wide, idx32) atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, \
+                                         written, wide, idx32)
+        if (idx32)
+            return wide ? ATM_RUN(1, 1) : ATM_RUN(0, 1);
+        return wide ? ATM_RUN(1, 0) : ATM_RUN(0, 0);
+    #undef ATM_RUN
     }
     #else
     #define ATM_AVX512 0
@@ -452,14 +465,14 @@ cdef extern from *:
                                    uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
                                    uint64_t ec, uint64_t sc, int long_left, int64_t w,
                                    uint16_t* counts, int64_t* spans) { return -1; }
-    static int64_t atm_run_avx512(const int64_t* v, const void* values, const int64_t* tris, int64_t k,
+    static int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k,
                                   int64_t m, void* pixels, int wide, const uint64_t* recip, int64_t edge_lim,
                                   const uint64_t* table, int64_t w, int64_t h, uint16_t* counts,
                                   int64_t* spans, int64_t* written) { return k; }
     #endif
     """
     int atm_has_avx512() noexcept nogil
-    int64_t atm_run_avx512(const int64_t* v, const void* values, const int64_t* tris, int64_t k, int64_t m,
+    int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k, int64_t m,
                            void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
                            int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written) noexcept nogil
     int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last, int64_t turn,
@@ -776,7 +789,12 @@ cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t t
     return written
 
 
-cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* tris, int64_t m, int64_t c,
+cdef inline int64_t _corner(const void* tris, int64_t i, bint idx32) noexcept nogil:
+    """Triangle corner i (of the 3M) in either index width."""
+    return (<const int32_t*>tris)[i] if idx32 else (<const int64_t*>tris)[i]
+
+
+cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris, bint idx32, int64_t m, int64_t c,
                         sample_t* pixels, int mode, uint16_t* counts, int64_t* spans, uint8_t* cover,
                         int64_t w, int64_t h, bint simd) noexcept nogil:
     """Write every triangle's pixels into `pixels` and account for them as `mode`
@@ -823,13 +841,15 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
     k = 0
     while k < m:
         if run:
-            k = atm_run_avx512(v, vals, tris, k, m, pixels, sample_t is uint16_t, recip, edge_lim, _RECIPROCAL, w,
+            k = atm_run_avx512(v, vals, tris, idx32, k, m, pixels, sample_t is uint16_t, recip, edge_lim, _RECIPROCAL, w,
                                h, counts if mode == MODE_COUNTS else NULL, spans, &written)
             if k >= m:
                 break
         j = k
         k += 1
-        corner[0] = tris[3 * j]; corner[1] = tris[3 * j + 1]; corner[2] = tris[3 * j + 2]
+        corner[0] = _corner(tris, 3 * j, idx32)
+        corner[1] = _corner(tris, 3 * j + 1, idx32)
+        corner[2] = _corner(tris, 3 * j + 2, idx32)
         _sort3(corner, v, w)  # T, M, B
         tx = v[2 * corner[0]]; ty = v[2 * corner[0] + 1]
         mx = v[2 * corner[1]]; my = v[2 * corner[1] + 1]
@@ -917,7 +937,7 @@ cdef int _check_counts(const uint16_t* counts, const int64_t* spans, int64_t w, 
     return 1
 
 
-cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, const int64_t* tris, int64_t m,
+cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, const void* tris, bint idx32, int64_t m,
                  sample_t* pixels, int64_t w, int64_t h, int check, bint simd, int64_t* detail) noexcept nogil:
     """Check the indices, rasterise, check the coverage; the status code, with
     `detail` set on an error."""
@@ -932,11 +952,12 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             return BAD_VERTEX
     for k in range(m):
         # unsigned: a negative index is beyond too
-        if (<uint64_t>tris[3 * k] >= <uint64_t>nv) | (<uint64_t>tris[3 * k + 1] >= <uint64_t>nv) | (<uint64_t>tris[3 * k + 2] >= <uint64_t>nv):
+        if ((<uint64_t>_corner(tris, 3 * k, idx32) >= <uint64_t>nv) | (<uint64_t>_corner(tris, 3 * k + 1, idx32) >= <uint64_t>nv)
+                | (<uint64_t>_corner(tris, 3 * k + 2, idx32) >= <uint64_t>nv)):
             detail[0] = k
             return BAD_INDEX
     if check == CHECK_TOTAL:
-        if _triangles(v, vals, tris, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, simd) == npix:
+        if _triangles(v, vals, tris, idx32, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, simd) == npix:
             return OK
     else:
         counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
@@ -947,7 +968,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             free(counts)
             free(spans)
             return NO_MEMORY
-        _triangles(v, vals, tris, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, simd)
+        _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, simd)
         status = _check_counts(counts, spans, w, h)
         free(counts)
         free(spans)
@@ -957,7 +978,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
     cover = <uint8_t*>calloc(<size_t>npix, 1)
     if cover == NULL:
         return NO_MEMORY
-    _triangles(v, vals, tris, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, simd)
+    _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, simd)
     status = OK
     for p in range(npix):
         if cover[p] != 1:
@@ -969,9 +990,10 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
 
 
 def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
-              const int64_t[:, ::1] triangles, sample_t[:, ::1] out,
+              const index_t[:, ::1] triangles, sample_t[:, ::1] out,
               int64_t width, int64_t height, int check=CHECK_SPANS, bint portable=False):
-    """Rasterise the triangles into `out` (H*W x C, C <= 4; the samples' type),
+    """Rasterise the triangles (corner indices int64 or int32) into `out` (H*W x C,
+    C <= 4; the samples' type),
     checking that every pixel is written exactly once (`check`: CHECK_SPANS for any
     mesh, CHECK_TOTAL only for one known to tile the image). Checks every index it
     reads: returns (status, detail) with status OK or one of the codes above.
@@ -995,10 +1017,10 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     # the first element's address, read only where there are elements
     cdef const int64_t* v = &vertices[0, 0] if nv else NULL
     cdef const sample_t* vals = &values[0, 0] if nv else NULL
-    cdef const int64_t* tris = &triangles[0, 0] if m else NULL
+    cdef const void* tris = &triangles[0, 0] if m else NULL
     with nogil:
-        status = _render(v, nv, vals, c, tris, m, &out[0, 0], width, height, check, _AVX512 and not portable,
-                         &detail)
+        status = _render(v, nv, vals, c, tris, index_t is int32_t, m, &out[0, 0], width, height, check,
+                         _AVX512 and not portable, &detail)
     if status == NO_MEMORY:
         raise MemoryError(f"rasterise: no memory for the coverage counters of a {width}x{height} image")
     return status, detail

@@ -49,6 +49,9 @@ _TOTAL, _SPANS = _rasterise.Check.CHECK_TOTAL, _rasterise.Check.CHECK_SPANS
 #: The sample types the kernel writes (ATM.md §3: the stored sample types).
 _SAMPLES = (np.dtype(np.uint8), np.dtype(np.uint16))
 
+#: The corner index types the kernel reads.
+_INDICES = (np.dtype(np.int32), np.dtype(np.int64))
+
 
 def _round_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
     """Exact round-half-up of num / den for den > 0 (integer arrays)."""
@@ -98,7 +101,9 @@ def render(mesh: Mesh, *, tiles: bool = False) -> np.ndarray:
         )
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.int64)
     values = np.ascontiguousarray(mesh.values).reshape(len(vertices), c)
-    triangles = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
+    # the kernel reads int32 corners as they are (half the memory of int64)
+    index = mesh.triangles.dtype if mesh.triangles.dtype in _INDICES else np.dtype(np.int64)
+    triangles = np.ascontiguousarray(mesh.triangles, dtype=index)
     # zeroed, not empty: with tiles=True only the count of written pixels is checked, so
     # should a broken mesh ever pass validation, no stale memory reaches the caller
     # (the image's own shape, so that the result owns its memory: a decode may return it)

@@ -616,7 +616,8 @@ def test_cpu_simd_walk_gives_the_portable_walks_pixels() -> None:
     masked vector stores (codec/_rasterise.pyx); portable=True takes the walk every
     other processor takes. Both give the same pixels (the output's samples outside
     any triangle included: neither writes them) and the same status, with both
-    coverage checks; a valid mesh's pixels are the rule's."""
+    coverage checks, from int64 and from int32 corner indices; a valid mesh's pixels
+    are the rule's."""
     from codec.native import _rasterise
 
     rng = np.random.default_rng(2031)
@@ -633,6 +634,26 @@ def test_cpu_simd_walk_gives_the_portable_walks_pixels() -> None:
                 assert _rasterise.rasterise(vertices, values, triangles, portable, w, h, check,
                                             portable=True) == status, (w, h, dtype, channels, check)
                 assert np.array_equal(fast, portable), (w, h, dtype, channels, check)
+                for simd in (True, False):  # int32 corners: the same as int64 ones
+                    narrow = first.copy()
+                    assert _rasterise.rasterise(vertices, values, triangles.astype(np.int32), narrow, w, h, check,
+                                                portable=not simd) == status, (w, h, dtype, channels, check)
+                    assert np.array_equal(narrow, fast), (w, h, dtype, channels, check)
             if status == (0, 0) and w * h * len(triangles) < 1 << 22:
                 mesh = Mesh(vertices, values if channels > 1 else values[:, 0], triangles, w, h)
                 assert np.array_equal(portable.reshape(h, w, channels), reference(mesh).reshape(h, w, channels))
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_cpu_refuses_a_corner_index_beyond_the_vertices(dtype) -> None:
+    """A corner index below 0 or past the vertices, in either index width the kernel
+    reads, is refused by name before any pixel is written (CorruptError from
+    decoder_cpu.render, the triangle's number in the message)."""
+    vertices = np.array([[0, 0], [3, 0], [0, 3], [3, 3]], np.int64)
+    values = np.array([1, 2, 3, 4], np.uint8)
+    for bad in (-1, 4, np.iinfo(dtype).max, np.iinfo(dtype).min):
+        triangles = np.array([[0, 1, 2], [1, 3, bad]], dtype)
+        mesh = Mesh(vertices, values, triangles, 4, 4)
+        for tiles in (True, False):
+            with pytest.raises(CorruptError, match="triangle 1 refers to a vertex beyond the 4 stored"):
+                decoder_cpu.render(mesh, tiles=tiles)
