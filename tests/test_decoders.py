@@ -657,3 +657,40 @@ def test_cpu_refuses_a_corner_index_beyond_the_vertices(dtype) -> None:
         for tiles in (True, False):
             with pytest.raises(CorruptError, match="triangle 1 refers to a vertex beyond the 4 stored"):
                 decoder_cpu.render(mesh, tiles=tiles)
+
+
+@pytest.mark.parametrize("backend", ["cpu", "gl"])
+def test_render_writes_into_the_callers_array(backend: str) -> None:
+    """render(out=...) renders into the caller's array and returns it, with the pixels
+    of a render into a new one (gray, colour, 16-bit, a one-pixel-high image without
+    triangles); an array of another shape or type, not C-contiguous or read-only is
+    refused by what is wrong with it, before anything is written."""
+    from codec import decoding
+    from codec.errors import OptionError
+
+    if backend == "gl":
+        try:
+            decoder_gl.context()
+        except BackendError as exc:
+            pytest.skip(str(exc))
+    rng = np.random.default_rng(5)
+    for w, h, channels, dtype in ((37, 23, 1, np.uint8), (37, 23, 3, np.uint8), (64, 9, 1, np.uint16),
+                                  (40, 1, 1, np.uint8)):
+        pts = {(int(x), int(y)) for x, y in zip(rng.integers(0, w, 60), rng.integers(0, h, 60))}
+        vertices = np.array(sorted(pts | set(_corners(w, h)), key=lambda p: (p[1], p[0])), np.int64)
+        values = rng.integers(0, np.iinfo(dtype).max + 1, (len(vertices), channels)).astype(dtype)
+        triangles = triangulate(vertices) if h > 1 else np.zeros((0, 3), np.int64)
+        mesh = Mesh(vertices, values if channels > 1 else values[:, 0], triangles, w, h)
+        expected = decoding.render(mesh, backend, tiles=True)
+        shape = expected.shape
+        out = np.full(shape, 7, dtype)
+        assert decoding.render(mesh, backend, tiles=True, out=out) is out
+        assert np.array_equal(out, expected)
+        wrong = [np.zeros(shape[::-1] if h > 1 else (h + 1, w), dtype),
+                 np.zeros(shape, np.int16), np.zeros(shape + (1,) if channels == 1 else shape[:2], dtype),
+                 np.zeros((shape[0], shape[1] * 2) + shape[2:], dtype)[:, ::2], [[0] * w] * h]
+        ro = np.zeros(shape, dtype)
+        ro.flags.writeable = False
+        for bad, what in zip(wrong + [ro], ["shape", "dtype", "shape", "C-contiguous", "numpy array", "read-only"]):
+            with pytest.raises(OptionError, match=what):
+                decoding.render(mesh, backend, tiles=True, out=bad)
