@@ -31,6 +31,15 @@ and n*e / (d * 2**s) < V*d*d / (d * 2**s) <= 1/d. And n*M < V*2**s + V*d.
   writer of the image during the call (each call owns its output). A sample beyond
   the span may exceed the sample type; the packs saturate it, or it carries only
   into later samples, which the mask drops with it.
+* Where the processor has AVX-512 (BW and VL; found at import, so that a build for
+  any x86-64 runs everywhere), a one-channel triangle's rows take a walk in C
+  instead (atm_walk_avx512): the same span ends and fixed-point samples, eight
+  computed in two 256-bit registers, narrowed and stored under a byte or word mask,
+  with no load of the row and no room needed past the span; a walk for each
+  orientation, so no select a row. The set-up of those triangles is in C too
+  (atm_run_avx512: _triangles' arithmetic, line for line), a loop that hands back
+  the rare triangle it does not take. rasterise(portable=True) takes the portable
+  code (the tests compare the two).
 
 Triangles beyond those bounds (d2 over 2**23 for 8-bit samples, 2**15 for 16-bit: 2
 million and 8,192 pixels; taller edges, or over 2**16 rows; images 2**22 wide), with a
@@ -61,13 +70,18 @@ than 2**15 spans (a tiling's row has at most W), which is counted when there are
 fails the image is rasterised again counting each pixel's writes, to name the first
 pixel uncovered or covered twice."""
 
-from libc.stdint cimport int64_t, uint8_t, uint16_t, uint64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint64_t
 from libc.stdlib cimport calloc, free, malloc
 from libc.string cimport memcpy
 
 ctypedef fused sample_t:
     uint8_t
     uint16_t
+
+# the triangles' corner indices: int64, or int32 (half the memory to read)
+ctypedef fused index_t:
+    int32_t
+    int64_t
 
 # rasterise()'s status codes; the caller turns them into CorruptError
 cpdef enum Status:
@@ -235,6 +249,242 @@ cdef extern from *:
     """
     uint64_t atm_pack8_u8(uint64_t v, uint64_t s) noexcept nogil
     void atm_put8_u16(uint16_t* p, uint64_t v, uint64_t s, int64_t n) noexcept nogil
+
+
+cdef extern from *:
+    """
+    /* _walk1's rows with AVX-512 (BW and VL, on 256-bit registers: no 512-bit
+       instruction, which would lower some processors' clock for every thread of the
+       core), chosen at run time where the processor has it, so that a build for any
+       x86-64 keeps the portable walk for the others. A span's samples are computed
+       eight at a time, narrowed by truncation (a sample beyond the span may exceed
+       the type; it is masked out with them) and stored under a byte (or word) mask:
+       no load of the row, and no room needed beyond the span (masked-out elements
+       are neither written nor can they fault). The same fixed-point values and span
+       ends as the portable walk, so the same pixels. */
+    #if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)
+    #include <immintrin.h>
+    #define ATM_AVX512 1
+    #define ATM_TARGET __attribute__((target("avx512f,avx512bw,avx512vl")))
+    static int atm_has_avx512(void) {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw")
+               && __builtin_cpu_supports("avx512vl");
+    }
+    /* the 8 samples (a + k*adx) >> shift, k = 0..7, as bytes (u8) or words (u16) */
+    static inline ATM_TARGET __m128i atm_eight(uint64_t a, __m256i k0, __m256i k4, int wide) {
+        __m256i v = _mm256_set1_epi64x((long long)a);
+        __m256i x0 = _mm256_add_epi64(v, k0), x1 = _mm256_add_epi64(v, k4);
+        if (wide) {
+            x0 = _mm256_srli_epi64(x0, 46);
+            x1 = _mm256_srli_epi64(x1, 46);
+            return _mm_unpacklo_epi64(_mm256_cvtepi64_epi16(x0), _mm256_cvtepi64_epi16(x1));
+        }
+        x0 = _mm256_srli_epi64(x0, 54);
+        x1 = _mm256_srli_epi64(x1, 54);
+        return _mm_unpacklo_epi32(_mm256_cvtepi64_epi8(x0), _mm256_cvtepi64_epi8(x1));
+    }
+    /* the masks of the first n = 0 .. 8 elements */
+    static const uint16_t atm_first[9] = {0, 1, 3, 7, 15, 31, 63, 127, 255};
+    /* samples 0 .. n - 1 (n <= 8) of a span at p (bytes or words) */
+    static inline ATM_TARGET void atm_store8(void* p, __m128i s, int64_t n, int wide) {
+        if (wide)
+            _mm_mask_storeu_epi16(p, (__mmask8)atm_first[n], s);
+        else
+            _mm_mask_storeu_epi8(p, (__mmask16)atm_first[n], s);
+    }
+    static inline ATM_TARGET int64_t atm_walk(void* pixels, int64_t y, int64_t last, int64_t turn,
+                                              uint64_t arow, uint64_t adx, uint64_t ady,
+                                              uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
+                                              uint64_t ec, uint64_t sc, int long_left, int64_t w,
+                                              uint16_t* counts, int64_t* spans, int wide, int narrow,
+                                              int counting) {
+        /* the left edge's ceiling and the right one's: the long edge's is the left one
+           when long_left (a walk for each: no select a row) */
+        uint64_t el = long_left ? ea : eb, sl = long_left ? sa : sb, er = long_left ? eb : ea;
+        uint64_t sr = long_left ? sb : sa;
+        __m256i k0 = _mm256_set_epi64x((long long)(3 * adx), (long long)(2 * adx), (long long)adx, 0);
+        __m256i k4 = _mm256_add_epi64(k0, _mm256_set1_epi64x((long long)(4 * adx)));
+        int64_t written = 0, lo, hi, n, size = wide ? 2 : 1;
+        char* row = (char*)pixels + y * w * size;
+        char* p;
+        uint64_t a;
+        for (; y <= last; y++) {
+            if (long_left) {
+                lo = (int64_t)(el >> 40);
+                hi = (int64_t)((y < turn ? er : ec) >> 40);
+            } else {
+                lo = (int64_t)((y < turn ? el : ec) >> 40);
+                hi = (int64_t)(er >> 40);
+            }
+            n = hi - lo;
+            a = arow + adx * (uint64_t)lo;
+            p = row + lo * size;
+            if (!narrow) {
+                for (; n > 8; n -= 8, p += 8 * size, a += 8 * adx)
+                    atm_store8(p, atm_eight(a, k0, k4, wide), 8, wide);
+            }
+            atm_store8(p, atm_eight(a, k0, k4, wide), n, wide);
+            written += hi - lo;
+            if (counting && lo < hi) {  /* MODE_COUNTS' bookkeeping (_account's) */
+                counts[y * (w + 1) + lo] += 1;
+                counts[y * (w + 1) + hi] -= 1;
+                if (spans)
+                    spans[y] += 1;
+            }
+            el += sl;
+            er += sr;
+            ec += sc;
+            arow += ady;
+            row += w * size;
+        }
+        return written;
+    }
+    static ATM_TARGET int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last,
+                                              int64_t turn, uint64_t arow, uint64_t adx, uint64_t ady,
+                                              uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
+                                              uint64_t ec, uint64_t sc, int long_left, int64_t w,
+                                              uint16_t* counts, int64_t* spans) {
+        /* eight walks, each with its sample size, span test and bookkeeping known to
+           the compiler */
+    #define ATM_WALK(ll, wide, narrow, counting) atm_walk(pixels, y, last, turn, arow, adx, ady, ea, sa, eb, \
+                                                          sb, ec, sc, ll, w, counts, spans, wide, narrow, counting)
+    #define ATM_WALKS(wide, narrow, counting) (long_left ? ATM_WALK(1, wide, narrow, counting) \
+                                                         : ATM_WALK(0, wide, narrow, counting))
+        if (counts)
+            return wide ? (narrow ? ATM_WALKS(1, 1, 1) : ATM_WALKS(1, 0, 1))
+                        : (narrow ? ATM_WALKS(0, 1, 1) : ATM_WALKS(0, 0, 1));
+        return wide ? (narrow ? ATM_WALKS(1, 1, 0) : ATM_WALKS(1, 0, 0))
+                    : (narrow ? ATM_WALKS(0, 1, 0) : ATM_WALKS(0, 0, 0));
+    #undef ATM_WALKS
+    #undef ATM_WALK
+    }
+    /* _triangles' loop over one-channel triangles k, k + 1, ... with the walk above:
+       the same set-up as its own (_sort3's order, the plane with the table's
+       multiplier, _fixed_edges' edges), here so that the compiler sees the set-up
+       and the walk together. Stops at the first triangle the fast walk does not take
+       (|D| over the table's 2048, a corner in the last column, an edge over
+       edge_lim rows), which the caller renders its own way: the index where it
+       stopped (m at the end); the pixels written are added to *written. */
+    static inline ATM_TARGET int64_t atm_run(const int64_t* v, const void* values, const void* tris,
+                                             int64_t k, int64_t m, void* pixels, const uint64_t* recip,
+                                             int64_t edge_lim, const uint64_t* table, int64_t w, int64_t h,
+                                             uint16_t* counts, int64_t* spans, int64_t* written,
+                                             int wide, int idx32) {
+        int64_t a, b, c, t, ka, kb, kc, kt, tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl;
+        int64_t d, half, vt, vm, vb, ga, gb, last, turn, xmin, xmax, total = 0;
+        uint64_t mult, arow, adx, ady, ea, sa, eb, sb, ec, sc;
+        int s, border;
+        for (; k < m; k++) {
+            if (idx32) {
+                a = ((const int32_t*)tris)[3 * k]; b = ((const int32_t*)tris)[3 * k + 1]; c = ((const int32_t*)tris)[3 * k + 2];
+            } else {
+                a = ((const int64_t*)tris)[3 * k]; b = ((const int64_t*)tris)[3 * k + 1]; c = ((const int64_t*)tris)[3 * k + 2];
+            }
+            ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c];
+            s = kb < ka;
+            t = s ? b : a; b = s ? a : b; a = t;
+            kt = s ? kb : ka; kb = s ? ka : kb; ka = kt;
+            s = kc < kb;
+            t = s ? c : b; c = s ? b : c; b = t;
+            kt = s ? kc : kb; kc = s ? kb : kc; kb = kt;
+            s = kb < ka;
+            t = s ? b : a; b = s ? a : b; a = t;
+            tx = v[2 * a]; ty = v[2 * a + 1];
+            mx = v[2 * b]; my = v[2 * b + 1];
+            bx = v[2 * c]; by = v[2 * c + 1];
+            dxm = mx - tx; dym = my - ty; dxb = bx - tx; dyb = by - ty;
+            dxl = bx - mx; dyl = by - my;
+            d = dxm * dyb - dxb * dym;
+            if (d == 0)
+                continue;
+            half = d > 0 ? d : -d;
+            border = (tx == w - 1) | (mx == w - 1) | (bx == w - 1);
+            if (half > 2048 || border || dyb > edge_lim)
+                break;
+            mult = wide ? (table[half] + 255) >> 8 : table[half];
+            if (wide) {
+                vt = ((const uint16_t*)values)[a]; vm = ((const uint16_t*)values)[b]; vb = ((const uint16_t*)values)[c];
+            } else {
+                vt = ((const uint8_t*)values)[a]; vm = ((const uint8_t*)values)[b]; vb = ((const uint8_t*)values)[c];
+            }
+            ga = 2 * (dyb * vm - dyl * vt - dym * vb);
+            gb = 2 * (dxl * vt - dxb * vm + dxm * vb);
+            if (d < 0) {
+                ga = -ga;
+                gb = -gb;
+            }
+            arow = (uint64_t)((2 * vt + 1) * half - ga * tx) * mult;
+            adx = (uint64_t)ga * mult;
+            ady = (uint64_t)gb * mult;
+            last = by == h - 1 ? by : by - 1;
+            ea = (uint64_t)(tx * dyb + dyb - 1) * recip[dyb];
+            sa = (uint64_t)dxb * recip[dyb];
+            if (dym > 0) {
+                eb = (uint64_t)(tx * dym + dym - 1) * recip[dym];
+                sb = (uint64_t)dxm * recip[dym];
+                ec = (uint64_t)(mx * dyl + dyl - 1) * recip[dyl];
+                sc = (uint64_t)dxl * recip[dyl];
+                ec -= (uint64_t)dym * sc;
+                turn = by > my ? my : last + 1;
+            } else {
+                eb = (uint64_t)(mx * dyl + dyl - 1) * recip[dyl];
+                sb = (uint64_t)dxl * recip[dyl];
+                ec = eb;
+                sc = sb;
+                turn = last + 1;
+            }
+            xmin = tx < mx ? tx : mx; xmin = xmin < bx ? xmin : bx;
+            xmax = tx > mx ? tx : mx; xmax = xmax > bx ? xmax : bx;
+            /* the walk a call of its own: inlined here, its eight forms made the loop
+               slower than the call */
+            total += atm_walk_avx512(pixels, wide, xmax - xmin <= 8, ty, last, turn, arow, adx, ady, ea, sa,
+                                     eb, sb, ec, sc, d > 0, w, counts, spans);
+        }
+        *written += total;
+        return k;
+    }
+    static ATM_TARGET int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32,
+                                             int64_t k, int64_t m, void* pixels, int wide,
+                                             const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
+                                             int64_t w, int64_t h, uint16_t* counts, int64_t* spans,
+                                             int64_t* written) {
+        /* a loop for each sample size and index width */
+    #define ATM_RUN(wide, idx32) atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, \
+                                         written, wide, idx32)
+        if (idx32)
+            return wide ? ATM_RUN(1, 1) : ATM_RUN(0, 1);
+        return wide ? ATM_RUN(1, 0) : ATM_RUN(0, 0);
+    #undef ATM_RUN
+    }
+    #else
+    #define ATM_AVX512 0
+    static int atm_has_avx512(void) { return 0; }
+    static int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last,
+                                   int64_t turn, uint64_t arow, uint64_t adx, uint64_t ady,
+                                   uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
+                                   uint64_t ec, uint64_t sc, int long_left, int64_t w,
+                                   uint16_t* counts, int64_t* spans) { return -1; }
+    static int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k,
+                                  int64_t m, void* pixels, int wide, const uint64_t* recip, int64_t edge_lim,
+                                  const uint64_t* table, int64_t w, int64_t h, uint16_t* counts,
+                                  int64_t* spans, int64_t* written) { return k; }
+    #endif
+    """
+    int atm_has_avx512() noexcept nogil
+    int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k, int64_t m,
+                           void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
+                           int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written) noexcept nogil
+    int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last, int64_t turn,
+                            uint64_t arow, uint64_t adx, uint64_t ady, uint64_t ea, uint64_t sa, uint64_t eb,
+                            uint64_t sb, uint64_t ec, uint64_t sc, int long_left, int64_t w, uint16_t* counts,
+                            int64_t* spans) noexcept nogil
+
+
+# whether this processor runs the AVX-512 walk (found once, at import; read only)
+cdef bint _AVX512 = atm_has_avx512()
+#: Whether rasterise() takes the AVX-512 walk on this processor.
+AVX512 = bool(_AVX512)
 
 
 # _MASK[n]: the low n bytes of a word
@@ -463,7 +713,7 @@ cdef inline int64_t _walk1(sample_t* pixels, sample_t* row, uint64_t arow, uint6
 cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, uint64_t ady, int64_t tx,
                                int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by, int64_t last,
                                bint long_left, const uint64_t* recip, int64_t w, int64_t h, int mode,
-                               uint16_t* counts, int64_t* spans, uint8_t* cover) noexcept nogil:
+                               uint16_t* counts, int64_t* spans, uint8_t* cover, bint simd) noexcept nogil:
     """A triangle of one channel in fixed point, its edges too (most triangles of a
     gray image; none with a corner in the last column, nor a plane too large for the
     fixed point), its rows walked in locals: the long edge T -> B and the short one,
@@ -472,7 +722,8 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
     rows). An edge from column x0 moving dx columns over dy rows has ceil(x) =
     floor(n / dy) on its k-th row, n = x0*dy + dx*k + dy - 1, with 0 <= n < W*dy, read
     as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when W*dy*dy <= 2**40, as for
-    the planes: see the module's docstring). Short spans take _put8. The pixels
+    the planes: see the module's docstring). Short spans take _put8 (with AVX-512
+    and no per-pixel count, `simd`, atm_walk_avx512 takes the rows). The pixels
     written."""
     cdef int64_t turn, xmin = min(tx, mx, bx), xmax = max(tx, mx, bx)
     cdef uint64_t ea, sa, eb, sb, ec, sc
@@ -480,6 +731,9 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
     turn = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb, &ec, &sc)
     # a narrow triangle (most of them): every span is [lo, hi) within [xmin, xmax], so
     # at most 8 samples, and the last row's word from xmax lies in the image
+    if simd and mode != MODE_COVER:
+        return atm_walk_avx512(pixels, sample_t is uint16_t, xmax - xmin <= 8, ty, last, turn, arow, adx, ady,
+                               ea, sa, eb, sb, ec, sc, long_left, w, counts if mode == MODE_COUNTS else NULL, spans)
     if xmax - xmin <= 8 and last * w + xmax + 8 <= w * h:
         return _walk1(pixels, row, arow, adx, ady, ty, last, turn, ea, sa, eb, sb, ec, sc, long_left, True, w, h,
                       mode, counts, spans, cover)
@@ -535,20 +789,25 @@ cdef int64_t _triangle_colour(sample_t* pixels, Planes* pl, int64_t c, int64_t t
     return written
 
 
-cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* tris, int64_t m, int64_t c,
+cdef inline int64_t _corner(const void* tris, int64_t i, bint idx32) noexcept nogil:
+    """Triangle corner i (of the 3M) in either index width."""
+    return (<const int32_t*>tris)[i] if idx32 else (<const int64_t*>tris)[i]
+
+
+cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris, bint idx32, int64_t m, int64_t c,
                         sample_t* pixels, int mode, uint16_t* counts, int64_t* spans, uint8_t* cover,
-                        int64_t w, int64_t h) noexcept nogil:
+                        int64_t w, int64_t h, bint simd) noexcept nogil:
     """Write every triangle's pixels into `pixels` and account for them as `mode`
     says: MODE_COUNTS in `counts` (a row of W + 1 counters per image row, see the
     module's docstring) and `spans` (non-empty spans per row, or NULL), MODE_COVER by
     counting each pixel's writes in `cover` (capped at 2). Returns the number of pixels
     written. Vertices and corners are checked by the caller."""
-    cdef int64_t k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
+    cdef int64_t j, k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
     cdef int64_t tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl, vt, vm, vb, mult
     cdef int64_t corner[3]
     cdef Edge lng, top, bottom
     cdef Planes pl
-    cdef bint long_left, border
+    cdef bint long_left, border, run
     cdef int bits
     cdef int64_t edge_lim
     cdef uint64_t* recip
@@ -576,8 +835,21 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
             recip[1] = <uint64_t>1 << 40
         for k in range(2, edge_lim + 1):
             recip[k] = _reciprocal(k, 40)
-    for k in range(m):
-        corner[0] = tris[3 * k]; corner[1] = tris[3 * k + 1]; corner[2] = tris[3 * k + 2]
+    # with AVX-512, atm_run_avx512 renders the one-channel triangles it can, up to
+    # one it cannot, which the loop's body renders
+    run = simd and c == 1 and recip != NULL and mode != MODE_COVER
+    k = 0
+    while k < m:
+        if run:
+            k = atm_run_avx512(v, vals, tris, idx32, k, m, pixels, sample_t is uint16_t, recip, edge_lim, _RECIPROCAL, w,
+                               h, counts if mode == MODE_COUNTS else NULL, spans, &written)
+            if k >= m:
+                break
+        j = k
+        k += 1
+        corner[0] = _corner(tris, 3 * j, idx32)
+        corner[1] = _corner(tris, 3 * j + 1, idx32)
+        corner[2] = _corner(tris, 3 * j + 2, idx32)
         _sort3(corner, v, w)  # T, M, B
         tx = v[2 * corner[0]]; ty = v[2 * corner[0] + 1]
         mx = v[2 * corner[1]]; my = v[2 * corner[1] + 1]
@@ -622,7 +894,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const int64_t* t
         if pl.fast and not border and dyb <= edge_lim and recip != NULL:
             if c == 1:
                 written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last,
-                                      long_left, recip, w, h, mode, counts, spans, cover)
+                                      long_left, recip, w, h, mode, counts, spans, cover, simd)
             else:
                 written += _triangle_colour(pixels, &pl, c, tx, ty, mx, my, bx, by, last, long_left, recip, w,
                                             mode, counts, spans, cover)
@@ -665,8 +937,8 @@ cdef int _check_counts(const uint16_t* counts, const int64_t* spans, int64_t w, 
     return 1
 
 
-cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, const int64_t* tris, int64_t m,
-                 sample_t* pixels, int64_t w, int64_t h, int check, int64_t* detail) noexcept nogil:
+cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, const void* tris, bint idx32, int64_t m,
+                 sample_t* pixels, int64_t w, int64_t h, int check, bint simd, int64_t* detail) noexcept nogil:
     """Check the indices, rasterise, check the coverage; the status code, with
     `detail` set on an error."""
     cdef int64_t k, p, npix = w * h
@@ -680,11 +952,12 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             return BAD_VERTEX
     for k in range(m):
         # unsigned: a negative index is beyond too
-        if (<uint64_t>tris[3 * k] >= <uint64_t>nv) | (<uint64_t>tris[3 * k + 1] >= <uint64_t>nv) | (<uint64_t>tris[3 * k + 2] >= <uint64_t>nv):
+        if ((<uint64_t>_corner(tris, 3 * k, idx32) >= <uint64_t>nv) | (<uint64_t>_corner(tris, 3 * k + 1, idx32) >= <uint64_t>nv)
+                | (<uint64_t>_corner(tris, 3 * k + 2, idx32) >= <uint64_t>nv)):
             detail[0] = k
             return BAD_INDEX
     if check == CHECK_TOTAL:
-        if _triangles(v, vals, tris, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h) == npix:
+        if _triangles(v, vals, tris, idx32, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, simd) == npix:
             return OK
     else:
         counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
@@ -695,7 +968,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             free(counts)
             free(spans)
             return NO_MEMORY
-        _triangles(v, vals, tris, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h)
+        _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, simd)
         status = _check_counts(counts, spans, w, h)
         free(counts)
         free(spans)
@@ -705,7 +978,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
     cover = <uint8_t*>calloc(<size_t>npix, 1)
     if cover == NULL:
         return NO_MEMORY
-    _triangles(v, vals, tris, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h)
+    _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, simd)
     status = OK
     for p in range(npix):
         if cover[p] != 1:
@@ -717,14 +990,17 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
 
 
 def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
-              const int64_t[:, ::1] triangles, sample_t[:, ::1] out,
-              int64_t width, int64_t height, int check=CHECK_SPANS):
-    """Rasterise the triangles into `out` (H*W x C, C <= 4; the samples' type),
+              const index_t[:, ::1] triangles, sample_t[:, ::1] out,
+              int64_t width, int64_t height, int check=CHECK_SPANS, bint portable=False):
+    """Rasterise the triangles (corner indices int64 or int32) into `out` (H*W x C,
+    C <= 4; the samples' type),
     checking that every pixel is written exactly once (`check`: CHECK_SPANS for any
     mesh, CHECK_TOTAL only for one known to tile the image). Checks every index it
     reads: returns (status, detail) with status OK or one of the codes above.
     Releases the GIL; nothing else may write `out` during the call (short spans are
-    merged into it word by word, the samples around them written back as read)."""
+    merged into it word by word, the samples around them written back as read).
+    portable=True: the portable walk even where the processor has AVX-512 (which
+    gives the same pixels; for tests)."""
     cdef int64_t detail = 0, nv = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
     cdef int status
     if c > 4 or c < 1 or values.shape[0] != nv or vertices.shape[1] != 2:
@@ -741,9 +1017,10 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     # the first element's address, read only where there are elements
     cdef const int64_t* v = &vertices[0, 0] if nv else NULL
     cdef const sample_t* vals = &values[0, 0] if nv else NULL
-    cdef const int64_t* tris = &triangles[0, 0] if m else NULL
+    cdef const void* tris = &triangles[0, 0] if m else NULL
     with nogil:
-        status = _render(v, nv, vals, c, tris, m, &out[0, 0], width, height, check, &detail)
+        status = _render(v, nv, vals, c, tris, index_t is int32_t, m, &out[0, 0], width, height, check,
+                         _AVX512 and not portable, &detail)
     if status == NO_MEMORY:
         raise MemoryError(f"rasterise: no memory for the coverage counters of a {width}x{height} image")
     return status, detail

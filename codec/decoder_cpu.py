@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import CorruptError, UnsupportedError
+from .errors import CorruptError, OptionError, UnsupportedError
 from .mesh import Mesh
 from .native import _rasterise
 
@@ -48,6 +48,9 @@ _TOTAL, _SPANS = _rasterise.Check.CHECK_TOTAL, _rasterise.Check.CHECK_SPANS
 
 #: The sample types the kernel writes (ATM.md §3: the stored sample types).
 _SAMPLES = (np.dtype(np.uint8), np.dtype(np.uint16))
+
+#: The corner index types the kernel reads.
+_INDICES = (np.dtype(np.int32), np.dtype(np.int64))
 
 
 def _round_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
@@ -58,6 +61,26 @@ def _round_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 def _finish(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
     info = np.iinfo(dtype)
     return np.clip(values, info.min, info.max).astype(dtype)
+
+
+def image_shape(mesh: Mesh) -> tuple[int, ...]:
+    """The decoded image's shape: (H, W), or (H, W, C) for C > 1 channels."""
+    return (mesh.height, mesh.width) if mesh.channels == 1 else (mesh.height, mesh.width, mesh.channels)
+
+
+def check_out(out: np.ndarray, mesh: Mesh) -> None:
+    """Refuse, by what is wrong with it, an array that a render cannot write into in
+    place: the image's shape and sample type, C-contiguous, writeable."""
+    shape, dtype = image_shape(mesh), np.dtype(mesh.dtype)
+    if not isinstance(out, np.ndarray):
+        raise OptionError(f"out must be a numpy array, not {type(out).__name__}")
+    if out.shape != shape or out.dtype != dtype:
+        raise OptionError(f"out is a {out.shape} {out.dtype} array; this mesh renders to shape {shape}, "
+                          f"dtype {dtype} (e.g. numpy.empty({shape}, numpy.{dtype}))")
+    if not out.flags.c_contiguous:
+        raise OptionError("out must be C-contiguous (numpy.ascontiguousarray, or a new numpy.empty)")
+    if not out.flags.writeable:
+        raise OptionError("out is read-only; pass a writeable array")
 
 
 def render_line(mesh: Mesh) -> np.ndarray:
@@ -80,13 +103,23 @@ def render_line(mesh: Mesh) -> np.ndarray:
     return _finish(out, mesh.dtype).reshape(shape)
 
 
-def render(mesh: Mesh, *, tiles: bool = False) -> np.ndarray:
+def render(mesh: Mesh, *, tiles: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """Decode a mesh to an image of its dtype and channel count. tiles=True: the caller
     knows the triangles tile the image (mesh.validate passed: a decoder's band meshes,
     and bands stacked by stream.stack_bands), so the kernel checks only the count of
-    the pixels it writes, not each row's spans (ATM.md §4.2.3; codec/_rasterise.pyx)."""
+    the pixels it writes, not each row's spans (ATM.md §4.2.3; codec/_rasterise.pyx).
+    out: an array to render into and return (check_out's), instead of a new one: a
+    caller that decodes many images can keep one, and the kernel writes straight into
+    it (no image to allocate, fault in and copy). No other thread may use `out` during
+    the call (the kernel merges short spans into it word by word), and its content is
+    undefined after a CorruptError."""
+    if out is not None:
+        check_out(out, mesh)
     if len(mesh.triangles) == 0:
-        return render_line(mesh)
+        if out is None:
+            return render_line(mesh)
+        out[...] = render_line(mesh)
+        return out
     w, h, c = mesh.width, mesh.height, mesh.channels
     if w * h > 1 << 32:
         # keeps every numerator of the kernel's exact arithmetic below 2**53
@@ -98,11 +131,13 @@ def render(mesh: Mesh, *, tiles: bool = False) -> np.ndarray:
         )
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.int64)
     values = np.ascontiguousarray(mesh.values).reshape(len(vertices), c)
-    triangles = np.ascontiguousarray(mesh.triangles, dtype=np.int64)
+    # the kernel reads int32 corners as they are (half the memory of int64)
+    index = mesh.triangles.dtype if mesh.triangles.dtype in _INDICES else np.dtype(np.int64)
+    triangles = np.ascontiguousarray(mesh.triangles, dtype=index)
     # zeroed, not empty: with tiles=True only the count of written pixels is checked, so
     # should a broken mesh ever pass validation, no stale memory reaches the caller
     # (the image's own shape, so that the result owns its memory: a decode may return it)
-    image = np.zeros((h, w) if c == 1 else (h, w, c), dtype=mesh.dtype)
+    image = np.zeros(image_shape(mesh), dtype=mesh.dtype) if out is None else out
     check = _TOTAL if tiles else _SPANS
     status, detail = _rasterise.rasterise(vertices, values, triangles, image.reshape(h * w, c), w, h, check)
     if status:

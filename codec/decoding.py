@@ -12,15 +12,21 @@ from .mesh import Mesh
 BACKENDS = ("cpu", "gl")
 
 
-def render(mesh: Mesh, backend: str = "cpu", *, tiles: bool = False) -> np.ndarray:
+def render(mesh: Mesh, backend: str = "cpu", *, tiles: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """Rasterise a validated mesh with the named backend. tiles=True: mesh.validate
-    proved that its triangles tile the image (decoder_cpu.render)."""
+    proved that its triangles tile the image (decoder_cpu.render). out: an array of
+    the image's shape and sample type to render into and return (decoder_cpu.check_out;
+    the CPU decoder writes it in place, the GL decoder's image is copied in)."""
     if backend == "cpu":
         from . import decoder_cpu
 
-        return decoder_cpu.render(mesh, tiles=tiles)
+        return decoder_cpu.render(mesh, tiles=tiles, out=out)
     if backend == "gl":
-        from . import decoder_gl
+        from . import decoder_cpu, decoder_gl
 
-        return decoder_gl.render(mesh)
+        if out is None:
+            return decoder_gl.render(mesh)
+        decoder_cpu.check_out(out, mesh)
+        out[...] = decoder_gl.render(mesh)
+        return out
     raise OptionError(f"unknown decoder backend {backend!r}; choose one of {', '.join(BACKENDS)}")

@@ -583,3 +583,114 @@ def test_cpu_short_spans_to_the_images_last_bytes(dtype, channels: int) -> None:
             shuffled = Mesh(mesh.vertices, mesh.values, triangles[order], w, h)
             assert np.array_equal(decoder_cpu.render(shuffled, tiles=True), expected), (w, h, sorted(pts))
             assert np.array_equal(decoder_cpu.render(shuffled), expected), (w, h, sorted(pts))
+
+
+def _walk_meshes(rng: np.random.Generator):
+    """Random vertex sets (8- and 16-bit samples, 1 and 3 channels, images 2 to 5,000
+    wide, sparse to dense: spans of 0 to hundreds of samples, flat tops and bottoms,
+    triangles on the image's last bytes), a third of them broken (a triangle dropped
+    or doubled, a vertex moved), the triangles in a random order half the time."""
+    for case in range(160):
+        w = int(rng.choice([2, 3, 5, 9, 17, 64, 300, 1000, 5000]))
+        h = int(rng.integers(2, 12 if w >= 1000 else 40))
+        n = max(1, int(rng.choice([0.002, 0.02, 0.1, 0.4]) * w * h))
+        pts = set(zip(rng.integers(0, w, n).tolist(), rng.integers(0, h, n).tolist()))
+        vertices = np.array(sorted(pts | set(_corners(w, h)), key=lambda p: (p[1], p[0])), np.int64)
+        triangles = np.ascontiguousarray(triangulate(vertices), dtype=np.int64)
+        if case % 3 == 0 and len(triangles) > 1:
+            kind = case % 9 // 3
+            if kind == 0:
+                triangles = np.delete(triangles, rng.integers(len(triangles)), 0)
+            elif kind == 1:
+                triangles = np.concatenate([triangles, triangles[rng.integers(len(triangles))][None]])
+            else:
+                vertices = vertices.copy()
+                vertices[rng.integers(len(vertices))] = [rng.integers(0, w), rng.integers(0, h)]
+        if rng.random() < 0.5:
+            triangles = triangles[rng.permutation(len(triangles))]
+        yield w, h, vertices, triangles
+
+
+def test_cpu_simd_walk_gives_the_portable_walks_pixels() -> None:
+    """Where the processor has AVX-512, rasterise() walks one-channel triangles with
+    masked vector stores (codec/_rasterise.pyx); portable=True takes the walk every
+    other processor takes. Both give the same pixels (the output's samples outside
+    any triangle included: neither writes them) and the same status, with both
+    coverage checks, from int64 and from int32 corner indices; a valid mesh's pixels
+    are the rule's."""
+    from codec.native import _rasterise
+
+    rng = np.random.default_rng(2031)
+    checks = (_rasterise.Check.CHECK_TOTAL, _rasterise.Check.CHECK_SPANS)
+    for w, h, vertices, triangles in _walk_meshes(rng):
+        for dtype, channels in ((np.uint8, 1), (np.uint16, 1), (np.uint8, 3), (np.uint16, 3)):
+            top = int(np.iinfo(dtype).max)
+            values = rng.integers(0, top + 1, (len(vertices), channels)).astype(dtype)
+            values[rng.random(len(vertices)) < 0.2] = top
+            first = rng.integers(0, top + 1, (w * h, channels)).astype(dtype)
+            for check in checks:
+                fast, portable = first.copy(), first.copy()
+                status = _rasterise.rasterise(vertices, values, triangles, fast, w, h, check)
+                assert _rasterise.rasterise(vertices, values, triangles, portable, w, h, check,
+                                            portable=True) == status, (w, h, dtype, channels, check)
+                assert np.array_equal(fast, portable), (w, h, dtype, channels, check)
+                for simd in (True, False):  # int32 corners: the same as int64 ones
+                    narrow = first.copy()
+                    assert _rasterise.rasterise(vertices, values, triangles.astype(np.int32), narrow, w, h, check,
+                                                portable=not simd) == status, (w, h, dtype, channels, check)
+                    assert np.array_equal(narrow, fast), (w, h, dtype, channels, check)
+            if status == (0, 0) and w * h * len(triangles) < 1 << 22:
+                mesh = Mesh(vertices, values if channels > 1 else values[:, 0], triangles, w, h)
+                assert np.array_equal(portable.reshape(h, w, channels), reference(mesh).reshape(h, w, channels))
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_cpu_refuses_a_corner_index_beyond_the_vertices(dtype) -> None:
+    """A corner index below 0 or past the vertices, in either index width the kernel
+    reads, is refused by name before any pixel is written (CorruptError from
+    decoder_cpu.render, the triangle's number in the message)."""
+    vertices = np.array([[0, 0], [3, 0], [0, 3], [3, 3]], np.int64)
+    values = np.array([1, 2, 3, 4], np.uint8)
+    for bad in (-1, 4, np.iinfo(dtype).max, np.iinfo(dtype).min):
+        triangles = np.array([[0, 1, 2], [1, 3, bad]], dtype)
+        mesh = Mesh(vertices, values, triangles, 4, 4)
+        for tiles in (True, False):
+            with pytest.raises(CorruptError, match="triangle 1 refers to a vertex beyond the 4 stored"):
+                decoder_cpu.render(mesh, tiles=tiles)
+
+
+@pytest.mark.parametrize("backend", ["cpu", "gl"])
+def test_render_writes_into_the_callers_array(backend: str) -> None:
+    """render(out=...) renders into the caller's array and returns it, with the pixels
+    of a render into a new one (gray, colour, 16-bit, a one-pixel-high image without
+    triangles); an array of another shape or type, not C-contiguous or read-only is
+    refused by what is wrong with it, before anything is written."""
+    from codec import decoding
+    from codec.errors import OptionError
+
+    if backend == "gl":
+        try:
+            decoder_gl.context()
+        except BackendError as exc:
+            pytest.skip(str(exc))
+    rng = np.random.default_rng(5)
+    for w, h, channels, dtype in ((37, 23, 1, np.uint8), (37, 23, 3, np.uint8), (64, 9, 1, np.uint16),
+                                  (40, 1, 1, np.uint8)):
+        pts = {(int(x), int(y)) for x, y in zip(rng.integers(0, w, 60), rng.integers(0, h, 60))}
+        vertices = np.array(sorted(pts | set(_corners(w, h)), key=lambda p: (p[1], p[0])), np.int64)
+        values = rng.integers(0, np.iinfo(dtype).max + 1, (len(vertices), channels)).astype(dtype)
+        triangles = triangulate(vertices) if h > 1 else np.zeros((0, 3), np.int64)
+        mesh = Mesh(vertices, values if channels > 1 else values[:, 0], triangles, w, h)
+        expected = decoding.render(mesh, backend, tiles=True)
+        shape = expected.shape
+        out = np.full(shape, 7, dtype)
+        assert decoding.render(mesh, backend, tiles=True, out=out) is out
+        assert np.array_equal(out, expected)
+        wrong = [np.zeros(shape[::-1] if h > 1 else (h + 1, w), dtype),
+                 np.zeros(shape, np.int16), np.zeros(shape + (1,) if channels == 1 else shape[:2], dtype),
+                 np.zeros((shape[0], shape[1] * 2) + shape[2:], dtype)[:, ::2], [[0] * w] * h]
+        ro = np.zeros(shape, dtype)
+        ro.flags.writeable = False
+        for bad, what in zip(wrong + [ro], ["shape", "dtype", "shape", "C-contiguous", "numpy array", "read-only"]):
+            with pytest.raises(OptionError, match=what):
+                decoding.render(mesh, backend, tiles=True, out=bad)
