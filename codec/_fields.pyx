@@ -6,6 +6,7 @@ CorruptError with their own messages. band_values does a band's whole sample sta
 one call, so that a file of many tiny bands pays no per-array numpy overhead there."""
 
 from libc.math cimport rint, sqrt
+from libc.stdlib cimport free, malloc
 from libc.string cimport memcpy
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 
@@ -17,48 +18,27 @@ cpdef enum Varints:
     VARINTS_LONG = 2    # a number is longer than the longest allowed
 
 
-cdef int64_t _leb128(const uint8_t[::1] data, int64_t longest, int64_t[::1] out) noexcept nogil:
-    """The LEB128 numbers of data into out (room for each number data ends); stops
-    inside a number that reaches `longest` bytes unfinished and returns its bytes so
-    far (0: every number ended)."""
-    cdef int64_t i, k = 0, length = 0
-    cdef uint64_t value = 0
-    cdef int shift = 0
-    for i in range(data.shape[0]):
-        value |= <uint64_t>(data[i] & 0x7F) << shift
-        shift += 7
-        length += 1
-        if data[i] < 0x80:
-            out[k] = <int64_t>value
-            k += 1
-            value = 0
-            shift = 0
-            length = 0
-        elif length >= longest:
-            break
-    return length
-
-
 def unvarints(const uint8_t[::1] data, int64_t count, int64_t longest):
     """(status, values): exactly `count` unsigned LEB128 numbers filling `data`, none
     longer than `longest` bytes (<= 9, so every value fits an int64). The count is
     checked before anything is allocated: a file cannot make it allocate more than
     its own length (values is None on an error)."""
-    cdef int64_t n = data.shape[0], i, ends = 0, length = 0
+    cdef int64_t n = data.shape[0], ends
+    cdef bint long_ = False
     if longest > 9 or count < 0:
         raise ValueError("unvarints: at most 9 bytes a number, and a count >= 0")
     with nogil:
-        # the count first: the number of last bytes, and a last byte at the end
-        for i in range(n):
-            ends += data[i] < 0x80
-    if ends != count or (n and data[n - 1] >= 0x80):
+        ends = _varint_scan(&data[0] if n else NULL, n, longest, &long_)
+    # the count first: a file cannot make it allocate more than its own length
+    if ends != count:
         return VARINTS_COUNT, None
+    if long_:
+        return VARINTS_LONG, None
     out = np.empty(count, dtype=np.int64)
     cdef int64_t[::1] o = out
-    with nogil:
-        length = _leb128(data, longest, o)
-    if length:  # stopped inside a number longer than `longest`
-        return VARINTS_LONG, None
+    if count:
+        with nogil:
+            _leb128_into(&data[0], n, &o[0])
     return VARINTS_OK, out
 
 
@@ -261,16 +241,8 @@ cdef int _varint_count(const uint8_t[::1] data, int64_t count, int64_t longest) 
     """unvarints' refusals of `data` without decoding it: VALUES_COUNT unless it holds
     exactly `count` numbers (checked first, as unvarints does), VALUES_LONG if a number
     has more than `longest` bytes (a run of `longest` continuation bytes)."""
-    cdef int64_t n = data.shape[0], i, ends = 0, run = 0
     cdef bint long_ = False
-    for i in range(n):
-        if data[i] < 0x80:
-            ends += 1
-            run = 0
-        else:
-            run += 1
-            long_ |= run >= longest
-    if ends != count or (n and data[n - 1] >= 0x80):
+    if _varint_scan(&data[0] if data.shape[0] else NULL, data.shape[0], longest, &long_) != count:
         return VALUES_COUNT
     return VALUES_LONG if long_ else VALUES_OK
 
@@ -315,7 +287,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int64_t[:, ::1] seq = seq_arr
     with nogil:
         # the varints (their count and lengths known good)
-        _leb128(samples, longest, zigzags)
+        if n * channels:
+            _leb128_into(&samples[0], samples.shape[0], &zigzags[0])
         for j in range(n * channels):
             # zigzag(r) <= 2 top iff |r| <= top (unsigned: a 9-byte varint may wrap)
             residual_bad |= <uint64_t>zigzags[j] > <uint64_t>(2 * top)
@@ -584,38 +557,59 @@ cdef void _count_sort_rows(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int6
             out[j, 0] = a; out[j, 1] = b; out[j, 2] = c
 
 
+cdef bint _position_keys(const int64_t* high, int64_t n, const uint8_t* packed, int bits, int64_t span,
+                         int64_t* o) noexcept nogil:
+    """position_keys' pass into o (n); False if a gap or a key reaches span."""
+    cdef int64_t j, gap, key = -1, low, at
+    cdef int b
+    for j in range(n):
+        if high[j] < 0 or high[j] >= span:
+            return False
+        low = 0
+        at = j * bits
+        for b in range(bits):
+            low = (low << 1) | ((packed[(at + b) >> 3] >> (7 - ((at + b) & 7))) & 1)
+        gap = (high[j] << bits) | low
+        if gap >= span:
+            return False
+        key += gap + 1
+        if key >= span:
+            return False
+        o[j] = key
+    return True
+
+
 def position_keys(const int64_t[::1] high, const uint8_t[::1] packed, int bits, int64_t span):
     """(ok, keys): the keys of the free vertices from their stored gaps (ATM.md
     §4.2.2): gap j is high[j] shifted left by `bits` plus the j-th `bits`-bit field of
     `packed` (big-endian bit order), each key the previous plus the gap plus one, from
     -1. ok is False (keys None) if a gap or a key reaches `span`, checked before the
     sum can overflow. packed must hold len(high) * bits bits (the caller checks)."""
-    cdef int64_t n = high.shape[0], j, gap, key = -1, low, at
-    cdef int b
+    cdef int64_t n = high.shape[0]
     cdef bint ok = True
     if bits < 0 or bits > 32 or packed.shape[0] * 8 < n * bits or span < 0:
         raise ValueError("position_keys: 0..32 low bits, all of them in `packed`")
     out = np.empty(n, dtype=np.int64)
     cdef int64_t[::1] o = out
-    with nogil:
-        for j in range(n):
-            if high[j] < 0 or high[j] >= span:
-                ok = False
-                break
-            low = 0
-            at = j * bits
-            for b in range(bits):
-                low = (low << 1) | ((packed[(at + b) >> 3] >> (7 - ((at + b) & 7))) & 1)
-            gap = (high[j] << bits) | low
-            if gap >= span:
-                ok = False
-                break
-            key += gap + 1
-            if key >= span:
-                ok = False
-                break
-            o[j] = key
+    if n:
+        with nogil:
+            ok = _position_keys(&high[0], n, &packed[0] if packed.shape[0] else NULL, bits, span, &o[0])
     return (True, out) if ok else (False, None)
+
+
+cdef inline void _hilbert_point(int64_t d, const int64_t* xy, const int64_t* back, int g, int64_t groups,
+                                int64_t start, int64_t* px, int64_t* py) noexcept nogil:
+    """hilbert_points of one key (the tables' sizes checked by the caller)."""
+    cdef int64_t k = (groups - 1) * 2 * g, i, x = 0, y = 0, state = start
+    cdef int64_t mask = (1 << (2 * g)) - 1, low = (1 << g) - 1, size = 4 << (2 * g)
+    while k >= 0:
+        i = (((d >> k) & mask) | state) & (size - 1)
+        x = (x << g) | (xy[i] >> g)
+        y = (y << g) | (xy[i] & low)
+        state = back[i]
+        k -= 2 * g
+    px[0] = x
+    py[0] = y
 
 
 def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::1] back,
@@ -623,8 +617,8 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
     """coding.hilbert_points' state machine, a key at a time: (x, y) of each key from
     the inverse group tables (xy, back: 4 << 2g entries; back holds the next state
     shifted by 2g). Every lookup is masked into the tables."""
-    cdef int64_t n = d.shape[0], j, k, i, x, y, state
-    cdef int64_t mask = (1 << (2 * g)) - 1, low = (1 << g) - 1, size = 4 << (2 * g)
+    cdef int64_t n = d.shape[0], j
+    cdef int64_t size = 4 << (2 * g)
     if xy.shape[0] != size or back.shape[0] != size or not 0 <= start < size:
         raise ValueError("hilbert_points: tables of 4 << 2g entries")
     xs = np.empty(n, dtype=np.int64)
@@ -632,18 +626,7 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
     cdef int64_t[::1] ox = xs, oy = ys
     with nogil:
         for j in range(n):
-            x = 0
-            y = 0
-            state = start
-            k = (groups - 1) * 2 * g
-            while k >= 0:
-                i = (((d[j] >> k) & mask) | state) & (size - 1)
-                x = (x << g) | (xy[i] >> g)
-                y = (y << g) | (xy[i] & low)
-                state = back[i]
-                k -= 2 * g
-            ox[j] = x
-            oy[j] = y
+            _hilbert_point(d[j], &xy[0], &back[0], g, groups, start, &ox[j], &oy[j])
     return xs, ys
 
 
@@ -705,6 +688,79 @@ cdef inline int _quadrant(int64_t dx, int64_t dy) noexcept nogil:
     return 2 if dx < 0 else 3
 
 
+cdef int _chains(const int64_t* lengths, int64_t count, const int64_t* starts, bint started,
+                 const int64_t* steps, bint given, int64_t total, int64_t width, int64_t rows,
+                 int64_t* st, int64_t* o) noexcept nogil:
+    """chains' passes (given: the steps' varints were good, and the starts'): the
+    status, the keys in o (total) when CHAINS_OK and given; st: scratch of two per step."""
+    cdef int64_t i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
+    cdef int64_t pixels = width * rows, nsteps = total - count
+    cdef uint64_t u
+    cdef int turn, q
+    cdef int status = CHAINS_OK
+    for i in range(count):
+        if lengths[i] < 2:
+            status = CHAINS_LENGTHS
+        s += lengths[i]  # each below 2**35: no overflow
+    if status == CHAINS_OK and s != total:
+        status = CHAINS_LENGTHS
+    if status == CHAINS_OK and started:
+        for i in range(count):
+            u = <uint64_t>starts[i]
+            key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+            if key < 0 or key >= pixels:
+                status = CHAINS_START
+                break
+    if status == CHAINS_OK and given:
+        for j in range(2 * nsteps):
+            u = <uint64_t>steps[j]
+            st[j] = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+        for j in range(nsteps):
+            if st[2 * j] == 0 and st[2 * j + 1] == 0:
+                status = CHAINS_EMPTY
+                break
+    if status == CHAINS_OK and given:
+        # a step's turn is the sum of the stored quadrants before it on its polyline
+        j = 0
+        for i in range(count):
+            turn = 0
+            for k in range(lengths[i] - 1):
+                dx = st[2 * j]; dy = st[2 * j + 1]
+                q = _quadrant(dx, dy)
+                if turn == 1:
+                    t = dx; dx = -dy; dy = t
+                elif turn == 2:
+                    dx = -dx; dy = -dy
+                elif turn == 3:
+                    t = dx; dx = dy; dy = -t
+                if dx >= width or -dx >= width or dy >= rows or -dy >= rows:
+                    status = CHAINS_LONG
+                st[2 * j] = dx; st[2 * j + 1] = dy
+                turn = (turn + q) & 3
+                j += 1
+    if status == CHAINS_OK and given:
+        key = 0
+        j = 0
+        first = 0
+        for i in range(count):
+            u = <uint64_t>starts[i]
+            key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+            x = key % width
+            y = key // width
+            o[first] = key
+            for k in range(1, lengths[i]):
+                x += st[2 * j]; y += st[2 * j + 1]
+                j += 1
+                if x < 0 or x >= width or y < 0 or y >= rows:
+                    status = CHAINS_LEAVES
+                    break
+                o[first + k] = y * width + x
+            if status != CHAINS_OK:
+                break
+            first += lengths[i]
+    return status
+
+
 def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[::1] steps,
            int64_t total, int64_t width, int64_t rows):
     """(status, chain keys): meshcode._polylines' passes over a band's polylines
@@ -716,10 +772,7 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
     wrong in two ways gets the same message; keys is None on an error. Every sum is
     checked before it can overflow: the varints are below 2**35. starts or steps
     None (their varints were bad): the checks stop before that field, keys None."""
-    cdef int64_t count = lengths.shape[0], i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
-    cdef int64_t pixels = width * rows, nsteps = total - count
-    cdef uint64_t u
-    cdef int turn, q
+    cdef int64_t count = lengths.shape[0], nsteps = total - count
     cdef bint given = steps is not None, started = starts is not None
     given = given and started
     if width < 1 or rows < 1 or (started and starts.shape[0] != count) or (given and steps.shape[0] != 2 * nsteps):
@@ -727,69 +780,49 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
     keys = np.empty(total, dtype=np.int64)
     turned = np.empty(2 * nsteps if nsteps > 0 else 0, dtype=np.int64)
     cdef int64_t[::1] o = keys, st = turned
-    cdef int status = CHAINS_OK
+    cdef int status
     with nogil:
-        for i in range(count):
-            if lengths[i] < 2:
-                status = CHAINS_LENGTHS
-            s += lengths[i]  # each below 2**35: no overflow
-        if status == CHAINS_OK and s != total:
-            status = CHAINS_LENGTHS
-        if status == CHAINS_OK and started:
-            for i in range(count):
-                u = <uint64_t>starts[i]
-                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
-                if key < 0 or key >= pixels:
-                    status = CHAINS_START
-                    break
-        if status == CHAINS_OK and given:
-            for j in range(2 * nsteps):
-                u = <uint64_t>steps[j]
-                st[j] = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
-            for j in range(nsteps):
-                if st[2 * j] == 0 and st[2 * j + 1] == 0:
-                    status = CHAINS_EMPTY
-                    break
-        if status == CHAINS_OK and given:
-            # a step's turn is the sum of the stored quadrants before it on its polyline
-            j = 0
-            for i in range(count):
-                turn = 0
-                for k in range(lengths[i] - 1):
-                    dx = st[2 * j]; dy = st[2 * j + 1]
-                    q = _quadrant(dx, dy)
-                    if turn == 1:
-                        t = dx; dx = -dy; dy = t
-                    elif turn == 2:
-                        dx = -dx; dy = -dy
-                    elif turn == 3:
-                        t = dx; dx = dy; dy = -t
-                    if dx >= width or -dx >= width or dy >= rows or -dy >= rows:
-                        status = CHAINS_LONG
-                    st[2 * j] = dx; st[2 * j + 1] = dy
-                    turn = (turn + q) & 3
-                    j += 1
-        if status == CHAINS_OK and given:
-            key = 0
-            j = 0
-            first = 0
-            for i in range(count):
-                u = <uint64_t>starts[i]
-                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
-                x = key % width
-                y = key // width
-                o[first] = key
-                for k in range(1, lengths[i]):
-                    x += st[2 * j]; y += st[2 * j + 1]
-                    j += 1
-                    if x < 0 or x >= width or y < 0 or y >= rows:
-                        status = CHAINS_LEAVES
-                        break
-                    o[first + k] = y * width + x
-                if status != CHAINS_OK:
-                    break
-                first += lengths[i]
+        status = _chains(&lengths[0] if count else NULL, count, &starts[0] if started and count else NULL, started,
+                         &steps[0] if given and nsteps > 0 else NULL, given, total, width, rows,
+                         &st[0] if nsteps > 0 else NULL, &o[0] if total else NULL)
     return status, (keys if status == CHAINS_OK and given else None)
+
+
+cdef int64_t _line_ranks(const int64_t* keys, const int64_t* perm, int64_t total, int64_t* rank,
+                         int64_t* first) noexcept nogil:
+    """line_ranks' first pass: each point's rank among the distinct keys (rank), the
+    first point of each (first); the number of distinct keys, -1 if perm is no
+    argsort of keys."""
+    cdef int64_t i, k, groups = 0
+    for i in range(total):
+        if <uint64_t>perm[i] >= <uint64_t>total:
+            return -1
+        rank[i] = -1
+    for i in range(total):
+        k = perm[i]
+        if rank[k] >= 0 or (i and keys[k] < keys[perm[i - 1]]):
+            return -1  # a place twice, or out of order: no argsort
+        if i == 0 or keys[k] != keys[perm[i - 1]]:
+            first[groups] = k
+            groups += 1
+        elif k < first[groups - 1]:
+            first[groups - 1] = k
+        rank[k] = groups - 1
+    return groups
+
+
+cdef void _distinct(const int64_t* keys, const int64_t* rank, const int64_t* first, int64_t total,
+                    int64_t groups, int64_t* distinct, int64_t* appear) noexcept nogil:
+    """line_ranks' second pass: the distinct keys in increasing order, and their ranks
+    in the order the chains first reach them."""
+    cdef int64_t r, j = 0, k
+    for r in range(groups):
+        distinct[r] = keys[first[r]]
+    for k in range(total):
+        r = rank[k]
+        if first[r] == k:
+            appear[j] = r
+            j += 1
 
 
 def line_ranks(const int64_t[::1] keys, const int64_t[::1] perm):
@@ -798,44 +831,68 @@ def line_ranks(const int64_t[::1] keys, const int64_t[::1] perm):
     chains first reach them (the sample order's polyline part, ATM.md §4.2.4), from
     `perm`, an argsort of `keys` (any: a key's first point is the least place in its
     group). None if perm is no permutation."""
-    cdef int64_t total = keys.shape[0], i, j, k, groups = 0, r
-    cdef bint bad = perm.shape[0] != total
+    cdef int64_t total = keys.shape[0], groups = -1
     rank_arr = np.empty(total, dtype=np.int64)
     first_arr = np.empty(total, dtype=np.int64)
     cdef int64_t[::1] rank = rank_arr, first = first_arr
-    with nogil:
-        for i in range(total):
-            if <uint64_t>perm[i] >= <uint64_t>total:
-                bad = True
-                break
-            rank[i] = -1
-        if not bad:
-            for i in range(total):
-                k = perm[i]
-                if rank[k] >= 0 or (i and keys[k] < keys[perm[i - 1]]):
-                    bad = True  # a place twice, or out of order: no argsort
-                    break
-                if i == 0 or keys[k] != keys[perm[i - 1]]:
-                    first[groups] = k
-                    groups += 1
-                elif k < first[groups - 1]:
-                    first[groups - 1] = k
-                rank[k] = groups - 1
-    if bad:
+    if perm.shape[0] != total:
         return None
+    if total:
+        with nogil:
+            groups = _line_ranks(&keys[0], &perm[0], total, &rank[0], &first[0])
+        if groups < 0:
+            return None
+    else:
+        groups = 0
     distinct = np.empty(groups, dtype=np.int64)
     appear_arr = np.empty(groups, dtype=np.int64)
     cdef int64_t[::1] d = distinct, appear = appear_arr
-    with nogil:
-        for r in range(groups):
-            d[r] = keys[first[r]]
-        j = 0
-        for k in range(total):
-            r = rank[k]
-            if first[r] == k:
-                appear[j] = r
-                j += 1
+    if groups:
+        with nogil:
+            _distinct(&keys[0], &rank[0], &first[0], total, groups, &d[0], &appear[0])
     return distinct, rank_arr, appear_arr
+
+
+cdef bint _band_vertices(const int64_t* line_keys, int64_t nl, const int64_t* free_keys, int64_t nf,
+                         const int64_t* ranks, int64_t total, const int64_t* appear, int64_t na,
+                         const int64_t* lengths, int64_t count, int64_t width, int64_t* v, int64_t* fp,
+                         int64_t* lp, int64_t* flat, int64_t* walls, int64_t nwalls, int64_t* on_line) noexcept nogil:
+    """band_vertices' passes into the caller's buffers (v: 2 (nl + nf), fp: nf, lp: nl
+    scratch, flat: total, walls: 2 nwalls, on_line: na); False if a pixel is in both
+    lists or an index is out of range."""
+    cdef int64_t n = nl + nf, i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
+    for k in range(n):
+        if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
+            key = line_keys[i]
+            lp[i] = k
+            i += 1
+        else:
+            key = free_keys[j]
+            if i < nl and line_keys[i] == key:
+                return False
+            fp[j] = k
+            j += 1
+        # the keys increase: the row advances instead of a 64-bit division each
+        while key - row >= width:
+            row += width
+            y += 1
+        v[2 * k] = key - row
+        v[2 * k + 1] = y
+    if (total and _corners_beyond(ranks, total, nl)) or (na and _corners_beyond(appear, na, nl)):
+        return False
+    for k in range(total):
+        flat[k] = lp[ranks[k]]
+    for k in range(na):
+        on_line[k] = lp[appear[k]]
+    for i in range(count):
+        for k in range(at, at + lengths[i] - 1):
+            if k + 1 >= total or w >= nwalls:
+                return False
+            walls[2 * w] = flat[k]
+            walls[2 * w + 1] = flat[k + 1]
+            w += 1
+        at += lengths[i]
+    return True
 
 
 def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
@@ -848,59 +905,80 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     the polylines' steps as vertex pairs (walls); and the polyline vertices in the
     order line_ranks' `appear` gives. ok is False if a pixel is in both lists."""
     cdef int64_t nl = line_keys.shape[0], nf = free_keys.shape[0], n = nl + nf
-    cdef int64_t total = ranks.shape[0], count = lengths.shape[0], na = appear.shape[0]
-    cdef int64_t i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
-    cdef bint ok = True
+    cdef int64_t total = ranks.shape[0], count = lengths.shape[0], na = appear.shape[0], nw = max(total - count, 0)
+    cdef bint ok
     if width < 1:
         raise ValueError("band_vertices: a width of at least one pixel")
     vertices = np.empty((n, 2), dtype=np.int64)
-    places = np.empty(nf, dtype=np.int64)
-    line_places = np.empty(nl, dtype=np.int64)
-    flat_arr = np.empty(total, dtype=np.int64)
-    walls_arr = np.empty((max(total - count, 0), 2), dtype=np.int64)
-    on_line_arr = np.empty(na, dtype=np.int64)
+    places = np.empty(nf + 1, dtype=np.int64)
+    line_places = np.empty(nl + 1, dtype=np.int64)
+    flat_arr = np.empty(total + 1, dtype=np.int64)
+    walls_arr = np.empty((nw + 1, 2), dtype=np.int64)
+    on_line_arr = np.empty(na + 1, dtype=np.int64)
     cdef int64_t[:, ::1] v = vertices, walls = walls_arr
     cdef int64_t[::1] fp = places, lp = line_places, flat = flat_arr, on_line = on_line_arr
+    # (each buffer one longer than needed, so that &x[0] exists when it is empty)
     with nogil:
-        for k in range(n):
-            if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
-                key = line_keys[i]
-                lp[i] = k
-                i += 1
-            else:
-                key = free_keys[j]
-                if i < nl and line_keys[i] == key:
-                    ok = False
-                    break
-                fp[j] = k
-                j += 1
-            # the keys increase: the row advances instead of a 64-bit division each
-            while key - row >= width:
-                row += width
-                y += 1
-            v[k, 0] = key - row
-            v[k, 1] = y
-        if ok and (_corners_beyond(&ranks[0], total, nl) if total else False):
-            ok = False
-        if ok and (_corners_beyond(&appear[0], na, nl) if na else False):
-            ok = False
-        if ok:
-            for k in range(total):
-                flat[k] = lp[ranks[k]]
-            for k in range(na):
-                on_line[k] = lp[appear[k]]
-            for i in range(count):
-                for k in range(at, at + lengths[i] - 1):
-                    if k + 1 >= total or w >= walls.shape[0]:
-                        ok = False
-                        break
-                    walls[w, 0] = flat[k]
-                    walls[w, 1] = flat[k + 1]
-                    w += 1
-                at += lengths[i]
+        ok = _band_vertices(&line_keys[0] if nl else NULL, nl, &free_keys[0] if nf else NULL, nf,
+                            &ranks[0] if total else NULL, total, &appear[0] if na else NULL, na,
+                            &lengths[0] if count else NULL, count, width, &v[0, 0] if n else NULL, &fp[0], &lp[0],
+                            &flat[0], &walls[0, 0], nw, &on_line[0])
     if not ok:
         return False, None, None, None, None, None
-    return True, vertices, places, flat_arr, walls_arr, on_line_arr
+    return True, vertices, places[:nf], flat_arr[:total], walls_arr[:nw], on_line_arr[:na]
+
+
+cdef enum:
+    ARGSORT_BUCKETS = 2048  # buckets _argsort's digits need at most (11-bit digits)
+
+
+cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* buf) noexcept nogil:
+    """argsort_keys' radix passes into buf (4 n + ARGSORT_BUCKETS entries); the sorted
+    places (a pointer into buf), NULL if a key lies outside 0..span-1."""
+    cdef int64_t j, b, total, c, bits = 0, passes, digit, shift = 0, mask
+    cdef bint bad = False
+    while bits < 63 and (<int64_t>1 << bits) < span:
+        bits += 1
+    passes = (bits + 10) // 11
+    digit = (bits + passes - 1) // passes if passes else 1
+    mask = (<int64_t>1 << digit) - 1  # at most ARGSORT_BUCKETS - 1
+    # raw pointers (memoryview indexing reloads its base at each of the scatter's stores)
+    cdef int64_t* k_src = buf
+    cdef int64_t* k_dst = buf + n
+    cdef int64_t* i_src = buf + 2 * n
+    cdef int64_t* i_dst = buf + 3 * n
+    cdef int64_t* count = buf + 4 * n
+    cdef int64_t* tmp
+    for j in range(n):
+        bad |= <uint64_t>keys[j] >= <uint64_t>span
+        k_src[j] = keys[j]
+        i_src[j] = j
+    if bad:
+        return NULL
+    while passes > 0:
+        for b in range(mask + 1):
+            count[b] = 0
+        for j in range(n):
+            count[(k_src[j] >> shift) & mask] += 1
+        total = 0
+        for b in range(mask + 1):
+            c = count[b]
+            count[b] = total
+            total += c
+        for j in range(n):
+            b = (k_src[j] >> shift) & mask
+            k_dst[count[b]] = k_src[j]
+            i_dst[count[b]] = i_src[j]
+            count[b] += 1
+        tmp = k_src
+        k_src = k_dst
+        k_dst = tmp
+        tmp = i_src
+        i_src = i_dst
+        i_dst = tmp
+        shift += digit
+        passes -= 1
+    return i_src
 
 
 def argsort_keys(const int64_t[::1] keys, int64_t span):
@@ -911,55 +989,16 @@ def argsort_keys(const int64_t[::1] keys, int64_t span):
     linear in the keys (the Hilbert order of a band's free vertices, where a comparison
     sort cost more than the rest of the field decoding). None if a key lies outside
     0..span-1."""
-    cdef int64_t n = keys.shape[0], j, b, total, c, bits = 0, passes, digit, shift = 0, mask
-    cdef bint bad = False
-    while bits < 63 and (<int64_t>1 << bits) < span:
-        bits += 1
-    passes = (bits + 10) // 11
-    digit = (bits + passes - 1) // passes if passes else 1
-    mask = (<int64_t>1 << digit) - 1
-    # one buffer: keys and indices, each twice, and the bucket counts; raw pointers
-    # (memoryview indexing reloads its base at each of the scatter's stores)
-    buf = np.empty(4 * n + mask + 1, dtype=np.int64)
+    cdef int64_t n = keys.shape[0]
+    buf = np.empty(4 * n + ARGSORT_BUCKETS, dtype=np.int64)
     cdef int64_t[::1] whole = buf
-    cdef int64_t* k_src = &whole[0]
-    cdef int64_t* k_dst = k_src + n
-    cdef int64_t* i_src = k_src + 2 * n
-    cdef int64_t* i_dst = k_src + 3 * n
-    cdef int64_t* count = k_src + 4 * n
-    cdef int64_t* tmp
+    cdef int64_t* out
     with nogil:
-        for j in range(n):
-            bad |= <uint64_t>keys[j] >= <uint64_t>span
-            k_src[j] = keys[j]
-            i_src[j] = j
-        while not bad and passes > 0:
-            for b in range(mask + 1):
-                count[b] = 0
-            for j in range(n):
-                count[(k_src[j] >> shift) & mask] += 1
-            total = 0
-            for b in range(mask + 1):
-                c = count[b]
-                count[b] = total
-                total += c
-            for j in range(n):
-                b = (k_src[j] >> shift) & mask
-                k_dst[count[b]] = k_src[j]
-                i_dst[count[b]] = i_src[j]
-                count[b] += 1
-            tmp = k_src
-            k_src = k_dst
-            k_dst = tmp
-            tmp = i_src
-            i_src = i_dst
-            i_dst = tmp
-            shift += digit
-            passes -= 1
-    if bad:
+        out = _argsort(&keys[0] if n else NULL, n, span, &whole[0])
+    if out == NULL:
         return None
     # a view of the buffer (its indices' half)
-    return buf[i_src - &whole[0] : i_src - &whole[0] + n]
+    return buf[out - &whole[0] : out - &whole[0] + n]
 
 
 ctypedef fused _bits_t:
@@ -1004,3 +1043,203 @@ def fill_holes(_bits_t[:, ::1] pixels, const uint8_t[::1] holes, uint64_t value)
                 keep = <_bits_t>(h[i] == 0) * <_bits_t>-1
                 for ch in range(c):
                     p[i * c + ch] = (p[i * c + ch] & keep) | (word & ~keep)
+
+
+cpdef enum Front:
+    FRONT_OK = 0
+    FRONT_REFUSED = 1     # a field is wrong: meshcode reads the fields again to say which, and how
+
+
+cdef int64_t _varint_scan(const uint8_t* data, int64_t size, int64_t longest, bint* long_) noexcept nogil:
+    """How many LEB128 numbers fill data (-1 if the last one does not end), and in
+    long_ whether one has more than `longest` bytes (a run of `longest` continuation
+    bytes)."""
+    cdef int64_t i, ends = 0, run = 0
+    long_[0] = False
+    for i in range(size):
+        if data[i] < 0x80:
+            ends += 1
+            run = 0
+        else:
+            run += 1
+            long_[0] |= run >= longest
+    return -1 if size and data[size - 1] >= 0x80 else ends
+
+
+cdef int64_t _varint_ends(const uint8_t* data, int64_t size, int64_t longest) noexcept nogil:
+    """How many LEB128 numbers fill data, -1 unless every number ends within it and has
+    at most `longest` bytes (what unvarints accepts for that count)."""
+    cdef bint long_ = False
+    cdef int64_t ends = _varint_scan(data, size, longest, &long_)
+    return -1 if long_ else ends
+
+
+cdef void _leb128_into(const uint8_t* data, int64_t size, int64_t* out) noexcept nogil:
+    """The LEB128 numbers of data, which _varint_ends accepted, into out."""
+    cdef int64_t i, k = 0
+    cdef uint64_t value = 0
+    cdef int shift = 0
+    for i in range(size):
+        value |= <uint64_t>(data[i] & 0x7F) << shift
+        shift += 7
+        if data[i] < 0x80:
+            out[k] = <int64_t>value
+            k += 1
+            value = 0
+            shift = 0
+
+
+cdef inline const uint8_t* _bytes(const uint8_t[::1] field) noexcept nogil:
+    return &field[0] if field.shape[0] else NULL
+
+
+cdef bint _front(const uint8_t* lengths_field, int64_t lengths_size, const uint8_t* starts_field,
+                 int64_t starts_size, const uint8_t* steps_field, int64_t steps_size, int64_t count, int64_t total,
+                 const uint8_t* positions, int64_t positions_size, const uint8_t* packed, int64_t packed_size,
+                 int64_t n, int64_t nf, int64_t width, int64_t rows, bint by_rows, int64_t curve_span,
+                 int64_t max_bits, const int64_t* digit, const int64_t* nxt, const int64_t* xy, const int64_t* back,
+                 int g, int64_t groups, int64_t start, int64_t* lengths, int64_t* flat, int64_t* walls,
+                 int64_t* vertices, int64_t* seq, int64_t* scratch) noexcept nogil:
+    """band_front's passes, its fields' varint counts checked (nf + 1 positions), into
+    its arrays; scratch as band_front lays it out. False if anything is wrong."""
+    cdef int64_t nsteps = total - count, pixels = width * rows, span = pixels if by_rows else curve_span
+    cdef int64_t most = total if total > nf else nf, nl = 0, j, bits, pad, x, y
+    cdef int64_t* starts = scratch
+    cdef int64_t* steps = starts + count
+    cdef int64_t* keys = steps + 2 * nsteps
+    cdef int64_t* rank = keys + total
+    cdef int64_t* first = rank + total
+    cdef int64_t* line_keys = first + total
+    cdef int64_t* appear = line_keys + total
+    cdef int64_t* line_places = appear + total
+    cdef int64_t* nums = line_places + total
+    cdef int64_t* free_keys = nums + nf + 1
+    cdef int64_t* curve_keys = free_keys + nf
+    cdef int64_t* places = curve_keys + nf
+    cdef int64_t* sort_buf = places + nf
+    cdef int64_t* order
+    # the polylines: lengths, starts, steps, walked into their points' keys
+    _leb128_into(lengths_field, lengths_size, lengths)
+    _leb128_into(starts_field, starts_size, starts)
+    _leb128_into(steps_field, steps_size, steps)
+    if total:
+        if _chains(lengths, count, starts, True, steps, True, total, width, rows, steps, keys) != CHAINS_OK:
+            return False
+        order = _argsort(keys, total, pixels, sort_buf)
+        if order == NULL:
+            return False
+        nl = _line_ranks(keys, order, total, rank, first)
+        if nl < 0:
+            return False
+        _distinct(keys, rank, first, total, nl, line_keys, appear)
+    elif count:
+        return False
+    if n - nl != nf:  # the positions hold one number more than the free vertices
+        return False
+    # the free vertices: the gaps' high parts, their low bits, summed into keys
+    _leb128_into(positions, positions_size, nums)
+    bits = nums[0]
+    if bits > max_bits or packed_size != (nf * bits + 7) // 8:
+        return False
+    pad = 8 * packed_size - nf * bits  # all in the last byte
+    if pad and packed[packed_size - 1] & ((1 << pad) - 1):
+        return False
+    if nf and not _position_keys(nums + 1, nf, packed, <int>bits, span, free_keys if by_rows else curve_keys):
+        return False
+    if not by_rows:
+        # keys along the curve: their pixels, sorted into raster order
+        for j in range(nf):
+            _hilbert_point(curve_keys[j], xy, back, g, groups, start, &x, &y)
+            if x >= width or y >= rows:
+                return False
+            curve_keys[j] = y * width + x
+        order = _argsort(curve_keys, nf, pixels, sort_buf)
+        if order == NULL:
+            return False
+        for j in range(nf):
+            free_keys[j] = curve_keys[order[j]]
+    if not _band_vertices(line_keys, nl, free_keys, nf, rank, total, appear, nl, lengths, count, width, vertices,
+                          places, line_places, flat, walls, nsteps, seq):
+        return False
+    # the sample order: the polyline vertices (seq[:nl], as the chains reach them),
+    # then the free ones along the curve
+    if by_rows:
+        for j in range(nf):
+            curve_keys[j] = _hilbert_key(vertices[2 * places[j]], vertices[2 * places[j] + 1], digit, nxt, g,
+                                         groups, start)
+        order = _argsort(curve_keys, nf, curve_span, sort_buf)
+        if order == NULL:
+            return False
+        for j in range(nf):
+            seq[nl + j] = places[order[j]]
+    else:
+        # order, from the sort above (untouched since), takes raster places to curve ones
+        for j in range(nf):
+            seq[nl + order[j]] = places[j]
+    return True
+
+
+def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field, const uint8_t[::1] steps_field,
+               int64_t count, int64_t total, const uint8_t[::1] positions, const uint8_t[::1] position_bits,
+               int64_t n, int64_t width, int64_t rows, bint by_rows, int64_t longest, int64_t max_bits,
+               const int64_t[::1] digit, const int64_t[::1] nxt, int g, int64_t groups, int64_t start,
+               const int64_t[::1] xy, const int64_t[::1] back, int64_t curve_span):
+    """(status, vertices, flat, lengths, walls, sample order): the part of a band's
+    MESH payload (ATM.md §4.2.2, §4.2.4) before its triangles in one call, with one
+    release of the GIL for the work: the polylines (their varints, chains and distinct
+    pixels: meshcode._polylines' passes), the free vertices' keys (meshcode._free_keys;
+    in raster order, or along the Hilbert curve, whose inverse tables xy and back
+    give their pixels), both merged into the vertices in raster order
+    (band_vertices), and the sample sequence: the polyline vertices as the chains
+    first reach them, then the free ones along the curve (keys from the tables digit
+    and nxt, below curve_span: curve_order). count, total, n: the payload's polyline,
+    polyline point and vertex counts; longest: the longest varint; max_bits: the
+    most low bits a position gap may store apart. Anything wrong gives FRONT_REFUSED
+    (arrays None) without saying what: the caller reads the fields again with the
+    separate kernels, which refuse in the order of the fields. Every count is
+    checked against the fields' own varints before anything is allocated."""
+    cdef int64_t size = 4 << (2 * g), nsteps = total - count, np_ = -1, nf, most
+    cdef bint ok = False
+    cdef int64_t* scratch
+    refused = (FRONT_REFUSED, None, None, None, None, None)
+    if digit.shape[0] != size or nxt.shape[0] != size or xy.shape[0] != size or back.shape[0] != size or \
+            not 0 <= start < size or longest > 9 or width < 1 or rows < 1 or max_bits > 32:
+        raise ValueError("band_front: tables of 4 << 2g entries, at most 9 bytes a varint, a band of pixels")
+    if count < 0 or nsteps < 0 or n < 0:
+        return refused
+    with nogil:
+        ok = (_varint_ends(_bytes(lengths_field), lengths_field.shape[0], longest) == count
+              and _varint_ends(_bytes(starts_field), starts_field.shape[0], longest) == count
+              and _varint_ends(_bytes(steps_field), steps_field.shape[0], longest) == 2 * nsteps)
+        if ok:
+            np_ = _varint_ends(_bytes(positions), positions.shape[0], longest)
+    # n - nf distinct polyline points: between 0 and total
+    nf = np_ - 1
+    if not ok or nf < 0 or n < nf or n - nf > total:
+        return refused
+    lengths = np.empty(count, dtype=np.int64)
+    flat = np.empty(total, dtype=np.int64)
+    walls = np.empty((nsteps, 2), dtype=np.int64)
+    vertices = np.empty((n, 2), dtype=np.int64)
+    seq = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] L = lengths, F = flat, S = seq
+    cdef int64_t[:, ::1] W = walls, V = vertices
+    most = total if total > nf else nf
+    # _front's layout: starts, steps, keys, rank, first, line keys, appear and line
+    # places (total each), nums (nf + 1), free keys, curve keys, places (nf each), and
+    # the radix sort's buffer
+    scratch = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 4 * nf + 1 + 4 * most
+                                                   + ARGSORT_BUCKETS))
+    if scratch == NULL:
+        raise MemoryError("band_front: no memory for a band's scratch")
+    with nogil:
+        ok = _front(_bytes(lengths_field), lengths_field.shape[0], _bytes(starts_field), starts_field.shape[0],
+                    _bytes(steps_field), steps_field.shape[0], count, total, _bytes(positions), positions.shape[0],
+                    _bytes(position_bits), position_bits.shape[0], n, nf, width, rows, by_rows, curve_span, max_bits,
+                    &digit[0], &nxt[0], &xy[0], &back[0], g, groups, start, &L[0] if count else NULL,
+                    &F[0] if total else NULL, &W[0, 0] if nsteps else NULL, &V[0, 0] if n else NULL,
+                    &S[0] if n else NULL, scratch)
+        free(scratch)
+    if not ok:
+        return refused
+    return FRONT_OK, vertices, flat, lengths, walls, seq
