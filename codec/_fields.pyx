@@ -164,7 +164,7 @@ cdef void _steps_of_fans(const int64_t[::1] fan, int64_t step, double bound, int
     """_vertex_steps from the vertices' fan areas (sums of their triangles' doubled
     areas; m triangles)."""
     cdef int64_t n = steps.shape[0], i, total = 0, some = 0
-    cdef double mean, factor, s
+    cdef double mean, factor, s, least = 1.0 / bound  # once: the compiler keeps a division in the loop
     for i in range(n):
         steps[i] = step
     if step <= 1 or m == 0:
@@ -179,7 +179,7 @@ cdef void _steps_of_fans(const int64_t[::1] fan, int64_t step, double bound, int
     for i in range(n):
         if fan[i] > 0:
             factor = sqrt(mean / <double>fan[i])
-            factor = 1.0 / bound if factor < 1.0 / bound else (bound if factor > bound else factor)
+            factor = least if factor < least else (bound if factor > bound else factor)
             s = rint(<double>step * factor)
             s = 1.0 if s < 1.0 else (65535.0 if s > 65535.0 else s)
             steps[i] = <int64_t>s
@@ -247,6 +247,45 @@ cdef int _varint_count(const uint8_t[::1] data, int64_t count, int64_t longest) 
     return VALUES_LONG if long_ else VALUES_OK
 
 
+cdef int _triangle_pass(const int64_t* V, int64_t n, const int64_t* T, int64_t m, const int64_t* pos,
+                        int64_t* ar, int64_t* fan, int64_t* p, int* checks, int64_t* total,
+                        int64_t* crossed) noexcept nogil:
+    """band_values' one pass over the triangles: their corners checked (VALUES_CORNER
+    at the first beyond the n vertices), doubled areas (ar), the vertices' fan areas
+    (fan, zeroed), the samples' parents (_parent_of: p, all -1, from pos) and
+    mesh_checks' sums (checks: MESH_DEGENERATE at a triangle of area <= 0; total
+    area; rows crossed plus the count). _doubled_areas, _vertex_steps' sums and
+    _parents would each read the corners again; a function of its own, so that the
+    compiler keeps its pointers and sums in registers."""
+    cdef int64_t k, a, b, c, xa, ya, xb, yb, xc, yc, area, lo, hi, area_sum = 0, rows = 0
+    cdef bint flat = False
+    for k in range(m):
+        a = T[3 * k]; b = T[3 * k + 1]; c = T[3 * k + 2]
+        if <uint64_t>a >= <uint64_t>n or <uint64_t>b >= <uint64_t>n or <uint64_t>c >= <uint64_t>n:
+            return VALUES_CORNER
+        xa = V[2 * a]; ya = V[2 * a + 1]
+        xb = V[2 * b]; yb = V[2 * b + 1]
+        xc = V[2 * c]; yc = V[2 * c + 1]
+        area = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya)
+        ar[k] = area
+        fan[a] += area
+        fan[b] += area
+        fan[c] += area
+        _parent_of(pos[a], pos[b], pos[c], p)
+        flat |= area <= 0
+        area_sum += area
+        lo = ya if ya < yb else yb
+        lo = lo if lo < yc else yc
+        hi = ya if ya > yb else yb
+        hi = hi if hi > yc else yc
+        rows += hi - lo + 1
+    if flat and checks[0] == MESH_OK:
+        checks[0] = MESH_DEGENERATE
+    total[0] = area_sum
+    crossed[0] = rows
+    return VALUES_OK
+
+
 def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 const uint8_t[::1] samples, int64_t channels, const int64_t[::1] seq_order, int64_t step,
                 double bound, bint top_pinned, int64_t top, int64_t longest, int64_t width, int64_t rows):
@@ -262,10 +301,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     triangles, areas, width, rows) returns, from the same pass over the triangles (so
     that mesh.validate need not read them again). Every index is checked before it is
     used; values, areas and checks are None on an error."""
-    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q, a, b, c, xa, ya, area
-    cdef int64_t total = 0, crossed = 0, lo, hi, xb, yb, xc, yc
-    cdef const int64_t* V
-    cdef const int64_t* T
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q
+    cdef int64_t total = 0, crossed = 0
     cdef bint residual_bad = False, order_bad = False
     cdef uint64_t u
     cdef int64_t r
@@ -278,7 +315,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
         return status, None, None, None
     areas = np.empty(m, dtype=np.int64)
     zig_arr = np.empty(n * channels, dtype=np.int64)
-    scratch = np.full(n, -1, dtype=np.int64)
+    scratch = np.empty(n, dtype=np.int64)
     steps_arr = np.empty(n, dtype=np.int64)
     parent_arr = np.empty(n, dtype=np.int64)
     seq_arr = np.empty((n, channels), dtype=np.int64)
@@ -286,6 +323,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr, fan = fan_arr, zigzags = zig_arr
     cdef int64_t[:, ::1] seq = seq_arr
     with nogil:
+        for j in range(n):
+            pos[j] = -1
         # the varints (their count and lengths known good)
         if n * channels:
             _leb128_into(&samples[0], samples.shape[0], &zigzags[0])
@@ -304,37 +343,13 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                       else VALUES_RESIDUAL if residual_bad else VALUES_ORDER)
         else:
             checks = _vertices_inside(vertices, width, rows, &increasing)  # mesh_checks' vertex pass
-            # one pass over the triangles: their corners checked, doubled areas, the
-            # vertices' fan areas, the samples' parents (_doubled_areas, _vertex_steps'
-            # sums and _parents, each of which would read the corners again) and
-            # mesh_checks' sums; through raw pointers, which the compiler keeps in registers
+            # one pass over the triangles (_triangle_pass)
             for j in range(n):
                 fan[j] = 0
                 p[j] = -1
-            V = &vertices[0, 0] if n else NULL
-            T = &triangles[0, 0] if m else NULL
-            for k in range(m):
-                a = T[3 * k]; b = T[3 * k + 1]; c = T[3 * k + 2]
-                if <uint64_t>a >= <uint64_t>n or <uint64_t>b >= <uint64_t>n or <uint64_t>c >= <uint64_t>n:
-                    status = VALUES_CORNER
-                    break
-                xa = V[2 * a]; ya = V[2 * a + 1]
-                xb = V[2 * b]; yb = V[2 * b + 1]
-                xc = V[2 * c]; yc = V[2 * c + 1]
-                area = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya)
-                ar[k] = area
-                fan[a] += area
-                fan[b] += area
-                fan[c] += area
-                _parent_of(pos[a], pos[b], pos[c], &p[0])
-                if area <= 0 and checks == MESH_OK:
-                    checks = MESH_DEGENERATE
-                total += area
-                lo = ya if ya < yb else yb
-                lo = lo if lo < yc else yc
-                hi = ya if ya > yb else yb
-                hi = hi if hi > yc else yc
-                crossed += hi - lo + 1
+            if m:
+                status = _triangle_pass(&vertices[0, 0], n, &triangles[0, 0], m, &pos[0], &ar[0], &fan[0], &p[0],
+                                        &checks, &total, &crossed)
         if status == VALUES_OK:
             for j in range(n):
                 if p[j] < 0:
@@ -934,9 +949,15 @@ cdef enum:
 
 cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* buf) noexcept nogil:
     """argsort_keys' radix passes into buf (4 n + ARGSORT_BUCKETS entries); the sorted
-    places (a pointer into buf), NULL if a key lies outside 0..span-1."""
+    places (a pointer into buf), NULL if a key lies outside 0..span-1. Keys and places
+    that fit 32 bits each (every band's) move as one word, key above place: half the
+    stores of moving them apart."""
     cdef int64_t j, b, total, c, bits = 0, passes, digit, shift = 0, mask
     cdef bint bad = False
+    cdef uint64_t* w_src
+    cdef uint64_t* w_dst
+    cdef uint64_t* w_tmp
+    cdef uint64_t word, low32 = (<uint64_t>1 << 32) - 1
     while bits < 63 and (<int64_t>1 << bits) < span:
         bits += 1
     passes = (bits + 10) // 11
@@ -951,10 +972,41 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
     cdef int64_t* tmp
     for j in range(n):
         bad |= <uint64_t>keys[j] >= <uint64_t>span
-        k_src[j] = keys[j]
-        i_src[j] = j
     if bad:
         return NULL
+    if bits <= 32 and <uint64_t>n <= low32:
+        w_src = <uint64_t*>buf
+        w_dst = <uint64_t*>(buf + n)
+        for j in range(n):
+            w_src[j] = (<uint64_t>keys[j] << 32) | <uint64_t>j
+        shift = 32
+        while passes > 0:
+            for b in range(mask + 1):
+                count[b] = 0
+            for j in range(n):
+                count[(w_src[j] >> shift) & mask] += 1
+            total = 0
+            for b in range(mask + 1):
+                c = count[b]
+                count[b] = total
+                total += c
+            for j in range(n):
+                word = w_src[j]
+                b = (word >> shift) & mask
+                w_dst[count[b]] = word
+                count[b] += 1
+            w_tmp = w_src
+            w_src = w_dst
+            w_dst = w_tmp
+            shift += digit
+            passes -= 1
+        # the places, unpacked in the other half of the buffer
+        for j in range(n):
+            i_dst[j] = <int64_t>(w_src[j] & low32)
+        return i_dst
+    for j in range(n):
+        k_src[j] = keys[j]
+        i_src[j] = j
     while passes > 0:
         for b in range(mask + 1):
             count[b] = 0
@@ -1112,11 +1164,11 @@ cdef bint _front(const uint8_t* lengths_field, int64_t lengths_size, const uint8
     cdef int64_t* line_keys = first + total
     cdef int64_t* appear = line_keys + total
     cdef int64_t* line_places = appear + total
-    cdef int64_t* nums = line_places + total
+    cdef int64_t* nums = line_places + total + 1
     cdef int64_t* free_keys = nums + nf + 1
     cdef int64_t* curve_keys = free_keys + nf
     cdef int64_t* places = curve_keys + nf
-    cdef int64_t* sort_buf = places + nf
+    cdef int64_t* sort_buf = places + nf + 1
     cdef int64_t* order
     # the polylines: lengths, starts, steps, walked into their points' keys
     _leb128_into(lengths_field, lengths_size, lengths)
@@ -1225,10 +1277,10 @@ def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field
     cdef int64_t[::1] L = lengths, F = flat, S = seq
     cdef int64_t[:, ::1] W = walls, V = vertices
     most = total if total > nf else nf
-    # _front's layout: starts, steps, keys, rank, first, line keys, appear and line
-    # places (total each), nums (nf + 1), free keys, curve keys, places (nf each), and
-    # the radix sort's buffer
-    scratch = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 4 * nf + 1 + 4 * most
+    # _front's layout: starts, steps, keys, rank, first, line keys, appear (total
+    # each), line places (total + 1), nums (nf + 1), free keys, curve keys (nf each),
+    # places (nf + 1), and the radix sort's buffer
+    scratch = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 4 * nf + 3 + 4 * most
                                                    + ARGSORT_BUCKETS))
     if scratch == NULL:
         raise MemoryError("band_front: no memory for a band's scratch")
