@@ -7,7 +7,7 @@ one call, so that a file of many tiny bands pays no per-array numpy overhead the
 
 from libc.math cimport rint, sqrt
 from libc.stdlib cimport free, malloc
-from libc.string cimport memcpy
+from libc.string cimport memcpy, memset
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 
 import numpy as np
@@ -947,12 +947,22 @@ cdef enum:
     ARGSORT_BUCKETS = 2048  # buckets _argsort's digits need at most (11-bit digits)
 
 
+cdef inline void _bucket_starts(int64_t* count, int64_t buckets) noexcept nogil:
+    """Each bucket's count turned into the place its first key goes (an exclusive
+    running sum)."""
+    cdef int64_t b, c, total = 0
+    for b in range(buckets):
+        c = count[b]
+        count[b] = total
+        total += c
+
+
 cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* buf) noexcept nogil:
     """argsort_keys' radix passes into buf (4 n + ARGSORT_BUCKETS entries); the sorted
     places (a pointer into buf), NULL if a key lies outside 0..span-1. Keys and places
     that fit 32 bits each (every band's) move as one word, key above place: half the
     stores of moving them apart."""
-    cdef int64_t j, b, total, c, bits = 0, passes, digit, shift = 0, mask
+    cdef int64_t j, b, bits = 0, passes, digit, shift = 0, mask
     cdef bint bad = False
     cdef uint64_t* w_src
     cdef uint64_t* w_dst
@@ -981,15 +991,10 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
             w_src[j] = (<uint64_t>keys[j] << 32) | <uint64_t>j
         shift = 32
         while passes > 0:
-            for b in range(mask + 1):
-                count[b] = 0
+            memset(count, 0, (mask + 1) * sizeof(int64_t))
             for j in range(n):
                 count[(w_src[j] >> shift) & mask] += 1
-            total = 0
-            for b in range(mask + 1):
-                c = count[b]
-                count[b] = total
-                total += c
+            _bucket_starts(count, mask + 1)
             for j in range(n):
                 word = w_src[j]
                 b = (word >> shift) & mask
@@ -1008,15 +1013,10 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
         k_src[j] = keys[j]
         i_src[j] = j
     while passes > 0:
-        for b in range(mask + 1):
-            count[b] = 0
+        memset(count, 0, (mask + 1) * sizeof(int64_t))
         for j in range(n):
             count[(k_src[j] >> shift) & mask] += 1
-        total = 0
-        for b in range(mask + 1):
-            c = count[b]
-            count[b] = total
-            total += c
+        _bucket_starts(count, mask + 1)
         for j in range(n):
             b = (k_src[j] >> shift) & mask
             k_dst[count[b]] = k_src[j]
