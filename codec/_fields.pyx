@@ -1295,3 +1295,38 @@ def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field
     if not ok:
         return refused
     return FRONT_OK, vertices, flat, lengths, walls, seq
+
+
+def stack_bands(list vertex_arrays, list triangle_arrays, const int64_t[::1] rows_down):
+    """(vertices, triangles): consecutive bands' vertices (each N x 2 int64) moved down
+    by their band's rows_down, one after another, and their triangles (each M x 3
+    int64) renumbered to follow (stream.stack_bands), in one pass over each array
+    instead of numpy's temporaries per band."""
+    cdef Py_ssize_t bands = len(vertex_arrays), b
+    cdef int64_t nv = 0, nt = 0, at = 0, first = 0, j, shift, offset
+    cdef const int64_t[:, ::1] v
+    cdef const int64_t[:, ::1] t
+    if len(triangle_arrays) != bands or rows_down.shape[0] != bands:
+        raise ValueError("stack_bands: vertices, triangles and a shift for each band")
+    for b in range(bands):
+        nv += len(vertex_arrays[b])
+        nt += len(triangle_arrays[b])
+    vertices = np.empty((nv, 2), dtype=np.int64)
+    triangles = np.empty((nt, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] ov = vertices, ot = triangles
+    for b in range(bands):
+        v = vertex_arrays[b]
+        t = triangle_arrays[b]
+        shift = rows_down[b]
+        offset = first
+        with nogil:
+            for j in range(v.shape[0]):
+                ov[first + j, 0] = v[j, 0]
+                ov[first + j, 1] = v[j, 1] + shift
+            for j in range(t.shape[0]):
+                ot[at + j, 0] = t[j, 0] + offset
+                ot[at + j, 1] = t[j, 1] + offset
+                ot[at + j, 2] = t[j, 2] + offset
+        first += v.shape[0]
+        at += t.shape[0]
+    return vertices, triangles

@@ -575,3 +575,20 @@ def test_band_front_is_the_separate_passes(hilbert: bool) -> None:
             refused += 1
             assert slow is None, "band_front refused fields the separate passes accept"
     assert accepted > 300 and refused > 300
+
+
+def test_stack_bands_moves_and_renumbers_as_numpy() -> None:
+    """_fields.stack_bands (stream.stack_bands' compiled pass) gives numpy's
+    concatenation of each band's vertices moved down and triangles renumbered,
+    empty bands included."""
+    rng = np.random.default_rng(5)
+    sizes = [(5, 4), (0, 0), (9, 11), (1, 0)]
+    vs = [rng.integers(0, 50, (n, 2)).astype(np.int64) for n, _ in sizes]
+    ts = [rng.integers(0, max(n, 1), (m, 3)).astype(np.int64) for n, m in sizes]
+    down = np.array([0, 7, 7, 30], np.int64)
+    vertices, triangles = meshcode._fields.stack_bands(vs, ts, down)
+    offsets = np.cumsum([0] + [len(v) for v in vs[:-1]])
+    assert np.array_equal(vertices, np.concatenate([v + [0, d] for v, d in zip(vs, down)]))
+    assert np.array_equal(triangles, np.concatenate([t + o for t, o in zip(ts, offsets)]))
+    with pytest.raises(ValueError):
+        meshcode._fields.stack_bands(vs, ts[:-1], down)
