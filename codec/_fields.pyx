@@ -165,15 +165,14 @@ cdef void _steps_of_fans(const int64_t[::1] fan, int64_t step, double bound, int
     areas; m triangles)."""
     cdef int64_t n = steps.shape[0], i, total = 0, some = 0
     cdef double mean, factor, s, least = 1.0 / bound  # once: the compiler keeps a division in the loop
-    for i in range(n):
-        steps[i] = step
-    if step <= 1 or m == 0:
-        return
-    for i in range(n):
-        if fan[i] > 0:
-            total += fan[i]
-            some += 1
+    if step > 1 and m:
+        for i in range(n):
+            if fan[i] > 0:
+                total += fan[i]
+                some += 1
     if some == 0:
+        for i in range(n):
+            steps[i] = step
         return
     mean = <double>total / <double>some
     for i in range(n):
@@ -183,6 +182,8 @@ cdef void _steps_of_fans(const int64_t[::1] fan, int64_t step, double bound, int
             s = rint(<double>step * factor)
             s = 1.0 if s < 1.0 else (65535.0 if s > 65535.0 else s)
             steps[i] = <int64_t>s
+        else:
+            steps[i] = step
 
 
 def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step,
@@ -325,6 +326,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     with nogil:
         for j in range(n):
             pos[j] = -1
+            fan[j] = 0
+            p[j] = -1
         # the varints (their count and lengths known good)
         if n * channels:
             _leb128_into(&samples[0], samples.shape[0], &zigzags[0])
@@ -344,23 +347,17 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
         else:
             checks = _vertices_inside(vertices, width, rows, &increasing)  # mesh_checks' vertex pass
             # one pass over the triangles (_triangle_pass)
-            for j in range(n):
-                fan[j] = 0
-                p[j] = -1
             if m:
                 status = _triangle_pass(&vertices[0, 0], n, &triangles[0, 0], m, &pos[0], &ar[0], &fan[0], &p[0],
                                         &checks, &total, &crossed)
         if status == VALUES_OK:
-            for j in range(n):
-                if p[j] < 0:
-                    p[j] = j - 1
             _steps_of_fans(fan, step, bound, m, steps)
             if top_pinned:
                 for i in range(n):
                     if vertices[i, 1] == 0:
                         steps[i] = 1
             for j in range(n):
-                q = p[j]
+                q = p[j] if p[j] >= 0 else j - 1  # no earlier neighbour: the sample before
                 for ch in range(channels):
                     u = <uint64_t>zigzags[j * channels + ch]
                     r = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
