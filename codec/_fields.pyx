@@ -954,17 +954,27 @@ cdef inline void _bucket_starts(int64_t* count, int64_t buckets) noexcept nogil:
         total += c
 
 
+cdef inline bint _packed(int64_t n, int64_t span) noexcept nogil:
+    """Whether _argsort moves each key and its place as one word (both below 2**32)."""
+    return span <= (<int64_t>1 << 32) and n <= (<int64_t>1 << 32)
+
+
+cdef inline int64_t _argsort_words(int64_t n, int64_t span) noexcept nogil:
+    """The int64 words of buffer _argsort needs."""
+    return (2 if _packed(n, span) else 4) * n + ARGSORT_BUCKETS
+
+
 cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* buf) noexcept nogil:
-    """argsort_keys' radix passes into buf (4 n + ARGSORT_BUCKETS entries); the sorted
-    places (a pointer into buf), NULL if a key lies outside 0..span-1. Keys and places
-    that fit 32 bits each (every band's) move as one word, key above place: half the
-    stores of moving them apart."""
+    """argsort_keys' radix passes into buf (_argsort_words(n, span) entries); the
+    sorted places (a pointer into buf), NULL if a key lies outside 0..span-1. Keys and
+    places that fit 32 bits each (every band's) move as one word, key above place:
+    half the stores and half the buffer of moving them apart."""
     cdef int64_t j, b, bits = 0, passes, digit, shift = 0, mask
     cdef bint bad = False
     cdef uint64_t* w_src
     cdef uint64_t* w_dst
     cdef uint64_t* w_tmp
-    cdef uint64_t word, low32 = (<uint64_t>1 << 32) - 1
+    cdef uint64_t word, low32 = (<uint64_t>1 << 32) - 1  # (a key below 2**32 has at most 32 bits)
     while bits < 63 and (<int64_t>1 << bits) < span:
         bits += 1
     passes = (bits + 10) // 11
@@ -981,9 +991,10 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
         bad |= <uint64_t>keys[j] >= <uint64_t>span
     if bad:
         return NULL
-    if bits <= 32 and <uint64_t>n <= low32:
+    if _packed(n, span):
         w_src = <uint64_t*>buf
         w_dst = <uint64_t*>(buf + n)
+        count = buf + 2 * n
         for j in range(n):
             w_src[j] = (<uint64_t>keys[j] << 32) | <uint64_t>j
         shift = 32
@@ -1002,10 +1013,10 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
             w_dst = w_tmp
             shift += digit
             passes -= 1
-        # the places, unpacked in the other half of the buffer
+        # the places, unpacked where their words were
         for j in range(n):
-            i_dst[j] = <int64_t>(w_src[j] & low32)
-        return i_dst
+            (<int64_t*>w_src)[j] = <int64_t>(w_src[j] & low32)
+        return <int64_t*>w_src
     for j in range(n):
         k_src[j] = keys[j]
         i_src[j] = j
@@ -1039,7 +1050,7 @@ def argsort_keys(const int64_t[::1] keys, int64_t span):
     sort cost more than the rest of the field decoding). None if a key lies outside
     0..span-1."""
     cdef int64_t n = keys.shape[0]
-    buf = np.empty(4 * n + ARGSORT_BUCKETS, dtype=np.int64)
+    buf = np.empty(_argsort_words(n, span), dtype=np.int64)
     cdef int64_t[::1] whole = buf
     cdef int64_t* out
     with nogil:
@@ -1148,12 +1159,13 @@ cdef bint _front(const uint8_t* lengths_field, int64_t lengths_size, const uint8
                  int64_t n, int64_t nf, int64_t width, int64_t rows, bint by_rows, int64_t curve_span,
                  int64_t max_bits, const int64_t* digit, const int64_t* nxt, const int64_t* xy, const int64_t* back,
                  int g, int64_t groups, int64_t start, int64_t* lengths, int64_t* flat, int64_t* walls,
-                 int64_t* vertices, int64_t* seq, int64_t* scratch) noexcept nogil:
+                 int64_t* vertices, int64_t* seq, int64_t* lines, int64_t* frees, int64_t* sort_buf) noexcept nogil:
     """band_front's passes, its fields' varint counts checked (nf + 1 positions), into
-    its arrays; scratch as band_front lays it out. False if anything is wrong."""
+    its arrays; lines, frees and sort_buf: scratch as band_front sizes them. False if
+    anything is wrong."""
     cdef int64_t nsteps = total - count, pixels = width * rows, span = pixels if by_rows else curve_span
-    cdef int64_t most = total if total > nf else nf, nl = 0, j, bits, pad, x, y
-    cdef int64_t* starts = scratch
+    cdef int64_t nl = 0, j, bits, pad, x, y
+    cdef int64_t* starts = lines
     cdef int64_t* steps = starts + count
     cdef int64_t* keys = steps + 2 * nsteps
     cdef int64_t* rank = keys + total
@@ -1161,11 +1173,10 @@ cdef bint _front(const uint8_t* lengths_field, int64_t lengths_size, const uint8
     cdef int64_t* line_keys = first + total
     cdef int64_t* appear = line_keys + total
     cdef int64_t* line_places = appear + total
-    cdef int64_t* nums = line_places + total + 1
+    cdef int64_t* nums = frees
     cdef int64_t* free_keys = nums + nf + 1
     cdef int64_t* curve_keys = free_keys + nf
     cdef int64_t* places = curve_keys + nf
-    cdef int64_t* sort_buf = places + nf + 1
     cdef int64_t* order
     # the polylines: lengths, starts, steps, walked into their points' keys
     _leb128_into(lengths_field, lengths_size, lengths)
@@ -1249,7 +1260,9 @@ def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field
     checked against the fields' own varints before anything is allocated."""
     cdef int64_t size = 4 << (2 * g), nsteps = total - count, np_ = -1, nf, most
     cdef bint ok = False
-    cdef int64_t* scratch
+    cdef int64_t* lines
+    cdef int64_t* frees
+    cdef int64_t* sort_buf
     refused = (FRONT_REFUSED, None, None, None, None, None)
     if digit.shape[0] != size or nxt.shape[0] != size or xy.shape[0] != size or back.shape[0] != size or \
             not 0 <= start < size or longest > 9 or width < 1 or rows < 1 or max_bits > 32:
@@ -1273,13 +1286,19 @@ def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field
     seq = np.empty(n, dtype=np.int64)
     cdef int64_t[::1] L = lengths, F = flat, S = seq
     cdef int64_t[:, ::1] W = walls, V = vertices
+    # scratch in three pieces, each smaller than the band's vertices and triangles
+    # (one piece of them all was the decode's largest allocation, which glibc maps
+    # afresh, page faults and all, every time): the polylines' starts, steps, keys,
+    # rank, first, line keys, appear and line places; the positions' numbers, free
+    # keys, curve keys and places; the radix sorts' buffer
     most = total if total > nf else nf
-    # _front's layout: starts, steps, keys, rank, first, line keys, appear (total
-    # each), line places (total + 1), nums (nf + 1), free keys, curve keys (nf each),
-    # places (nf + 1), and the radix sort's buffer
-    scratch = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 4 * nf + 3 + 4 * most
-                                                   + ARGSORT_BUCKETS))
-    if scratch == NULL:
+    lines = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 1))
+    frees = <int64_t*>malloc(sizeof(int64_t) * (4 * nf + 2))
+    sort_buf = <int64_t*>malloc(sizeof(int64_t) * _argsort_words(most, max(width * rows, curve_span)))
+    if lines == NULL or frees == NULL or sort_buf == NULL:
+        free(lines)
+        free(frees)
+        free(sort_buf)
         raise MemoryError("band_front: no memory for a band's scratch")
     with nogil:
         ok = _front(_bytes(lengths_field), lengths_field.shape[0], _bytes(starts_field), starts_field.shape[0],
@@ -1287,8 +1306,10 @@ def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field
                     _bytes(position_bits), position_bits.shape[0], n, nf, width, rows, by_rows, curve_span, max_bits,
                     &digit[0], &nxt[0], &xy[0], &back[0], g, groups, start, &L[0] if count else NULL,
                     &F[0] if total else NULL, &W[0, 0] if nsteps else NULL, &V[0, 0] if n else NULL,
-                    &S[0] if n else NULL, scratch)
-        free(scratch)
+                    &S[0] if n else NULL, lines, frees, sort_buf)
+        free(lines)
+        free(frees)
+        free(sort_buf)
     if not ok:
         return refused
     return FRONT_OK, vertices, flat, lengths, walls, seq
