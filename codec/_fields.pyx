@@ -6,7 +6,8 @@ CorruptError with their own messages. band_values does a band's whole sample sta
 one call, so that a file of many tiny bands pays no per-array numpy overhead there."""
 
 from libc.math cimport rint, sqrt
-from libc.string cimport memcpy
+from libc.stdlib cimport free, malloc
+from libc.string cimport memcpy, memset
 from libc.stdint cimport int64_t, uint8_t, uint16_t, uint32_t, uint64_t
 
 import numpy as np
@@ -17,48 +18,27 @@ cpdef enum Varints:
     VARINTS_LONG = 2    # a number is longer than the longest allowed
 
 
-cdef int64_t _leb128(const uint8_t[::1] data, int64_t longest, int64_t[::1] out) noexcept nogil:
-    """The LEB128 numbers of data into out (room for each number data ends); stops
-    inside a number that reaches `longest` bytes unfinished and returns its bytes so
-    far (0: every number ended)."""
-    cdef int64_t i, k = 0, length = 0
-    cdef uint64_t value = 0
-    cdef int shift = 0
-    for i in range(data.shape[0]):
-        value |= <uint64_t>(data[i] & 0x7F) << shift
-        shift += 7
-        length += 1
-        if data[i] < 0x80:
-            out[k] = <int64_t>value
-            k += 1
-            value = 0
-            shift = 0
-            length = 0
-        elif length >= longest:
-            break
-    return length
-
-
 def unvarints(const uint8_t[::1] data, int64_t count, int64_t longest):
     """(status, values): exactly `count` unsigned LEB128 numbers filling `data`, none
     longer than `longest` bytes (<= 9, so every value fits an int64). The count is
     checked before anything is allocated: a file cannot make it allocate more than
     its own length (values is None on an error)."""
-    cdef int64_t n = data.shape[0], i, ends = 0, length = 0
+    cdef int64_t n = data.shape[0], ends
+    cdef bint long_ = False
     if longest > 9 or count < 0:
         raise ValueError("unvarints: at most 9 bytes a number, and a count >= 0")
     with nogil:
-        # the count first: the number of last bytes, and a last byte at the end
-        for i in range(n):
-            ends += data[i] < 0x80
-    if ends != count or (n and data[n - 1] >= 0x80):
+        ends = _varint_scan(&data[0] if n else NULL, n, longest, &long_)
+    # the count first: a file cannot make it allocate more than its own length
+    if ends != count:
         return VARINTS_COUNT, None
+    if long_:
+        return VARINTS_LONG, None
     out = np.empty(count, dtype=np.int64)
     cdef int64_t[::1] o = out
-    with nogil:
-        length = _leb128(data, longest, o)
-    if length:  # stopped inside a number longer than `longest`
-        return VARINTS_LONG, None
+    if count:
+        with nogil:
+            _leb128_into(&data[0], n, &o[0])
     return VARINTS_OK, out
 
 
@@ -184,25 +164,26 @@ cdef void _steps_of_fans(const int64_t[::1] fan, int64_t step, double bound, int
     """_vertex_steps from the vertices' fan areas (sums of their triangles' doubled
     areas; m triangles)."""
     cdef int64_t n = steps.shape[0], i, total = 0, some = 0
-    cdef double mean, factor, s
-    for i in range(n):
-        steps[i] = step
-    if step <= 1 or m == 0:
-        return
-    for i in range(n):
-        if fan[i] > 0:
-            total += fan[i]
-            some += 1
+    cdef double mean, factor, s, least = 1.0 / bound  # once: the compiler keeps a division in the loop
+    if step > 1 and m:
+        for i in range(n):
+            if fan[i] > 0:
+                total += fan[i]
+                some += 1
     if some == 0:
+        for i in range(n):
+            steps[i] = step
         return
     mean = <double>total / <double>some
     for i in range(n):
         if fan[i] > 0:
             factor = sqrt(mean / <double>fan[i])
-            factor = 1.0 / bound if factor < 1.0 / bound else (bound if factor > bound else factor)
+            factor = least if factor < least else (bound if factor > bound else factor)
             s = rint(<double>step * factor)
             s = 1.0 if s < 1.0 else (65535.0 if s > 65535.0 else s)
             steps[i] = <int64_t>s
+        else:
+            steps[i] = step
 
 
 def vertex_steps(const int64_t[:, ::1] triangles, const int64_t[::1] areas, int64_t n, int64_t step,
@@ -261,18 +242,49 @@ cdef int _varint_count(const uint8_t[::1] data, int64_t count, int64_t longest) 
     """unvarints' refusals of `data` without decoding it: VALUES_COUNT unless it holds
     exactly `count` numbers (checked first, as unvarints does), VALUES_LONG if a number
     has more than `longest` bytes (a run of `longest` continuation bytes)."""
-    cdef int64_t n = data.shape[0], i, ends = 0, run = 0
     cdef bint long_ = False
-    for i in range(n):
-        if data[i] < 0x80:
-            ends += 1
-            run = 0
-        else:
-            run += 1
-            long_ |= run >= longest
-    if ends != count or (n and data[n - 1] >= 0x80):
+    if _varint_scan(&data[0] if data.shape[0] else NULL, data.shape[0], longest, &long_) != count:
         return VALUES_COUNT
     return VALUES_LONG if long_ else VALUES_OK
+
+
+cdef int _triangle_pass(const int64_t* V, int64_t n, const int64_t* T, int64_t m, const int64_t* pos,
+                        int64_t* ar, int64_t* fan, int64_t* p, int* checks, int64_t* total,
+                        int64_t* crossed) noexcept nogil:
+    """band_values' one pass over the triangles: their corners checked (VALUES_CORNER
+    at the first beyond the n vertices), doubled areas (ar), the vertices' fan areas
+    (fan, zeroed), the samples' parents (_parent_of: p, all -1, from pos) and
+    mesh_checks' sums (checks: MESH_DEGENERATE at a triangle of area <= 0; total
+    area; rows crossed plus the count). _doubled_areas, _vertex_steps' sums and
+    _parents would each read the corners again; a function of its own, so that the
+    compiler keeps its pointers and sums in registers."""
+    cdef int64_t k, a, b, c, xa, ya, xb, yb, xc, yc, area, lo, hi, area_sum = 0, rows = 0
+    cdef bint flat = False
+    for k in range(m):
+        a = T[3 * k]; b = T[3 * k + 1]; c = T[3 * k + 2]
+        if <uint64_t>a >= <uint64_t>n or <uint64_t>b >= <uint64_t>n or <uint64_t>c >= <uint64_t>n:
+            return VALUES_CORNER
+        xa = V[2 * a]; ya = V[2 * a + 1]
+        xb = V[2 * b]; yb = V[2 * b + 1]
+        xc = V[2 * c]; yc = V[2 * c + 1]
+        area = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya)
+        ar[k] = area
+        fan[a] += area
+        fan[b] += area
+        fan[c] += area
+        _parent_of(pos[a], pos[b], pos[c], p)
+        flat |= area <= 0
+        area_sum += area
+        lo = ya if ya < yb else yb
+        lo = lo if lo < yc else yc
+        hi = ya if ya > yb else yb
+        hi = hi if hi > yc else yc
+        rows += hi - lo + 1
+    if flat and checks[0] == MESH_OK:
+        checks[0] = MESH_DEGENERATE
+    total[0] = area_sum
+    crossed[0] = rows
+    return VALUES_OK
 
 
 def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
@@ -290,10 +302,8 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     triangles, areas, width, rows) returns, from the same pass over the triangles (so
     that mesh.validate need not read them again). Every index is checked before it is
     used; values, areas and checks are None on an error."""
-    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q, a, b, c, xa, ya, area
-    cdef int64_t total = 0, crossed = 0, lo, hi, xb, yb, xc, yc
-    cdef const int64_t* V
-    cdef const int64_t* T
+    cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q
+    cdef int64_t total = 0, crossed = 0
     cdef bint residual_bad = False, order_bad = False
     cdef uint64_t u
     cdef int64_t r
@@ -306,7 +316,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
         return status, None, None, None
     areas = np.empty(m, dtype=np.int64)
     zig_arr = np.empty(n * channels, dtype=np.int64)
-    scratch = np.full(n, -1, dtype=np.int64)
+    scratch = np.empty(n, dtype=np.int64)
     steps_arr = np.empty(n, dtype=np.int64)
     parent_arr = np.empty(n, dtype=np.int64)
     seq_arr = np.empty((n, channels), dtype=np.int64)
@@ -314,8 +324,13 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr, fan = fan_arr, zigzags = zig_arr
     cdef int64_t[:, ::1] seq = seq_arr
     with nogil:
+        for j in range(n):
+            pos[j] = -1
+            fan[j] = 0
+            p[j] = -1
         # the varints (their count and lengths known good)
-        _leb128(samples, longest, zigzags)
+        if n * channels:
+            _leb128_into(&samples[0], samples.shape[0], &zigzags[0])
         for j in range(n * channels):
             # zigzag(r) <= 2 top iff |r| <= top (unsigned: a 9-byte varint may wrap)
             residual_bad |= <uint64_t>zigzags[j] > <uint64_t>(2 * top)
@@ -331,48 +346,18 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                       else VALUES_RESIDUAL if residual_bad else VALUES_ORDER)
         else:
             checks = _vertices_inside(vertices, width, rows, &increasing)  # mesh_checks' vertex pass
-            # one pass over the triangles: their corners checked, doubled areas, the
-            # vertices' fan areas, the samples' parents (_doubled_areas, _vertex_steps'
-            # sums and _parents, each of which would read the corners again) and
-            # mesh_checks' sums; through raw pointers, which the compiler keeps in registers
-            for j in range(n):
-                fan[j] = 0
-                p[j] = -1
-            V = &vertices[0, 0] if n else NULL
-            T = &triangles[0, 0] if m else NULL
-            for k in range(m):
-                a = T[3 * k]; b = T[3 * k + 1]; c = T[3 * k + 2]
-                if <uint64_t>a >= <uint64_t>n or <uint64_t>b >= <uint64_t>n or <uint64_t>c >= <uint64_t>n:
-                    status = VALUES_CORNER
-                    break
-                xa = V[2 * a]; ya = V[2 * a + 1]
-                xb = V[2 * b]; yb = V[2 * b + 1]
-                xc = V[2 * c]; yc = V[2 * c + 1]
-                area = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya)
-                ar[k] = area
-                fan[a] += area
-                fan[b] += area
-                fan[c] += area
-                _parent_of(pos[a], pos[b], pos[c], &p[0])
-                if area <= 0 and checks == MESH_OK:
-                    checks = MESH_DEGENERATE
-                total += area
-                lo = ya if ya < yb else yb
-                lo = lo if lo < yc else yc
-                hi = ya if ya > yb else yb
-                hi = hi if hi > yc else yc
-                crossed += hi - lo + 1
+            # one pass over the triangles (_triangle_pass)
+            if m:
+                status = _triangle_pass(&vertices[0, 0], n, &triangles[0, 0], m, &pos[0], &ar[0], &fan[0], &p[0],
+                                        &checks, &total, &crossed)
         if status == VALUES_OK:
-            for j in range(n):
-                if p[j] < 0:
-                    p[j] = j - 1
             _steps_of_fans(fan, step, bound, m, steps)
             if top_pinned:
                 for i in range(n):
                     if vertices[i, 1] == 0:
                         steps[i] = 1
             for j in range(n):
-                q = p[j]
+                q = p[j] if p[j] >= 0 else j - 1  # no earlier neighbour: the sample before
                 for ch in range(channels):
                     u = <uint64_t>zigzags[j * channels + ch]
                     r = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
@@ -584,38 +569,59 @@ cdef void _count_sort_rows(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int6
             out[j, 0] = a; out[j, 1] = b; out[j, 2] = c
 
 
+cdef bint _position_keys(const int64_t* high, int64_t n, const uint8_t* packed, int bits, int64_t span,
+                         int64_t* o) noexcept nogil:
+    """position_keys' pass into o (n); False if a gap or a key reaches span."""
+    cdef int64_t j, gap, key = -1, low, at
+    cdef int b
+    for j in range(n):
+        if high[j] < 0 or high[j] >= span:
+            return False
+        low = 0
+        at = j * bits
+        for b in range(bits):
+            low = (low << 1) | ((packed[(at + b) >> 3] >> (7 - ((at + b) & 7))) & 1)
+        gap = (high[j] << bits) | low
+        if gap >= span:
+            return False
+        key += gap + 1
+        if key >= span:
+            return False
+        o[j] = key
+    return True
+
+
 def position_keys(const int64_t[::1] high, const uint8_t[::1] packed, int bits, int64_t span):
     """(ok, keys): the keys of the free vertices from their stored gaps (ATM.md
     §4.2.2): gap j is high[j] shifted left by `bits` plus the j-th `bits`-bit field of
     `packed` (big-endian bit order), each key the previous plus the gap plus one, from
     -1. ok is False (keys None) if a gap or a key reaches `span`, checked before the
     sum can overflow. packed must hold len(high) * bits bits (the caller checks)."""
-    cdef int64_t n = high.shape[0], j, gap, key = -1, low, at
-    cdef int b
+    cdef int64_t n = high.shape[0]
     cdef bint ok = True
     if bits < 0 or bits > 32 or packed.shape[0] * 8 < n * bits or span < 0:
         raise ValueError("position_keys: 0..32 low bits, all of them in `packed`")
     out = np.empty(n, dtype=np.int64)
     cdef int64_t[::1] o = out
-    with nogil:
-        for j in range(n):
-            if high[j] < 0 or high[j] >= span:
-                ok = False
-                break
-            low = 0
-            at = j * bits
-            for b in range(bits):
-                low = (low << 1) | ((packed[(at + b) >> 3] >> (7 - ((at + b) & 7))) & 1)
-            gap = (high[j] << bits) | low
-            if gap >= span:
-                ok = False
-                break
-            key += gap + 1
-            if key >= span:
-                ok = False
-                break
-            o[j] = key
+    if n:
+        with nogil:
+            ok = _position_keys(&high[0], n, &packed[0] if packed.shape[0] else NULL, bits, span, &o[0])
     return (True, out) if ok else (False, None)
+
+
+cdef inline void _hilbert_point(int64_t d, const int64_t* xy, const int64_t* back, int g, int64_t groups,
+                                int64_t start, int64_t* px, int64_t* py) noexcept nogil:
+    """hilbert_points of one key (the tables' sizes checked by the caller)."""
+    cdef int64_t k = (groups - 1) * 2 * g, i, x = 0, y = 0, state = start
+    cdef int64_t mask = (1 << (2 * g)) - 1, low = (1 << g) - 1, size = 4 << (2 * g)
+    while k >= 0:
+        i = (((d >> k) & mask) | state) & (size - 1)
+        x = (x << g) | (xy[i] >> g)
+        y = (y << g) | (xy[i] & low)
+        state = back[i]
+        k -= 2 * g
+    px[0] = x
+    py[0] = y
 
 
 def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::1] back,
@@ -623,8 +629,8 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
     """coding.hilbert_points' state machine, a key at a time: (x, y) of each key from
     the inverse group tables (xy, back: 4 << 2g entries; back holds the next state
     shifted by 2g). Every lookup is masked into the tables."""
-    cdef int64_t n = d.shape[0], j, k, i, x, y, state
-    cdef int64_t mask = (1 << (2 * g)) - 1, low = (1 << g) - 1, size = 4 << (2 * g)
+    cdef int64_t n = d.shape[0], j
+    cdef int64_t size = 4 << (2 * g)
     if xy.shape[0] != size or back.shape[0] != size or not 0 <= start < size:
         raise ValueError("hilbert_points: tables of 4 << 2g entries")
     xs = np.empty(n, dtype=np.int64)
@@ -632,18 +638,7 @@ def hilbert_points(const int64_t[::1] d, const int64_t[::1] xy, const int64_t[::
     cdef int64_t[::1] ox = xs, oy = ys
     with nogil:
         for j in range(n):
-            x = 0
-            y = 0
-            state = start
-            k = (groups - 1) * 2 * g
-            while k >= 0:
-                i = (((d[j] >> k) & mask) | state) & (size - 1)
-                x = (x << g) | (xy[i] >> g)
-                y = (y << g) | (xy[i] & low)
-                state = back[i]
-                k -= 2 * g
-            ox[j] = x
-            oy[j] = y
+            _hilbert_point(d[j], &xy[0], &back[0], g, groups, start, &ox[j], &oy[j])
     return xs, ys
 
 
@@ -705,6 +700,79 @@ cdef inline int _quadrant(int64_t dx, int64_t dy) noexcept nogil:
     return 2 if dx < 0 else 3
 
 
+cdef int _chains(const int64_t* lengths, int64_t count, const int64_t* starts, bint started,
+                 const int64_t* steps, bint given, int64_t total, int64_t width, int64_t rows,
+                 int64_t* st, int64_t* o) noexcept nogil:
+    """chains' passes (given: the steps' varints were good, and the starts'): the
+    status, the keys in o (total) when CHAINS_OK and given; st: scratch of two per step."""
+    cdef int64_t i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
+    cdef int64_t pixels = width * rows, nsteps = total - count
+    cdef uint64_t u
+    cdef int turn, q
+    cdef int status = CHAINS_OK
+    for i in range(count):
+        if lengths[i] < 2:
+            status = CHAINS_LENGTHS
+        s += lengths[i]  # each below 2**35: no overflow
+    if status == CHAINS_OK and s != total:
+        status = CHAINS_LENGTHS
+    if status == CHAINS_OK and started:
+        for i in range(count):
+            u = <uint64_t>starts[i]
+            key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+            if key < 0 or key >= pixels:
+                status = CHAINS_START
+                break
+    if status == CHAINS_OK and given:
+        for j in range(2 * nsteps):
+            u = <uint64_t>steps[j]
+            st[j] = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+        for j in range(nsteps):
+            if st[2 * j] == 0 and st[2 * j + 1] == 0:
+                status = CHAINS_EMPTY
+                break
+    if status == CHAINS_OK and given:
+        # a step's turn is the sum of the stored quadrants before it on its polyline
+        j = 0
+        for i in range(count):
+            turn = 0
+            for k in range(lengths[i] - 1):
+                dx = st[2 * j]; dy = st[2 * j + 1]
+                q = _quadrant(dx, dy)
+                if turn == 1:
+                    t = dx; dx = -dy; dy = t
+                elif turn == 2:
+                    dx = -dx; dy = -dy
+                elif turn == 3:
+                    t = dx; dx = dy; dy = -t
+                if dx >= width or -dx >= width or dy >= rows or -dy >= rows:
+                    status = CHAINS_LONG
+                st[2 * j] = dx; st[2 * j + 1] = dy
+                turn = (turn + q) & 3
+                j += 1
+    if status == CHAINS_OK and given:
+        key = 0
+        j = 0
+        first = 0
+        for i in range(count):
+            u = <uint64_t>starts[i]
+            key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
+            x = key % width
+            y = key // width
+            o[first] = key
+            for k in range(1, lengths[i]):
+                x += st[2 * j]; y += st[2 * j + 1]
+                j += 1
+                if x < 0 or x >= width or y < 0 or y >= rows:
+                    status = CHAINS_LEAVES
+                    break
+                o[first + k] = y * width + x
+            if status != CHAINS_OK:
+                break
+            first += lengths[i]
+    return status
+
+
 def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[::1] steps,
            int64_t total, int64_t width, int64_t rows):
     """(status, chain keys): meshcode._polylines' passes over a band's polylines
@@ -716,10 +784,7 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
     wrong in two ways gets the same message; keys is None on an error. Every sum is
     checked before it can overflow: the varints are below 2**35. starts or steps
     None (their varints were bad): the checks stop before that field, keys None."""
-    cdef int64_t count = lengths.shape[0], i, j, k, s = 0, key = 0, first, x, y, dx, dy, t
-    cdef int64_t pixels = width * rows, nsteps = total - count
-    cdef uint64_t u
-    cdef int turn, q
+    cdef int64_t count = lengths.shape[0], nsteps = total - count
     cdef bint given = steps is not None, started = starts is not None
     given = given and started
     if width < 1 or rows < 1 or (started and starts.shape[0] != count) or (given and steps.shape[0] != 2 * nsteps):
@@ -727,69 +792,49 @@ def chains(const int64_t[::1] lengths, const int64_t[::1] starts, const int64_t[
     keys = np.empty(total, dtype=np.int64)
     turned = np.empty(2 * nsteps if nsteps > 0 else 0, dtype=np.int64)
     cdef int64_t[::1] o = keys, st = turned
-    cdef int status = CHAINS_OK
+    cdef int status
     with nogil:
-        for i in range(count):
-            if lengths[i] < 2:
-                status = CHAINS_LENGTHS
-            s += lengths[i]  # each below 2**35: no overflow
-        if status == CHAINS_OK and s != total:
-            status = CHAINS_LENGTHS
-        if status == CHAINS_OK and started:
-            for i in range(count):
-                u = <uint64_t>starts[i]
-                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
-                if key < 0 or key >= pixels:
-                    status = CHAINS_START
-                    break
-        if status == CHAINS_OK and given:
-            for j in range(2 * nsteps):
-                u = <uint64_t>steps[j]
-                st[j] = <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
-            for j in range(nsteps):
-                if st[2 * j] == 0 and st[2 * j + 1] == 0:
-                    status = CHAINS_EMPTY
-                    break
-        if status == CHAINS_OK and given:
-            # a step's turn is the sum of the stored quadrants before it on its polyline
-            j = 0
-            for i in range(count):
-                turn = 0
-                for k in range(lengths[i] - 1):
-                    dx = st[2 * j]; dy = st[2 * j + 1]
-                    q = _quadrant(dx, dy)
-                    if turn == 1:
-                        t = dx; dx = -dy; dy = t
-                    elif turn == 2:
-                        dx = -dx; dy = -dy
-                    elif turn == 3:
-                        t = dx; dx = dy; dy = -t
-                    if dx >= width or -dx >= width or dy >= rows or -dy >= rows:
-                        status = CHAINS_LONG
-                    st[2 * j] = dx; st[2 * j + 1] = dy
-                    turn = (turn + q) & 3
-                    j += 1
-        if status == CHAINS_OK and given:
-            key = 0
-            j = 0
-            first = 0
-            for i in range(count):
-                u = <uint64_t>starts[i]
-                key += <int64_t>(u >> 1) ^ -<int64_t>(u & 1)
-                x = key % width
-                y = key // width
-                o[first] = key
-                for k in range(1, lengths[i]):
-                    x += st[2 * j]; y += st[2 * j + 1]
-                    j += 1
-                    if x < 0 or x >= width or y < 0 or y >= rows:
-                        status = CHAINS_LEAVES
-                        break
-                    o[first + k] = y * width + x
-                if status != CHAINS_OK:
-                    break
-                first += lengths[i]
+        status = _chains(&lengths[0] if count else NULL, count, &starts[0] if started and count else NULL, started,
+                         &steps[0] if given and nsteps > 0 else NULL, given, total, width, rows,
+                         &st[0] if nsteps > 0 else NULL, &o[0] if total else NULL)
     return status, (keys if status == CHAINS_OK and given else None)
+
+
+cdef int64_t _line_ranks(const int64_t* keys, const int64_t* perm, int64_t total, int64_t* rank,
+                         int64_t* first) noexcept nogil:
+    """line_ranks' first pass: each point's rank among the distinct keys (rank), the
+    first point of each (first); the number of distinct keys, -1 if perm is no
+    argsort of keys."""
+    cdef int64_t i, k, groups = 0
+    for i in range(total):
+        if <uint64_t>perm[i] >= <uint64_t>total:
+            return -1
+        rank[i] = -1
+    for i in range(total):
+        k = perm[i]
+        if rank[k] >= 0 or (i and keys[k] < keys[perm[i - 1]]):
+            return -1  # a place twice, or out of order: no argsort
+        if i == 0 or keys[k] != keys[perm[i - 1]]:
+            first[groups] = k
+            groups += 1
+        elif k < first[groups - 1]:
+            first[groups - 1] = k
+        rank[k] = groups - 1
+    return groups
+
+
+cdef void _distinct(const int64_t* keys, const int64_t* rank, const int64_t* first, int64_t total,
+                    int64_t groups, int64_t* distinct, int64_t* appear) noexcept nogil:
+    """line_ranks' second pass: the distinct keys in increasing order, and their ranks
+    in the order the chains first reach them."""
+    cdef int64_t r, j = 0, k
+    for r in range(groups):
+        distinct[r] = keys[first[r]]
+    for k in range(total):
+        r = rank[k]
+        if first[r] == k:
+            appear[j] = r
+            j += 1
 
 
 def line_ranks(const int64_t[::1] keys, const int64_t[::1] perm):
@@ -798,44 +843,68 @@ def line_ranks(const int64_t[::1] keys, const int64_t[::1] perm):
     chains first reach them (the sample order's polyline part, ATM.md §4.2.4), from
     `perm`, an argsort of `keys` (any: a key's first point is the least place in its
     group). None if perm is no permutation."""
-    cdef int64_t total = keys.shape[0], i, j, k, groups = 0, r
-    cdef bint bad = perm.shape[0] != total
+    cdef int64_t total = keys.shape[0], groups = -1
     rank_arr = np.empty(total, dtype=np.int64)
     first_arr = np.empty(total, dtype=np.int64)
     cdef int64_t[::1] rank = rank_arr, first = first_arr
-    with nogil:
-        for i in range(total):
-            if <uint64_t>perm[i] >= <uint64_t>total:
-                bad = True
-                break
-            rank[i] = -1
-        if not bad:
-            for i in range(total):
-                k = perm[i]
-                if rank[k] >= 0 or (i and keys[k] < keys[perm[i - 1]]):
-                    bad = True  # a place twice, or out of order: no argsort
-                    break
-                if i == 0 or keys[k] != keys[perm[i - 1]]:
-                    first[groups] = k
-                    groups += 1
-                elif k < first[groups - 1]:
-                    first[groups - 1] = k
-                rank[k] = groups - 1
-    if bad:
+    if perm.shape[0] != total:
         return None
+    if total:
+        with nogil:
+            groups = _line_ranks(&keys[0], &perm[0], total, &rank[0], &first[0])
+        if groups < 0:
+            return None
+    else:
+        groups = 0
     distinct = np.empty(groups, dtype=np.int64)
     appear_arr = np.empty(groups, dtype=np.int64)
     cdef int64_t[::1] d = distinct, appear = appear_arr
-    with nogil:
-        for r in range(groups):
-            d[r] = keys[first[r]]
-        j = 0
-        for k in range(total):
-            r = rank[k]
-            if first[r] == k:
-                appear[j] = r
-                j += 1
+    if groups:
+        with nogil:
+            _distinct(&keys[0], &rank[0], &first[0], total, groups, &d[0], &appear[0])
     return distinct, rank_arr, appear_arr
+
+
+cdef bint _band_vertices(const int64_t* line_keys, int64_t nl, const int64_t* free_keys, int64_t nf,
+                         const int64_t* ranks, int64_t total, const int64_t* appear, int64_t na,
+                         const int64_t* lengths, int64_t count, int64_t width, int64_t* v, int64_t* fp,
+                         int64_t* lp, int64_t* flat, int64_t* walls, int64_t nwalls, int64_t* on_line) noexcept nogil:
+    """band_vertices' passes into the caller's buffers (v: 2 (nl + nf), fp: nf, lp: nl
+    scratch, flat: total, walls: 2 nwalls, on_line: na); False if a pixel is in both
+    lists or an index is out of range."""
+    cdef int64_t n = nl + nf, i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
+    for k in range(n):
+        if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
+            key = line_keys[i]
+            lp[i] = k
+            i += 1
+        else:
+            key = free_keys[j]
+            if i < nl and line_keys[i] == key:
+                return False
+            fp[j] = k
+            j += 1
+        # the keys increase: the row advances instead of a 64-bit division each
+        while key - row >= width:
+            row += width
+            y += 1
+        v[2 * k] = key - row
+        v[2 * k + 1] = y
+    if (total and _corners_beyond(ranks, total, nl)) or (na and _corners_beyond(appear, na, nl)):
+        return False
+    for k in range(total):
+        flat[k] = lp[ranks[k]]
+    for k in range(na):
+        on_line[k] = lp[appear[k]]
+    for i in range(count):
+        for k in range(at, at + lengths[i] - 1):
+            if k + 1 >= total or w >= nwalls:
+                return False
+            walls[2 * w] = flat[k]
+            walls[2 * w + 1] = flat[k + 1]
+            w += 1
+        at += lengths[i]
+    return True
 
 
 def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
@@ -848,59 +917,128 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     the polylines' steps as vertex pairs (walls); and the polyline vertices in the
     order line_ranks' `appear` gives. ok is False if a pixel is in both lists."""
     cdef int64_t nl = line_keys.shape[0], nf = free_keys.shape[0], n = nl + nf
-    cdef int64_t total = ranks.shape[0], count = lengths.shape[0], na = appear.shape[0]
-    cdef int64_t i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
-    cdef bint ok = True
+    cdef int64_t total = ranks.shape[0], count = lengths.shape[0], na = appear.shape[0], nw = max(total - count, 0)
+    cdef bint ok
     if width < 1:
         raise ValueError("band_vertices: a width of at least one pixel")
     vertices = np.empty((n, 2), dtype=np.int64)
-    places = np.empty(nf, dtype=np.int64)
-    line_places = np.empty(nl, dtype=np.int64)
-    flat_arr = np.empty(total, dtype=np.int64)
-    walls_arr = np.empty((max(total - count, 0), 2), dtype=np.int64)
-    on_line_arr = np.empty(na, dtype=np.int64)
+    places = np.empty(nf + 1, dtype=np.int64)
+    line_places = np.empty(nl + 1, dtype=np.int64)
+    flat_arr = np.empty(total + 1, dtype=np.int64)
+    walls_arr = np.empty((nw + 1, 2), dtype=np.int64)
+    on_line_arr = np.empty(na + 1, dtype=np.int64)
     cdef int64_t[:, ::1] v = vertices, walls = walls_arr
     cdef int64_t[::1] fp = places, lp = line_places, flat = flat_arr, on_line = on_line_arr
+    # (each buffer one longer than needed, so that &x[0] exists when it is empty)
     with nogil:
-        for k in range(n):
-            if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
-                key = line_keys[i]
-                lp[i] = k
-                i += 1
-            else:
-                key = free_keys[j]
-                if i < nl and line_keys[i] == key:
-                    ok = False
-                    break
-                fp[j] = k
-                j += 1
-            # the keys increase: the row advances instead of a 64-bit division each
-            while key - row >= width:
-                row += width
-                y += 1
-            v[k, 0] = key - row
-            v[k, 1] = y
-        if ok and (_corners_beyond(&ranks[0], total, nl) if total else False):
-            ok = False
-        if ok and (_corners_beyond(&appear[0], na, nl) if na else False):
-            ok = False
-        if ok:
-            for k in range(total):
-                flat[k] = lp[ranks[k]]
-            for k in range(na):
-                on_line[k] = lp[appear[k]]
-            for i in range(count):
-                for k in range(at, at + lengths[i] - 1):
-                    if k + 1 >= total or w >= walls.shape[0]:
-                        ok = False
-                        break
-                    walls[w, 0] = flat[k]
-                    walls[w, 1] = flat[k + 1]
-                    w += 1
-                at += lengths[i]
+        ok = _band_vertices(&line_keys[0] if nl else NULL, nl, &free_keys[0] if nf else NULL, nf,
+                            &ranks[0] if total else NULL, total, &appear[0] if na else NULL, na,
+                            &lengths[0] if count else NULL, count, width, &v[0, 0] if n else NULL, &fp[0], &lp[0],
+                            &flat[0], &walls[0, 0], nw, &on_line[0])
     if not ok:
         return False, None, None, None, None, None
-    return True, vertices, places, flat_arr, walls_arr, on_line_arr
+    return True, vertices, places[:nf], flat_arr[:total], walls_arr[:nw], on_line_arr[:na]
+
+
+cdef enum:
+    ARGSORT_BUCKETS = 2048  # buckets _argsort's digits need at most (11-bit digits)
+
+
+cdef inline void _bucket_starts(int64_t* count, int64_t buckets) noexcept nogil:
+    """Each bucket's count turned into the place its first key goes (an exclusive
+    running sum)."""
+    cdef int64_t b, c, total = 0
+    for b in range(buckets):
+        c = count[b]
+        count[b] = total
+        total += c
+
+
+cdef inline bint _packed(int64_t n, int64_t span) noexcept nogil:
+    """Whether _argsort moves each key and its place as one word (both below 2**32)."""
+    return span <= (<int64_t>1 << 32) and n <= (<int64_t>1 << 32)
+
+
+cdef inline int64_t _argsort_words(int64_t n, int64_t span) noexcept nogil:
+    """The int64 words of buffer _argsort needs."""
+    return (2 if _packed(n, span) else 4) * n + ARGSORT_BUCKETS
+
+
+cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* buf) noexcept nogil:
+    """argsort_keys' radix passes into buf (_argsort_words(n, span) entries); the
+    sorted places (a pointer into buf), NULL if a key lies outside 0..span-1. Keys and
+    places that fit 32 bits each (every band's) move as one word, key above place:
+    half the stores and half the buffer of moving them apart."""
+    cdef int64_t j, b, bits = 0, passes, digit, shift = 0, mask
+    cdef bint bad = False
+    cdef uint64_t* w_src
+    cdef uint64_t* w_dst
+    cdef uint64_t* w_tmp
+    cdef uint64_t word, low32 = (<uint64_t>1 << 32) - 1  # (a key below 2**32 has at most 32 bits)
+    while bits < 63 and (<int64_t>1 << bits) < span:
+        bits += 1
+    passes = (bits + 10) // 11
+    digit = (bits + passes - 1) // passes if passes else 1
+    mask = (<int64_t>1 << digit) - 1  # at most ARGSORT_BUCKETS - 1
+    # raw pointers (memoryview indexing reloads its base at each of the scatter's stores)
+    cdef int64_t* k_src = buf
+    cdef int64_t* k_dst = buf + n
+    cdef int64_t* i_src = buf + 2 * n
+    cdef int64_t* i_dst = buf + 3 * n
+    cdef int64_t* count = buf + 4 * n
+    cdef int64_t* tmp
+    for j in range(n):
+        bad |= <uint64_t>keys[j] >= <uint64_t>span
+    if bad:
+        return NULL
+    if _packed(n, span):
+        w_src = <uint64_t*>buf
+        w_dst = <uint64_t*>(buf + n)
+        count = buf + 2 * n
+        for j in range(n):
+            w_src[j] = (<uint64_t>keys[j] << 32) | <uint64_t>j
+        shift = 32
+        while passes > 0:
+            memset(count, 0, (mask + 1) * sizeof(int64_t))
+            for j in range(n):
+                count[(w_src[j] >> shift) & mask] += 1
+            _bucket_starts(count, mask + 1)
+            for j in range(n):
+                word = w_src[j]
+                b = (word >> shift) & mask
+                w_dst[count[b]] = word
+                count[b] += 1
+            w_tmp = w_src
+            w_src = w_dst
+            w_dst = w_tmp
+            shift += digit
+            passes -= 1
+        # the places, unpacked where their words were
+        for j in range(n):
+            (<int64_t*>w_src)[j] = <int64_t>(w_src[j] & low32)
+        return <int64_t*>w_src
+    for j in range(n):
+        k_src[j] = keys[j]
+        i_src[j] = j
+    while passes > 0:
+        memset(count, 0, (mask + 1) * sizeof(int64_t))
+        for j in range(n):
+            count[(k_src[j] >> shift) & mask] += 1
+        _bucket_starts(count, mask + 1)
+        for j in range(n):
+            b = (k_src[j] >> shift) & mask
+            k_dst[count[b]] = k_src[j]
+            i_dst[count[b]] = i_src[j]
+            count[b] += 1
+        tmp = k_src
+        k_src = k_dst
+        k_dst = tmp
+        tmp = i_src
+        i_src = i_dst
+        i_dst = tmp
+        shift += digit
+        passes -= 1
+    return i_src
 
 
 def argsort_keys(const int64_t[::1] keys, int64_t span):
@@ -911,55 +1049,16 @@ def argsort_keys(const int64_t[::1] keys, int64_t span):
     linear in the keys (the Hilbert order of a band's free vertices, where a comparison
     sort cost more than the rest of the field decoding). None if a key lies outside
     0..span-1."""
-    cdef int64_t n = keys.shape[0], j, b, total, c, bits = 0, passes, digit, shift = 0, mask
-    cdef bint bad = False
-    while bits < 63 and (<int64_t>1 << bits) < span:
-        bits += 1
-    passes = (bits + 10) // 11
-    digit = (bits + passes - 1) // passes if passes else 1
-    mask = (<int64_t>1 << digit) - 1
-    # one buffer: keys and indices, each twice, and the bucket counts; raw pointers
-    # (memoryview indexing reloads its base at each of the scatter's stores)
-    buf = np.empty(4 * n + mask + 1, dtype=np.int64)
+    cdef int64_t n = keys.shape[0]
+    buf = np.empty(_argsort_words(n, span), dtype=np.int64)
     cdef int64_t[::1] whole = buf
-    cdef int64_t* k_src = &whole[0]
-    cdef int64_t* k_dst = k_src + n
-    cdef int64_t* i_src = k_src + 2 * n
-    cdef int64_t* i_dst = k_src + 3 * n
-    cdef int64_t* count = k_src + 4 * n
-    cdef int64_t* tmp
+    cdef int64_t* out
     with nogil:
-        for j in range(n):
-            bad |= <uint64_t>keys[j] >= <uint64_t>span
-            k_src[j] = keys[j]
-            i_src[j] = j
-        while not bad and passes > 0:
-            for b in range(mask + 1):
-                count[b] = 0
-            for j in range(n):
-                count[(k_src[j] >> shift) & mask] += 1
-            total = 0
-            for b in range(mask + 1):
-                c = count[b]
-                count[b] = total
-                total += c
-            for j in range(n):
-                b = (k_src[j] >> shift) & mask
-                k_dst[count[b]] = k_src[j]
-                i_dst[count[b]] = i_src[j]
-                count[b] += 1
-            tmp = k_src
-            k_src = k_dst
-            k_dst = tmp
-            tmp = i_src
-            i_src = i_dst
-            i_dst = tmp
-            shift += digit
-            passes -= 1
-    if bad:
+        out = _argsort(&keys[0] if n else NULL, n, span, &whole[0])
+    if out == NULL:
         return None
     # a view of the buffer (its indices' half)
-    return buf[i_src - &whole[0] : i_src - &whole[0] + n]
+    return buf[out - &whole[0] : out - &whole[0] + n]
 
 
 ctypedef fused _bits_t:
@@ -1004,3 +1103,248 @@ def fill_holes(_bits_t[:, ::1] pixels, const uint8_t[::1] holes, uint64_t value)
                 keep = <_bits_t>(h[i] == 0) * <_bits_t>-1
                 for ch in range(c):
                     p[i * c + ch] = (p[i * c + ch] & keep) | (word & ~keep)
+
+
+cpdef enum Front:
+    FRONT_OK = 0
+    FRONT_REFUSED = 1     # a field is wrong: meshcode reads the fields again to say which, and how
+
+
+cdef int64_t _varint_scan(const uint8_t* data, int64_t size, int64_t longest, bint* long_) noexcept nogil:
+    """How many LEB128 numbers fill data (-1 if the last one does not end), and in
+    long_ whether one has more than `longest` bytes (a run of `longest` continuation
+    bytes)."""
+    cdef int64_t i, ends = 0, run = 0
+    long_[0] = False
+    for i in range(size):
+        if data[i] < 0x80:
+            ends += 1
+            run = 0
+        else:
+            run += 1
+            long_[0] |= run >= longest
+    return -1 if size and data[size - 1] >= 0x80 else ends
+
+
+cdef int64_t _varint_ends(const uint8_t* data, int64_t size, int64_t longest) noexcept nogil:
+    """How many LEB128 numbers fill data, -1 unless every number ends within it and has
+    at most `longest` bytes (what unvarints accepts for that count)."""
+    cdef bint long_ = False
+    cdef int64_t ends = _varint_scan(data, size, longest, &long_)
+    return -1 if long_ else ends
+
+
+cdef void _leb128_into(const uint8_t* data, int64_t size, int64_t* out) noexcept nogil:
+    """The LEB128 numbers of data, which _varint_ends accepted, into out."""
+    cdef int64_t i, k = 0
+    cdef uint64_t value = 0
+    cdef int shift = 0
+    for i in range(size):
+        value |= <uint64_t>(data[i] & 0x7F) << shift
+        shift += 7
+        if data[i] < 0x80:
+            out[k] = <int64_t>value
+            k += 1
+            value = 0
+            shift = 0
+
+
+cdef inline const uint8_t* _bytes(const uint8_t[::1] field) noexcept nogil:
+    return &field[0] if field.shape[0] else NULL
+
+
+cdef bint _front(const uint8_t* lengths_field, int64_t lengths_size, const uint8_t* starts_field,
+                 int64_t starts_size, const uint8_t* steps_field, int64_t steps_size, int64_t count, int64_t total,
+                 const uint8_t* positions, int64_t positions_size, const uint8_t* packed, int64_t packed_size,
+                 int64_t n, int64_t nf, int64_t width, int64_t rows, bint by_rows, int64_t curve_span,
+                 int64_t max_bits, const int64_t* digit, const int64_t* nxt, const int64_t* xy, const int64_t* back,
+                 int g, int64_t groups, int64_t start, int64_t* lengths, int64_t* flat, int64_t* walls,
+                 int64_t* vertices, int64_t* seq, int64_t* lines, int64_t* frees, int64_t* sort_buf) noexcept nogil:
+    """band_front's passes, its fields' varint counts checked (nf + 1 positions), into
+    its arrays; lines, frees and sort_buf: scratch as band_front sizes them. False if
+    anything is wrong."""
+    cdef int64_t nsteps = total - count, pixels = width * rows, span = pixels if by_rows else curve_span
+    cdef int64_t nl = 0, j, bits, pad, x, y
+    cdef int64_t* starts = lines
+    cdef int64_t* steps = starts + count
+    cdef int64_t* keys = steps + 2 * nsteps
+    cdef int64_t* rank = keys + total
+    cdef int64_t* first = rank + total
+    cdef int64_t* line_keys = first + total
+    cdef int64_t* appear = line_keys + total
+    cdef int64_t* line_places = appear + total
+    cdef int64_t* nums = frees
+    cdef int64_t* free_keys = nums + nf + 1
+    cdef int64_t* curve_keys = free_keys + nf
+    cdef int64_t* places = curve_keys + nf
+    cdef int64_t* order
+    # the polylines: lengths, starts, steps, walked into their points' keys
+    _leb128_into(lengths_field, lengths_size, lengths)
+    _leb128_into(starts_field, starts_size, starts)
+    _leb128_into(steps_field, steps_size, steps)
+    if total:
+        if _chains(lengths, count, starts, True, steps, True, total, width, rows, steps, keys) != CHAINS_OK:
+            return False
+        order = _argsort(keys, total, pixels, sort_buf)
+        if order == NULL:
+            return False
+        nl = _line_ranks(keys, order, total, rank, first)
+        if nl < 0:
+            return False
+        _distinct(keys, rank, first, total, nl, line_keys, appear)
+    elif count:
+        return False
+    if n - nl != nf:  # the positions hold one number more than the free vertices
+        return False
+    # the free vertices: the gaps' high parts, their low bits, summed into keys
+    _leb128_into(positions, positions_size, nums)
+    bits = nums[0]
+    if bits > max_bits or packed_size != (nf * bits + 7) // 8:
+        return False
+    pad = 8 * packed_size - nf * bits  # all in the last byte
+    if pad and packed[packed_size - 1] & ((1 << pad) - 1):
+        return False
+    if nf and not _position_keys(nums + 1, nf, packed, <int>bits, span, free_keys if by_rows else curve_keys):
+        return False
+    if not by_rows:
+        # keys along the curve: their pixels, sorted into raster order
+        for j in range(nf):
+            _hilbert_point(curve_keys[j], xy, back, g, groups, start, &x, &y)
+            if x >= width or y >= rows:
+                return False
+            curve_keys[j] = y * width + x
+        order = _argsort(curve_keys, nf, pixels, sort_buf)
+        if order == NULL:
+            return False
+        for j in range(nf):
+            free_keys[j] = curve_keys[order[j]]
+    if not _band_vertices(line_keys, nl, free_keys, nf, rank, total, appear, nl, lengths, count, width, vertices,
+                          places, line_places, flat, walls, nsteps, seq):
+        return False
+    # the sample order: the polyline vertices (seq[:nl], as the chains reach them),
+    # then the free ones along the curve
+    if by_rows:
+        for j in range(nf):
+            curve_keys[j] = _hilbert_key(vertices[2 * places[j]], vertices[2 * places[j] + 1], digit, nxt, g,
+                                         groups, start)
+        order = _argsort(curve_keys, nf, curve_span, sort_buf)
+        if order == NULL:
+            return False
+        for j in range(nf):
+            seq[nl + j] = places[order[j]]
+    else:
+        # order, from the sort above (untouched since), takes raster places to curve ones
+        for j in range(nf):
+            seq[nl + order[j]] = places[j]
+    return True
+
+
+def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field, const uint8_t[::1] steps_field,
+               int64_t count, int64_t total, const uint8_t[::1] positions, const uint8_t[::1] position_bits,
+               int64_t n, int64_t width, int64_t rows, bint by_rows, int64_t longest, int64_t max_bits,
+               const int64_t[::1] digit, const int64_t[::1] nxt, int g, int64_t groups, int64_t start,
+               const int64_t[::1] xy, const int64_t[::1] back, int64_t curve_span):
+    """(status, vertices, flat, lengths, walls, sample order): the part of a band's
+    MESH payload (ATM.md §4.2.2, §4.2.4) before its triangles in one call, with one
+    release of the GIL for the work: the polylines (their varints, chains and distinct
+    pixels: meshcode._polylines' passes), the free vertices' keys (meshcode._free_keys;
+    in raster order, or along the Hilbert curve, whose inverse tables xy and back
+    give their pixels), both merged into the vertices in raster order
+    (band_vertices), and the sample sequence: the polyline vertices as the chains
+    first reach them, then the free ones along the curve (keys from the tables digit
+    and nxt, below curve_span: curve_order). count, total, n: the payload's polyline,
+    polyline point and vertex counts; longest: the longest varint; max_bits: the
+    most low bits a position gap may store apart. Anything wrong gives FRONT_REFUSED
+    (arrays None) without saying what: the caller reads the fields again with the
+    separate kernels, which refuse in the order of the fields. Every count is
+    checked against the fields' own varints before anything is allocated."""
+    cdef int64_t size = 4 << (2 * g), nsteps = total - count, np_ = -1, nf, most
+    cdef bint ok = False
+    cdef int64_t* lines
+    cdef int64_t* frees
+    cdef int64_t* sort_buf
+    refused = (FRONT_REFUSED, None, None, None, None, None)
+    if digit.shape[0] != size or nxt.shape[0] != size or xy.shape[0] != size or back.shape[0] != size or \
+            not 0 <= start < size or longest > 9 or width < 1 or rows < 1 or max_bits > 32:
+        raise ValueError("band_front: tables of 4 << 2g entries, at most 9 bytes a varint, a band of pixels")
+    if count < 0 or nsteps < 0 or n < 0:
+        return refused
+    with nogil:
+        ok = (_varint_ends(_bytes(lengths_field), lengths_field.shape[0], longest) == count
+              and _varint_ends(_bytes(starts_field), starts_field.shape[0], longest) == count
+              and _varint_ends(_bytes(steps_field), steps_field.shape[0], longest) == 2 * nsteps)
+        if ok:
+            np_ = _varint_ends(_bytes(positions), positions.shape[0], longest)
+    # n - nf distinct polyline points: between 0 and total
+    nf = np_ - 1
+    if not ok or nf < 0 or n < nf or n - nf > total:
+        return refused
+    lengths = np.empty(count, dtype=np.int64)
+    flat = np.empty(total, dtype=np.int64)
+    walls = np.empty((nsteps, 2), dtype=np.int64)
+    vertices = np.empty((n, 2), dtype=np.int64)
+    seq = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] L = lengths, F = flat, S = seq
+    cdef int64_t[:, ::1] W = walls, V = vertices
+    # scratch in three pieces, each smaller than the band's vertices and triangles
+    # (one piece of them all was the decode's largest allocation, which glibc maps
+    # afresh, page faults and all, every time): the polylines' starts, steps, keys,
+    # rank, first, line keys, appear and line places; the positions' numbers, free
+    # keys, curve keys and places; the radix sorts' buffer
+    most = total if total > nf else nf
+    lines = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 1))
+    frees = <int64_t*>malloc(sizeof(int64_t) * (4 * nf + 2))
+    sort_buf = <int64_t*>malloc(sizeof(int64_t) * _argsort_words(most, max(width * rows, curve_span)))
+    if lines == NULL or frees == NULL or sort_buf == NULL:
+        free(lines)
+        free(frees)
+        free(sort_buf)
+        raise MemoryError("band_front: no memory for a band's scratch")
+    with nogil:
+        ok = _front(_bytes(lengths_field), lengths_field.shape[0], _bytes(starts_field), starts_field.shape[0],
+                    _bytes(steps_field), steps_field.shape[0], count, total, _bytes(positions), positions.shape[0],
+                    _bytes(position_bits), position_bits.shape[0], n, nf, width, rows, by_rows, curve_span, max_bits,
+                    &digit[0], &nxt[0], &xy[0], &back[0], g, groups, start, &L[0] if count else NULL,
+                    &F[0] if total else NULL, &W[0, 0] if nsteps else NULL, &V[0, 0] if n else NULL,
+                    &S[0] if n else NULL, lines, frees, sort_buf)
+        free(lines)
+        free(frees)
+        free(sort_buf)
+    if not ok:
+        return refused
+    return FRONT_OK, vertices, flat, lengths, walls, seq
+
+
+def stack_bands(list vertex_arrays, list triangle_arrays, const int64_t[::1] rows_down):
+    """(vertices, triangles): consecutive bands' vertices (each N x 2 int64) moved down
+    by their band's rows_down, one after another, and their triangles (each M x 3
+    int64) renumbered to follow (stream.stack_bands), in one pass over each array
+    instead of numpy's temporaries per band."""
+    cdef Py_ssize_t bands = len(vertex_arrays), b
+    cdef int64_t nv = 0, nt = 0, at = 0, first = 0, j, shift, offset
+    cdef const int64_t[:, ::1] v
+    cdef const int64_t[:, ::1] t
+    if len(triangle_arrays) != bands or rows_down.shape[0] != bands:
+        raise ValueError("stack_bands: vertices, triangles and a shift for each band")
+    for b in range(bands):
+        nv += len(vertex_arrays[b])
+        nt += len(triangle_arrays[b])
+    vertices = np.empty((nv, 2), dtype=np.int64)
+    triangles = np.empty((nt, 3), dtype=np.int64)
+    cdef int64_t[:, ::1] ov = vertices, ot = triangles
+    for b in range(bands):
+        v = vertex_arrays[b]
+        t = triangle_arrays[b]
+        shift = rows_down[b]
+        offset = first
+        with nogil:
+            for j in range(v.shape[0]):
+                ov[first + j, 0] = v[j, 0]
+                ov[first + j, 1] = v[j, 1] + shift
+            for j in range(t.shape[0]):
+                ot[at + j, 0] = t[j, 0] + offset
+                ot[at + j, 1] = t[j, 1] + offset
+                ot[at + j, 2] = t[j, 2] + offset
+        first += v.shape[0]
+        at += t.shape[0]
+    return vertices, triangles

@@ -158,6 +158,12 @@ def hilbert_tables(levels: int) -> tuple[np.ndarray, np.ndarray, int, int, int]:
     return (digit, nxt, _HILBERT_GROUP) + _hilbert_start(levels)
 
 
+def hilbert_inverse_tables() -> tuple[np.ndarray, np.ndarray]:
+    """(pixel table, next-state table): what _fields' kernels take to turn keys back
+    into pixels (hilbert_points'), with hilbert_tables' bits, groups and state."""
+    return _hilbert_inverse_tables()
+
+
 def hilbert_points(d: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) of each key d < 4**levels along the Hilbert curve over the 2**levels
     square: the inverse of hilbert_keys."""

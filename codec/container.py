@@ -98,6 +98,8 @@ _MESH_NAMES = [sub.name for sub in schema.MeshPayload.subcons]
 _MESH_FIXED = struct.Struct(
     "<" + "".join({1: "B", 2: "H", 4: "I"}[sub.sizeof()] for sub in schema.MeshPayload.subcons[: len(_MESH_NAMES) - len(meshcode.FIELDS)])
 )
+#: A MESH payload section's length prefix.
+_SECTION = struct.Struct("<I")
 #: schema.ChunkHead (length, type) as a struct: parsed once per chunk.
 _CHUNK_HEAD = struct.Struct("<I4s")
 assert _CHUNK_HEAD.size == schema.ChunkHead.sizeof()
@@ -126,18 +128,19 @@ class _MeshFields:
 
     def __init__(self, raw: bytes, where: str):
         values = list(_MESH_FIXED.unpack_from(raw))
-        at = _MESH_FIXED.size
+        at, size = _MESH_FIXED.size, len(raw)
         view = memoryview(raw)
         for _ in meshcode.FIELDS:  # seven length-prefixed sections
-            if at + 4 > len(raw):
+            start = at + 4
+            if start > size:
                 raise CorruptError(f"{where} is malformed: it ends inside a section's length")
-            (n,) = struct.unpack_from("<I", raw, at)
-            if at + 4 + n > len(raw):
+            (n,) = _SECTION.unpack_from(raw, at)
+            at = start + n
+            if at > size:
                 raise CorruptError(f"{where} is malformed: a section of {n:,} bytes runs past its end")
-            values.append(view[at + 4 : at + 4 + n])  # a view: no copy
-            at += 4 + n
-        if at != len(raw):
-            raise CorruptError(f"{where} has {len(raw) - at} bytes of trailing data")
+            values.append(view[start:at])  # a view: no copy
+        if at != size:
+            raise CorruptError(f"{where} has {size - at} bytes of trailing data")
         self.__dict__.update(zip(_MESH_NAMES, values))
 
 
@@ -567,18 +570,19 @@ class Reader:
         if frames.frame_length(payload, where) != len(payload):  # codec.info decompresses no more
             raise CorruptError(f"{where} has bytes after its zstd frame (ATM.md §4: one frame)")
         # (the frame's length checked just above: decompress need not walk its blocks again)
-        raw = frames.decompress(payload, size, where, self._dctx, one_frame=True) if size <= _WHOLE_FRAME else b""
+        raw = frames.decompress(payload, size, where, self._dctx, one_frame=True, size=size) if size <= _WHOLE_FRAME else b""
         fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where, self._dctx)
         if len(fixed) < _MESH_FIXED.size:
             raise CorruptError(f"{where} is malformed: it ends inside its fixed fields")
         y0, rows, n, nt, lines, points, connectivity, _, _, _ = _MESH_FIXED.unpack(fixed)
         if y0 != y0_expected or rows < min(2, h.height) or y0 + rows > h.height:
             raise CorruptError(f"{where} has {rows} rows from row {y0}, expected a band from row {y0_expected}")
-        if n > limits.max_vertices(h.width, rows):
+        most = limits.max_vertices(h.width, rows)
+        if n > most:
             raise LimitError(f"{where}: {n:,} vertices is too many for {h.width}x{rows} pixels")
         if nt > limits.max_triangles(h.width, rows):
             raise LimitError(f"{where}: {nt:,} triangles is too many for {h.width}x{rows} pixels")
-        if points > 2 * limits.max_vertices(h.width, rows) or lines > points:
+        if points > 2 * most or lines > points:
             raise CorruptError(f"{where}: {lines:,} polylines of {points:,} points in all")
         if connectivity == schema.DELAUNAY and n > limits.max_rebuilt_vertices(len(payload)):
             raise LimitError(
@@ -592,7 +596,7 @@ class Reader:
         if size > need:
             raise CorruptError(f"{where} declares {size:,} bytes; its counts can use at most {need:,}")
         if whole and not raw:
-            raw = frames.decompress(payload, size, where, self._dctx, one_frame=True)
+            raw = frames.decompress(payload, size, where, self._dctx, one_frame=True, size=size)
         return fixed, raw
 
     def _parse_band(self, payload: bytes, offset: int, y0_expected: int) -> tuple[int, Mesh]:

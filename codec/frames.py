@@ -211,11 +211,13 @@ def frame_length(frame: bytes, what: str) -> int:
 
 
 def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompressor | None = None,
-               *, one_frame: bool = False) -> bytes:
+               *, one_frame: bool = False, size: int | None = None) -> bytes:
     """The data of one zstd frame that declares a size of at most `limit` bytes; dctx:
     the caller's own decompressor to reuse; one_frame: the caller has checked that the
-    frame fills `frame` (frame_length), which is then not walked again."""
-    size = declared_size(frame, what)
+    frame fills `frame` (frame_length), which is then not walked again; size: the
+    frame's declared_size, when the caller has read it."""
+    if size is None:
+        size = declared_size(frame, what)
     if size > min(limit, limits.MAX_PAYLOAD_BYTES):
         raise LimitError(
             f"{what} would decompress to {size:,} bytes, more than its image can need "

@@ -24,6 +24,7 @@ from . import frames, limits
 from .coding import (
     MAX_VARINT_BYTES,
     canonical_triangles,
+    hilbert_inverse_tables,
     hilbert_keys,
     hilbert_levels,
     hilbert_points,
@@ -435,6 +436,48 @@ def _polylines(m, width: int, rows: int, where: str) -> tuple[np.ndarray, ...]:
     return lengths, line_keys, ranks, appear
 
 
+def _front(m, n: int, width: int, rows: int, levels: int, where: str) -> tuple[np.ndarray, ...]:
+    """(vertices, flat, lengths, walls, sample order): what _fields.band_front makes
+    of a parsed MeshPayload, by its separate passes, each refusing what is wrong with
+    its own message, in the order of the fields (decode_band's way when band_front
+    refuses the fields)."""
+    pixels = width * rows
+    # polylines first: their points are vertices the positions do not repeat
+    lengths, line_keys, ranks, appear = _polylines(m, width, rows, where)
+    free = n - len(line_keys)
+    if free < 0:
+        raise CorruptError(f"{where}: the polylines have more vertices than the {n} stored")
+    if m.position_order not in (schema.POSITIONS_RASTER, schema.POSITIONS_HILBERT):
+        raise CorruptError(f"{where}: unknown position order {m.position_order}")
+    by_rows = m.position_order == schema.POSITIONS_RASTER
+    span = pixels if by_rows else 1 << 2 * levels  # the keys' range
+    free_keys = _free_keys(m, free, span, width, rows, where)
+    if not by_rows:
+        x, y = hilbert_points(free_keys, levels)
+        if free and (x.max() >= width or y.max() >= rows):
+            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+        free_keys = y * width + x
+        by_curve = _fields.argsort_keys(free_keys, pixels)  # distinct keys below pixels: linear passes
+        free_keys = free_keys[by_curve]
+    # Both key lists are increasing: merged in one compiled pass, which also finds
+    # each polyline point's vertex (flat) and the walls as vertex pairs
+    ok, vertices, free_index, flat, walls, on_line = _fields.band_vertices(
+        line_keys, free_keys, ranks, appear, lengths, width)
+    if not ok:
+        raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
+    # the encoder's _sample_order, from the parts known here: the positions along the
+    # curve are already in its order
+    if by_rows:
+        # their Hilbert keys and linear radix passes over them, in one compiled call
+        curve = _fields.curve_order(vertices, free_index, *hilbert_tables(levels), 1 << 2 * levels)
+        if curve is None:  # the merge gave places of vertices inside the band: no file reaches it
+            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
+    else:
+        curve = np.empty(free, np.int64)
+        curve[by_curve] = free_index
+    return vertices, flat, lengths, walls, np.concatenate([on_line, curve]) if len(flat) else curve
+
+
 @functools.cache
 def _largest(dtype: np.dtype) -> int:
     """The largest sample of an unsigned storage type (np.iinfo costs more than a
@@ -455,36 +498,21 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         raise LimitError(f"{where}: {m.polyline_index_count:,} polyline indices is too many")
     if m.connectivity not in (schema.LISTED, schema.DELAUNAY):
         raise CorruptError(f"{where}: unknown connectivity code {m.connectivity}")
-    pixels = width * rows
-
-    # polylines first: their points are vertices the positions do not repeat
-    lengths, line_keys, ranks, appear = _polylines(m, width, rows, where)
-    count, total = len(lengths), len(ranks)
-
-    free = n - len(line_keys)
-    if free < 0:
-        raise CorruptError(f"{where}: the polylines have more vertices than the {n} stored")
-    if m.position_order not in (schema.POSITIONS_RASTER, schema.POSITIONS_HILBERT):
-        raise CorruptError(f"{where}: unknown position order {m.position_order}")
-    by_rows = m.position_order == schema.POSITIONS_RASTER
+    # the polylines, the free vertices' positions and the sample order in one compiled
+    # call; should it refuse the fields, the separate passes read them again and say
+    # what is wrong, in the order of the fields
     levels = hilbert_levels(width, rows)
-    span = pixels if by_rows else 1 << 2 * levels  # the keys' range
-    free_keys = _free_keys(m, free, span, width, rows, where)
-    if not by_rows:
-        x, y = hilbert_points(free_keys, levels)
-        if free and (x.max() >= width or y.max() >= rows):
-            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
-        free_keys = y * width + x
-        by_curve = _fields.argsort_keys(free_keys, pixels)  # distinct keys below pixels: linear passes
-        free_keys = free_keys[by_curve]
-    # Both key lists are increasing: merged in one compiled pass, which also finds
-    # each polyline point's vertex (flat) and the walls as vertex pairs
-    ok, vertices, free_index, flat, walls, on_line = _fields.band_vertices(
-        line_keys, free_keys, ranks, appear, lengths, width)
-    if not ok:
-        raise CorruptError(f"{where}: a vertex is stored both on a polyline and by position")
+    front = None
+    if m.position_order in (schema.POSITIONS_RASTER, schema.POSITIONS_HILBERT):
+        status, vertices, flat, lengths, walls, seq_order = front = _fields.band_front(
+            m.polyline_lengths, m.polyline_starts, m.polyline_steps, int(m.polyline_count),
+            int(m.polyline_index_count), m.positions, m.position_bits, n, width, rows,
+            m.position_order == schema.POSITIONS_RASTER, MAX_VARINT_BYTES, MAX_POSITION_BITS,
+            *hilbert_tables(levels), *hilbert_inverse_tables(), 1 << 2 * levels)
+    if front is None or status != _fields.Front.FRONT_OK:
+        vertices, flat, lengths, walls, seq_order = _front(m, n, width, rows, levels, where)
     lines = Polylines(flat, lengths)
-    if not total:
+    if not len(flat):
         walls = None
 
     if m.connectivity == schema.DELAUNAY:
@@ -511,17 +539,6 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
     if m.sample_step < 1:
         raise CorruptError(f"{where}: sample step 0")
     top = _largest(dtype)
-    # the encoder's _sample_order, from the parts known here: the positions along the
-    # curve are already in its order
-    if by_rows:
-        # their Hilbert keys and linear radix passes over them, in one compiled call
-        curve = _fields.curve_order(vertices, free_index, *hilbert_tables(levels), 1 << 2 * levels)
-        if curve is None:  # the merge gave places of vertices inside the band: no file reaches it
-            raise CorruptError(f"{where}: a vertex lies outside the {width}x{rows} band")
-    else:
-        curve = np.empty(free, np.int64)
-        curve[by_curve] = free_index
-    seq_order = np.concatenate([on_line, curve]) if total else curve
     # the samples' varints, steps, parents and running sums in one compiled pass
     # (unvarints, vertex_steps, sample_parents and tree_sums' arithmetic), every index
     # checked there; with mesh.validate's element checks from its pass over the triangles

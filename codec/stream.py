@@ -464,9 +464,11 @@ def stack_bands(group: list[tuple[int, Mesh]]) -> Mesh:
         return group[0][1]
     top = group[0][0]
     meshes = [m for _, m in group]
-    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
-    vertices = np.concatenate([m.vertices + [0, y0 - top] for y0, m in group])
-    triangles = np.concatenate([m.triangles + o for m, o in zip(meshes, offsets)])
+    # one compiled pass (numpy's add and concatenate per band cost more than the copy)
+    vertices, triangles = _fields.stack_bands(
+        [np.ascontiguousarray(m.vertices, dtype=np.int64) for m in meshes],
+        [np.ascontiguousarray(m.triangles, dtype=np.int64) for m in meshes],
+        np.array([y0 - top for y0, _ in group], dtype=np.int64))
     holes = None
     if any(m.holes is not None for m in meshes):
         holes = np.concatenate(

@@ -475,3 +475,120 @@ def test_curve_order_is_hilbert_keys_then_their_sort(seed: int, width: int, rows
         wrong = places.copy()
         wrong[-1] = len(vertices)
         assert _fields.curve_order(vertices, wrong, *coding.hilbert_tables(levels), 1 << 2 * levels) is None
+
+
+def _band_payloads(hilbert: bool) -> list:
+    """Parsed MESH payloads of small encodes (gray, banded, with walls), their free
+    vertices stored in raster order or (hilbert: the trial sizes rigged) along the
+    curve."""
+    import io
+
+    import codec
+    from codec import container, frames
+    from tests.corpus import load_corpus
+
+    image = load_corpus()["camera"][:120:, :150]
+    real = frames.trial_size
+    calls = [0]
+
+    def curve_wins(data: bytes) -> float:  # encode_band asks raster first, then the curve
+        calls[0] += 1
+        return 1e12 if calls[0] % 2 else 0.0
+
+    if hilbert:
+        meshcode.frames.trial_size = curve_wins
+    try:
+        files = [codec.encode(image, points=p, band_height=b) for p in (40, 600) for b in (None, 16)]
+    finally:
+        meshcode.frames.trial_size = real
+    payloads = []
+    for data in files:
+        reader = container.Reader(io.BytesIO(data))
+        y0 = 0
+        while True:
+            ctype, payload, offset = reader._next_chunk()
+            if ctype == container.schema.END:
+                break
+            if ctype == container.schema.MESH:
+                _, raw = reader._check_frame(payload, "MESH", y0)
+                fields = container._MeshFields(raw, "MESH")
+                payloads.append((raw, reader.header.width))
+                y0 = fields.y0 + fields.rows - 1
+    assert all(container._MeshFields(raw, "x").position_order == int(hilbert) for raw, _ in payloads)
+    return payloads
+
+
+def _band_front(m, width: int):
+    rows = int(m.rows)
+    levels = coding.hilbert_levels(width, rows)
+    return meshcode._fields.band_front(
+        m.polyline_lengths, m.polyline_starts, m.polyline_steps, int(m.polyline_count), int(m.polyline_index_count),
+        m.positions, m.position_bits, int(m.vertex_count), width, rows, m.position_order == 0,
+        coding.MAX_VARINT_BYTES, meshcode.MAX_POSITION_BITS, *coding.hilbert_tables(levels),
+        *coding.hilbert_inverse_tables(), 1 << 2 * levels)
+
+
+@pytest.mark.parametrize("hilbert", [False, True])
+def test_band_front_is_the_separate_passes(hilbert: bool) -> None:
+    """_fields.band_front (one call) gives what meshcode._front's separate passes give
+    (polylines, positions, merge, sample order), on every band it accepts; on damaged
+    fields (bits flipped, bytes dropped or added, counts off by one) it accepts
+    nothing the separate passes refuse, and decode_band then raises their message."""
+    import random
+
+    from codec import container
+
+    rng = random.Random(7 + hilbert)
+    names = ["polyline_lengths", "polyline_starts", "polyline_steps", "positions", "position_bits"]
+    payloads = _band_payloads(hilbert)
+    accepted = refused = 0
+    for trial in range(1500):
+        raw, width = rng.choice(payloads)
+        m = container._MeshFields(raw, "x")
+        if trial % 5:
+            k = rng.randrange(len(names) + 1)
+            if k < len(names):
+                field = bytearray(bytes(getattr(m, names[k])))
+                at = rng.randrange(len(field) + 1)
+                if rng.random() < 0.5 and at < len(field):
+                    field[at] ^= 1 << rng.randrange(8)
+                elif rng.random() < 0.5 and at < len(field):
+                    del field[at]
+                else:
+                    field.insert(at, rng.randrange(256))
+                setattr(m, names[k], memoryview(bytes(field)))
+            else:
+                name = rng.choice(["polyline_count", "polyline_index_count", "vertex_count"])
+                setattr(m, name, max(0, getattr(m, name) + rng.choice([-1, 1])))
+        n, rows = int(m.vertex_count), int(m.rows)
+        status, *fast = _band_front(m, width)
+        try:
+            slow = meshcode._front(m, n, width, rows, coding.hilbert_levels(width, rows), "x")
+        except CorruptError:
+            slow = None
+        if status == meshcode._fields.Front.FRONT_OK:
+            accepted += 1
+            assert slow is not None, "band_front accepted fields the separate passes refuse"
+            for a, b in zip(fast, slow):
+                assert np.array_equal(np.asarray(a).reshape(-1), np.asarray(b).reshape(-1))
+        else:
+            refused += 1
+            assert slow is None, "band_front refused fields the separate passes accept"
+    assert accepted > 300 and refused > 300
+
+
+def test_stack_bands_moves_and_renumbers_as_numpy() -> None:
+    """_fields.stack_bands (stream.stack_bands' compiled pass) gives numpy's
+    concatenation of each band's vertices moved down and triangles renumbered,
+    empty bands included."""
+    rng = np.random.default_rng(5)
+    sizes = [(5, 4), (0, 0), (9, 11), (1, 0)]
+    vs = [rng.integers(0, 50, (n, 2)).astype(np.int64) for n, _ in sizes]
+    ts = [rng.integers(0, max(n, 1), (m, 3)).astype(np.int64) for n, m in sizes]
+    down = np.array([0, 7, 7, 30], np.int64)
+    vertices, triangles = meshcode._fields.stack_bands(vs, ts, down)
+    offsets = np.cumsum([0] + [len(v) for v in vs[:-1]])
+    assert np.array_equal(vertices, np.concatenate([v + [0, d] for v, d in zip(vs, down)]))
+    assert np.array_equal(triangles, np.concatenate([t + o for t, o in zip(ts, offsets)]))
+    with pytest.raises(ValueError):
+        meshcode._fields.stack_bands(vs, ts[:-1], down)
