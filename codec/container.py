@@ -27,6 +27,7 @@ from .errors import CorruptError, FormatError, LimitError, TruncatedError, Unsup
 from .image import DTYPES, SAMPLE_TYPES
 from .mesh import Mesh, validate
 from .quantise import STORAGE, Quantiser
+from .triangulate import Delaunay
 from .residual import CHUNK as RESIDUAL
 
 
@@ -321,6 +322,8 @@ class Reader:
         #: metadata bytes (decompressed) still allowed in this file
         self._meta_budget = limits.MAX_METADATA_BYTES
         self._dctx = frames.decompressor()  # this reader's own
+        #: the triangulation's buffers, this reader's own: reused band after band
+        self._triangulator = Delaunay()
         self.version = self._read_signature()
         ctype, payload, offset = self._next_chunk()
         if ctype != schema.HEADER:
@@ -605,7 +608,7 @@ class Reader:
         # (_check_frame refused a band not from y0_expected or not within the image)
         _, raw = self._check_frame(payload, where, y0_expected)
         m = _MeshFields(raw, where)
-        mesh, areas, checked = meshcode.decode_band(m, h.width, h.storage, h.channels, f"MESH chunk at byte {offset}")
+        mesh, areas, checked = meshcode.decode_band(m, h.width, h.storage, h.channels, where, self._triangulator)
         # a rebuilt triangulation tiles the band and has the walls as edges (decode_band
         # checked them), whose polylines decode_band made and checked
         rebuilt = m.connectivity == schema.DELAUNAY

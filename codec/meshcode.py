@@ -38,7 +38,7 @@ from .coding import (
 from .errors import ATMError, CorruptError, LimitError
 from .mesh import Mesh, Polylines, chain_steps, doubled_areas
 from .native import _fields, _renumber, _samples
-from .triangulate import delaunay_and_crc, triangulate
+from .triangulate import Delaunay, delaunay_and_crc, triangulate
 
 
 #: The MESH payload's variable-length fields, in payload order: all after sample_step.
@@ -485,10 +485,13 @@ def _largest(dtype: np.dtype) -> int:
     return int(np.iinfo(dtype).max)
 
 
-def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tuple[Mesh, np.ndarray, tuple]:
+def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str,
+                triangulator: Delaunay | None = None) -> tuple[Mesh, np.ndarray, tuple]:
     """The Mesh of a parsed MeshPayload, its triangles' doubled areas and the element
     checks of _fields.mesh_checks (both for mesh.validate); CorruptError if any field
-    is inconsistent. Structural checks of the result are left to mesh.validate."""
+    is inconsistent. Structural checks of the result are left to mesh.validate. A
+    Delaunay band is triangulated in `triangulator`'s buffers when one is given (its
+    owner's, reused band after band)."""
     n, rows = int(m.vertex_count), int(m.rows)
     if n > limits.max_vertices(width, rows):
         raise LimitError(f"{where}: {n:,} vertices is too many for {width}x{rows} pixels")
@@ -522,7 +525,8 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str) -> tu
         # every step is an edge (mesh.validate need not search the edges)
         try:
             # in canonical order, with their CRC from the kernel's pass that wrote them
-            triangles, crc = delaunay_and_crc(vertices, walls, strict=True)
+            run = delaunay_and_crc if triangulator is None else triangulator.triangles_and_crc
+            triangles, crc = run(vertices, walls, strict=True)
         except ATMError as exc:
             raise CorruptError(f"{where}: {exc}") from None
     else:

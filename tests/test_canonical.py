@@ -58,6 +58,9 @@ def decode_by_triangle(monkeypatch) -> None:
         return triangles, triangle_crc(triangles)
 
     monkeypatch.setattr(meshcode, "delaunay_and_crc", by_triangle)
+    # a Reader triangulates in its own Delaunay's buffers: that route too
+    monkeypatch.setattr(triangulate_module.Delaunay, "triangles_and_crc",
+                        lambda self, v, w=None, strict=False: by_triangle(v, w, strict))
 
 
 def lattice(w: int, h: int, sx: int = 1, sy: int = 1) -> np.ndarray:

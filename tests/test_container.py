@@ -461,3 +461,41 @@ def test_a_reader_decompresses_every_frame_with_its_own_decompressor(monkeypatch
     decoded = codec.decode(data)
     assert (decoded[image == 65535] == 65535).all() and decoded.shape == image.shape
     assert len(made) == 1
+
+
+def test_a_reader_triangulates_its_bands_in_its_own_buffers(monkeypatch):
+    """Each Reader owns the triangulation's buffers and reuses them band after band (no
+    buffers shared between readers, so threads decoding files never meet); the meshes
+    are those of a fresh triangulation, and a refused band leaves the buffers sound."""
+    from codec import triangulate as triangulate_module
+
+    rng = np.random.default_rng(5)
+    image = (np.add.outer(np.arange(96), np.arange(80)) + rng.integers(0, 40, (96, 80))).astype(np.uint8)
+    data = codec.encode(image, points=300, band_height=24)
+    calls = []
+    real = triangulate_module.Delaunay.triangles_and_crc
+
+    def counted(self, *args, **kwargs):
+        calls.append(id(self))
+        return real(self, *args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(triangulate_module.Delaunay, "triangles_and_crc", counted)
+        first, second = container.Reader(io.BytesIO(data)), container.Reader(io.BytesIO(data))
+        owned = list(first)
+    assert len(owned) == 4 and calls == [id(first._triangulator)] * 4
+    assert first._triangulator is not second._triangulator
+    # a refused triangulation (two walls crossing) leaves the buffers sound for the next
+    with pytest.raises(ATMError):
+        second._triangulator.triangles_and_crc(
+            np.array([[0, 0], [4, 4], [0, 4], [4, 0]]), np.array([[0, 1], [2, 3]]), strict=True)
+    reused = list(second)
+    # the meshes of a fresh kernel call per band
+    with monkeypatch.context() as patch:
+        patch.setattr(triangulate_module.Delaunay, "triangles_and_crc",
+                      lambda self, v, w=None, strict=False: triangulate_module.delaunay_and_crc(v, w, strict=strict))
+        fresh = list(container.Reader(io.BytesIO(data)))
+    for (y0, a), (y1, b), (y2, c) in zip(owned, reused, fresh):
+        assert y0 == y1 == y2
+        assert np.array_equal(a.triangles, c.triangles) and np.array_equal(b.triangles, c.triangles)
+        assert np.array_equal(a.vertices, c.vertices)
