@@ -126,8 +126,41 @@ cdef class Triangulation:
     module's codes; codec.triangulate.Triangulation raises instead)."""
 
     cdef CDT cdt
+    cdef bint busy
 
-    def start(self, const int64_t[:, ::1] vertices, bint track=False):
+    # One thread at a time: the kernel's buffers (canonical()'s counts among them) are
+    # the object's own, used with the GIL released; a second thread's call meanwhile
+    # raises instead of sharing them.
+    def _one_thread(self, str name, method, *args):
+        if self.busy:
+            raise RuntimeError(f"Triangulation.{name}: the object is in use by another thread")
+        self.busy = True
+        try:
+            return method(*args)
+        finally:
+            self.busy = False
+
+    def start(self, vertices, bint track=False):
+        """Triangulate vertices (N x 2) afresh; track=True records changes() after it."""
+        return self._one_thread("start", self._start, vertices, track)
+
+    def insert(self, points):
+        """As _insert (below), one thread at a time."""
+        return self._one_thread("insert", self._insert, points)
+
+    def constrain(self, segments):
+        """As _constrain (below), one thread at a time."""
+        return self._one_thread("constrain", self._constrain, segments)
+
+    def triangles(self):
+        """All triangles, M x 3, canonical order (ATM.md §4.2.3)."""
+        return self._one_thread("triangles", self._triangles)
+
+    def changes(self):
+        """As _changes (below), one thread at a time."""
+        return self._one_thread("changes", self._changes)
+
+    def _start(self, const int64_t[:, ::1] vertices, bint track=False):
         """Triangulate the first N x 2 vertices (pixel coordinates 0 .. MAX_EXTENT,
         distinct, not all on one line); their indices are their rows. track: keep
         what changes() reports (each changed triangle slot's old corners)."""
@@ -160,7 +193,7 @@ cdef class Triangulation:
         self.cdt.dirty_mark.assign(self.cdt.V.size() // 3, 0)
         return status
 
-    def insert(self, const int64_t[:, ::1] points):
+    def _insert(self, const int64_t[:, ::1] points):
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
         indices continue the vertices' numbering in the points' order. All are checked
         first: if one is refused, only those before it go in (status: its refusal)."""
@@ -176,7 +209,7 @@ cdef class Triangulation:
             return int(status), np.array(went_in, dtype=np.int64)
         return int(status), np.arange(first, first + done, dtype=np.int64)
 
-    def constrain(self, const int64_t[:, ::1] segments):
+    def _constrain(self, const int64_t[:, ::1] segments):
         """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
         cdef int64_t s = segments.shape[0], j, n = self.cdt.pt.size()
         cdef Status status = CDT_OK
@@ -204,12 +237,11 @@ cdef class Triangulation:
         internal error (the guard a broken predicate would meet; -1: n (n - 1) / 2)."""
         self.cdt.flip_limit = limit
 
-    def triangles(self):
-        """All triangles, M x 3, canonical order (ATM.md §4.2.3)."""
+    def _triangles(self):
         cdef uint32_t crc
         return triangle_array(self.cdt, NULL, &crc)
 
-    def changes(self):
+    def _changes(self):
         """(removed, added): the triangles (K x 3 each, corners in their stored
         rotation) that left and that joined the triangulation since start or the last
         call; a triangle may be in both if it was undone and made again. Only for a

@@ -1335,6 +1335,8 @@ def stack_bands(list vertex_arrays, list triangle_arrays, const int64_t[::1] row
     for b in range(bands):
         v = vertex_arrays[b]
         t = triangle_arrays[b]
+        if v.shape[1] != 2 or t.shape[1] != 3:  # (the loops read columns unchecked)
+            raise ValueError("stack_bands: vertices are N x 2 and triangles M x 3")
         shift = rows_down[b]
         offset = first
         with nogil:

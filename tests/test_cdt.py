@@ -653,3 +653,38 @@ def test_a_reused_triangulator_gives_what_fresh_calls_give():
         np.testing.assert_array_equal(triangles, expected[0])
         assert crc == expected[1]
     assert 5 < refused < 50
+
+
+def test_a_triangulation_is_used_by_one_thread_at_a_time():
+    """The encoder's Triangulation works in buffers of its own with the GIL released
+    (canonical()'s counts among them): a second thread's call while one runs raises
+    RuntimeError instead of sharing them (two threads listing the triangles of one
+    object overran the output and crashed the process), and the answers stay right."""
+    import threading
+
+    from codec.native import _cdt
+
+    rng = np.random.default_rng(3)
+    pts = np.unique(rng.integers(0, 3000, (200_000, 2)), axis=0).astype(np.int64)
+    t = _cdt.Triangulation()
+    assert t.start(pts) == _cdt.OK
+    expected = t.triangles()
+    results, refused = [], []
+
+    def lister():
+        for _ in range(15):
+            try:
+                results.append(t.triangles())
+            except RuntimeError as exc:
+                assert "in use by another thread" in str(exc)
+                refused.append(1)
+
+    threads = [threading.Thread(target=lister) for _ in range(2)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert len(results) + len(refused) == 30 and results
+    assert all(np.array_equal(r, expected) for r in results)
+    # after the race the object is free again
+    assert np.array_equal(t.triangles(), expected)

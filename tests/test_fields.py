@@ -592,3 +592,8 @@ def test_stack_bands_moves_and_renumbers_as_numpy() -> None:
     assert np.array_equal(triangles, np.concatenate([t + o for t, o in zip(ts, offsets)]))
     with pytest.raises(ValueError):
         meshcode._fields.stack_bands(vs, ts[:-1], down)
+    # arrays of the wrong width are refused, not read past their rows
+    with pytest.raises(ValueError):
+        meshcode._fields.stack_bands([np.arange(8).reshape(8, 1)], [np.arange(6).reshape(6, 1)], down[:1])
+    with pytest.raises(ValueError):
+        meshcode._fields.stack_bands([vs[0]], [np.zeros((4, 2), np.int64)], down[:1])
