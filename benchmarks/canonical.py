@@ -40,12 +40,12 @@ from speed import interleaved  # noqa: E402
 @contextlib.contextmanager
 def triangle_alone() -> Iterator[None]:
     """Within it, codec.triangulate.by_triangle returns Triangle's triangles unflipped."""
-    kept = triangulate_module.canonicalise
-    triangulate_module.canonicalise = lambda vertices, triangles, constraints: np.asarray(triangles, np.int64)
+    kept = canonical.canonicalise  # (by_triangle imports it from there at each call)
+    canonical.canonicalise = lambda vertices, triangles, constraints: np.asarray(triangles, np.int64)
     try:
         yield
     finally:
-        triangulate_module.canonicalise = kept
+        canonical.canonicalise = kept
 
 
 def bands(data: bytes) -> list[tuple[np.ndarray, np.ndarray | None, np.ndarray]]:

@@ -944,11 +944,15 @@ cdef enum:
     ARGSORT_BUCKETS = 2048  # buckets _argsort's digits need at most (11-bit digits)
 
 
-cdef inline void _bucket_starts(int64_t* count, int64_t buckets) noexcept nogil:
-    """Each bucket's count turned into the place its first key goes (an exclusive
-    running sum)."""
-    cdef int64_t b, c, total = 0
-    for b in range(buckets):
+cdef inline void _digit_places(const uint64_t* words, int64_t n, int64_t shift, int64_t mask,
+                               int64_t* count) noexcept nogil:
+    """count[d]: the place the first of the n words whose digit (word >> shift) & mask is
+    d goes in a radix pass (the digits counted, then an exclusive running sum)."""
+    cdef int64_t j, b, c, total = 0
+    memset(count, 0, (mask + 1) * sizeof(int64_t))
+    for j in range(n):
+        count[(words[j] >> shift) & mask] += 1
+    for b in range(mask + 1):
         c = count[b]
         count[b] = total
         total += c
@@ -999,10 +1003,7 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
             w_src[j] = (<uint64_t>keys[j] << 32) | <uint64_t>j
         shift = 32
         while passes > 0:
-            memset(count, 0, (mask + 1) * sizeof(int64_t))
-            for j in range(n):
-                count[(w_src[j] >> shift) & mask] += 1
-            _bucket_starts(count, mask + 1)
+            _digit_places(w_src, n, shift, mask, count)
             for j in range(n):
                 word = w_src[j]
                 b = (word >> shift) & mask
@@ -1021,10 +1022,7 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
         k_src[j] = keys[j]
         i_src[j] = j
     while passes > 0:
-        memset(count, 0, (mask + 1) * sizeof(int64_t))
-        for j in range(n):
-            count[(k_src[j] >> shift) & mask] += 1
-        _bucket_starts(count, mask + 1)
+        _digit_places(<const uint64_t*>k_src, n, shift, mask, count)  # (keys checked >= 0)
         for j in range(n):
             b = (k_src[j] >> shift) & mask
             k_dst[count[b]] = k_src[j]

@@ -7,9 +7,7 @@ by_triangle() by Shewchuk's Triangle and the canonical flip pass of codec.canoni
 from __future__ import annotations
 
 import numpy as np
-import triangle
 
-from .canonical import canonicalise
 from .errors import ATMError
 from .mesh import segments
 from .native import _cdt
@@ -154,6 +152,11 @@ def by_triangle(vertices: np.ndarray, segments: np.ndarray | None = None, *,
     Triangle's exact arithmetic is skipped where that provably changes nothing
     (exact=True keeps it, for tests: the result is identical).
     """
+    # Triangle and the flip pass serve only this check: a decode does not import them
+    import triangle
+
+    from .canonical import canonicalise
+
     vertices = np.asarray(vertices, dtype=np.int64)
     if segments is not None:
         segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)

@@ -254,7 +254,7 @@ def test_decoding_does_not_depend_on_how_triangle_is_called(monkeypatch, keep, w
     data = encoder.pack(mesh)
     expected = codec.decode(data)
     decode_by_triangle(monkeypatch)
-    monkeypatch.setattr(triangulate_module.triangle, "triangulate",
+    monkeypatch.setattr(triangle, "triangulate",
                         shuffled_triangle(np.random.default_rng(seed), algorithm))
     np.testing.assert_array_equal(codec.decode(data), expected)
 
@@ -284,7 +284,7 @@ def test_conformance_files_decode_alike_by_any_triangle_call(monkeypatch, algori
 
     here = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
     decode_by_triangle(monkeypatch)
-    monkeypatch.setattr(triangulate_module.triangle, "triangulate",
+    monkeypatch.setattr(triangle, "triangulate",
                         shuffled_triangle(np.random.default_rng(len(algorithm)), algorithm))
     for path in sorted(here.glob("*.atm")):
         npy = path.with_suffix(".npy")
@@ -306,7 +306,7 @@ def test_a_corpus_image_decodes_alike_by_any_triangle_call(monkeypatch, mesher):
     decode_by_triangle(monkeypatch)
     for k, algorithm in enumerate(ALGORITHMS):
         call = shuffled_triangle(np.random.default_rng(k), algorithm)
-        monkeypatch.setattr(triangulate_module.triangle, "triangulate", call)
+        monkeypatch.setattr(triangle, "triangulate", call)
         np.testing.assert_array_equal(codec.decode(data), expected)
         raw = raw_triangle(mesh.vertices, walls, np.random.default_rng(k), algorithm)
         canonical.canonicalise(mesh.vertices, raw, walls, check=True)
@@ -322,7 +322,7 @@ def test_conformance_files_catch_a_decoder_without_the_rule(monkeypatch):
 
     here = Path(__file__).resolve().parent.parent / "format_spec" / "conformance"
     decode_by_triangle(monkeypatch)
-    monkeypatch.setattr(triangulate_module, "canonicalise", lambda v, t, c: np.asarray(t, np.int64))
+    monkeypatch.setattr(canonical, "canonicalise", lambda v, t, c: np.asarray(t, np.int64))
     caught = set()
     for path in sorted(here.glob("*.atm")):
         try:
