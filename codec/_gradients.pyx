@@ -236,3 +236,178 @@ def off_edge_share(const float[:, ::1] laplacian, const uint8_t[:, ::1] found):
             total += row_total
             off += row_off
     return off / total if total != 0 else 0.0
+
+
+# tan(22.5 degrees) in Q15, as OpenCV's Canny classifies gradient directions
+cdef int _TG22 = 13573
+
+
+def canny(const int16_t[:, ::1] ix, const int16_t[:, ::1] iy, double low, double high):
+    """cv2.Canny(ix, iy, low, high, L2gradient=True) > 0 in one thread (OpenCV's runs
+    its stripes on its own threads, which cost more CPU than they save on an image of a
+    few hundred thousand pixels): the squared magnitude ix^2 + iy^2 (int32), thinned to
+    its maxima across the gradient direction (the same Q15 sector test, ties and zero
+    border as OpenCV's), then the pixels above floor(low^2) joined 8-connected to those
+    above floor(high^2). The same edges, bit for bit (tests/test_encode_front.py)."""
+    cdef Py_ssize_t h = ix.shape[0], w = ix.shape[1]
+    if iy.shape[0] != h or iy.shape[1] != w:
+        raise ValueError("canny: dx and dy differ in size")
+    if not (low >= 0 and high >= 0):
+        raise ValueError("canny: thresholds must be >= 0")
+    if low > high:
+        low, high = high, low
+    # OpenCV's order: capped at 32767, squared, then floored (its cvFloor)
+    low = min(32767.0, low)
+    high = min(32767.0, high)
+    cdef int lo = <int>(low * low) if low > 0 else 0
+    cdef int hi = <int>(high * high) if high > 0 else 0
+    if h == 0 or w == 0:
+        return np.zeros((h, w), dtype=bool)
+    cdef Py_ssize_t stride = w + 2
+    # map: 0 a candidate, 1 not an edge, 2 an edge; a border of 1s all round
+    map_a = np.empty((h + 2) * stride, dtype=np.uint8)
+    # three rows of magnitudes, each with a zero at both ends
+    mag_a = np.zeros(3 * stride, dtype=np.int32)
+    stack_a = np.empty(h * w, dtype=np.int64)
+    cdef uint8_t[::1] map_v = map_a
+    cdef int[::1] mag_v = mag_a
+    cdef int64_t[::1] stack_v = stack_a
+    cdef uint8_t* pmap = &map_v[0]
+    cdef int* rows = &mag_v[0]
+    cdef int64_t* stack = &stack_v[0]
+    cdef int* prev
+    cdef int* cur
+    cdef int* nxt
+    cdef int* tmp
+    cdef const int16_t* dxr
+    cdef const int16_t* dyr
+    cdef uint8_t* mrow
+    cdef Py_ssize_t y, x, top = 0, p, q
+    cdef int m, ax, ay, tg22x, s, dx, dy
+    cdef int64_t k
+    cdef Py_ssize_t[8] around
+    around[0] = -stride - 1
+    around[1] = -stride
+    around[2] = -stride + 1
+    around[3] = -1
+    around[4] = 1
+    around[5] = stride - 1
+    around[6] = stride
+    around[7] = stride + 1
+    with nogil:
+        for x in range(stride):
+            pmap[x] = 1
+            pmap[(h + 1) * stride + x] = 1
+        # prev (row y - 1), cur (row y) and nxt (row y + 1), each at offset 1
+        prev = rows + 1
+        cur = rows + stride + 1
+        nxt = rows + 2 * stride + 1
+        dxr = &ix[0, 0]
+        dyr = &iy[0, 0]
+        for x in range(w):
+            dx = dxr[x]
+            dy = dyr[x]
+            cur[x] = dx * dx + dy * dy
+        for y in range(h):
+            if y + 1 < h:
+                dxr = &ix[y + 1, 0]
+                dyr = &iy[y + 1, 0]
+                for x in range(w):
+                    dx = dxr[x]
+                    dy = dyr[x]
+                    nxt[x] = dx * dx + dy * dy
+            else:
+                for x in range(w):
+                    nxt[x] = 0
+            dxr = &ix[y, 0]
+            dyr = &iy[y, 0]
+            mrow = pmap + (y + 1) * stride + 1
+            mrow[-1] = 1
+            mrow[w] = 1
+            for x in range(w):
+                m = cur[x]
+                mrow[x] = 1
+                if m > lo:
+                    dx = dxr[x]
+                    dy = dyr[x]
+                    ax = dx if dx >= 0 else -dx
+                    ay = (dy if dy >= 0 else -dy) << 15
+                    tg22x = ax * _TG22
+                    # the two neighbours across the gradient; a tie is allowed with
+                    # the second one except on diagonals
+                    if ay < tg22x:
+                        if not (m > cur[x - 1] and m >= cur[x + 1]):
+                            continue
+                    elif ay > tg22x + (ax << 16):
+                        if not (m > prev[x] and m >= nxt[x]):
+                            continue
+                    else:
+                        s = -1 if (dx ^ dy) < 0 else 1
+                        if not (m > prev[x - s] and m > nxt[x + s]):
+                            continue
+                    if m > hi:
+                        mrow[x] = 2
+                        stack[top] = (y + 1) * stride + 1 + x
+                        top += 1
+                    else:
+                        mrow[x] = 0
+            tmp = prev
+            prev = cur
+            cur = nxt
+            nxt = tmp
+        # hysteresis: every candidate 8-connected to an edge becomes one
+        while top > 0:
+            top -= 1
+            p = stack[top]
+            for k in range(8):
+                q = p + around[k]
+                if pmap[q] == 0:
+                    pmap[q] = 2
+                    stack[top] = q
+                    top += 1
+    # the edges (2s) inside the border, in one vectorised comparison
+    return map_a.reshape(h + 2, stride)[1 : h + 1, 1 : w + 1] == 2
+
+
+def otsu_level(const float[:, ::1] magnitude, float scale):
+    """cv2.threshold(levels, 0, 255, THRESH_OTSU)[0] of the 8-bit levels
+    np.clip(magnitude * scale, 0, 255).astype(np.uint8) (the float32 product,
+    truncated), in one pass with no image-sized temporaries and in one thread: the
+    histogram, then Otsu's between-class variance in OpenCV's arithmetic and order
+    (its first maximum wins)."""
+    cdef Py_ssize_t h = magnitude.shape[0], w = magnitude.shape[1], y, x
+    cdef int64_t[256] hist
+    cdef int i
+    cdef float v, top = 255, zero = 0
+    cdef const float* row
+    cdef double mu = 0, mu1 = 0, q1 = 0, q2, mu2, p_i, sigma, max_sigma = 0, level = 0
+    cdef double eps = 1.1920928955078125e-07  # FLT_EPSILON
+    if h == 0 or w == 0:
+        raise ValueError("otsu_level: an empty image")
+    cdef double each = 1.0 / <double>(h * w)
+    with nogil:
+        for i in range(256):
+            hist[i] = 0
+        for y in range(h):
+            row = &magnitude[y, 0]
+            for x in range(w):
+                v = row[x] * scale
+                v = zero if v < zero else (top if v > top else v)
+                hist[<uint8_t>v] += 1
+        for i in range(256):
+            mu += i * <double>hist[i]
+        mu *= each
+        for i in range(256):
+            p_i = hist[i] * each
+            mu1 *= q1
+            q1 += p_i
+            q2 = 1.0 - q1
+            if min(q1, q2) < eps or max(q1, q2) > 1.0 - eps:
+                continue
+            mu1 = (mu1 + i * p_i) / q1
+            mu2 = (mu - q1 * mu1) / q2
+            sigma = q1 * q2 * (mu1 - mu2) * (mu1 - mu2)
+            if sigma > max_sigma:
+                max_sigma = sigma
+                level = i
+    return level

@@ -47,15 +47,12 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
 def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:
     """(low, high): high by Otsu's method on the gradient magnitudes (the split between
     flat-or-textured pixels and edge pixels), at least MIN_HIGH; low = high / 2."""
-    import cv2
-
     top = float(magnitude.max())
     if top <= 0:
         return MIN_HIGH / 2, MIN_HIGH
-    # the float32 product (numpy casts the scale to the array's float32), clipped in place
-    levels = np.multiply(magnitude, np.float32(255.0 / top))
-    levels = np.clip(levels, 0, 255, out=levels).astype(np.uint8)
-    otsu, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    # cv2.threshold(THRESH_OTSU) of the levels, clip(magnitude * float32(255 / top), 0,
+    # 255) as uint8, in one compiled pass: no level image, and no OpenCV threads
+    otsu = native._gradients.otsu_level(np.ascontiguousarray(magnitude, dtype=np.float32), np.float32(255.0 / top))
     high = min(max(MIN_HIGH, float(otsu) * top / 255.0), MAX_HIGH)
     return high / 2, high
 
@@ -78,10 +75,9 @@ def detect(gray: np.ndarray, peak: float, canny: tuple[float, float] | None = No
 
     Returns (edges: H x W bool, magnitude: H x W float32, (low, high) used).
     """
-    import cv2
-
     mag, ix, iy = gradient(gray, peak)
     low, high = canny if canny is not None else auto_thresholds(mag)
-    # cv2.Canny on derivatives compares |(dx, dy)| (L2) against the thresholds
-    edges = cv2.Canny(ix, iy, low * _SCALE, high * _SCALE, L2gradient=True) > 0
+    # cv2.Canny(ix, iy, ..., L2gradient=True) > 0, which compares |(dx, dy)| against
+    # the thresholds, in one thread: OpenCV's own threads cost more CPU than they save
+    edges = native._gradients.canny(ix, iy, low * _SCALE, high * _SCALE)
     return edges, mag, (low, high)

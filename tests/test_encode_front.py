@@ -1,0 +1,101 @@
+"""The encoder's front in one thread: Canny, Otsu's threshold and the 3 x 3 exclusion
+zone computed without OpenCV's thread pool (codec._gradients.canny, .otsu_level,
+codec.mesher.adaptive._excluded) give exactly what the OpenCV calls they replace give."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from codec import native
+from codec.image import structure
+from codec.mesher import adaptive, edges
+from tests.corpus import load_corpus
+
+
+def _cases(seed: int, count: int):
+    """(ix, iy, low, high): random derivatives (small, full int16 range, and those of
+    smoothed noise) with thresholds on their scale."""
+    rng = np.random.default_rng(seed)
+    for t in range(count):
+        h, w = (int(v) for v in rng.integers(1, 48, 2))
+        kind = t % 3
+        if kind == 0:
+            ix, iy = (rng.integers(-400, 400, (h, w)).astype(np.int16) for _ in range(2))
+            scale = 300
+        elif kind == 1:
+            img = cv2.GaussianBlur((rng.random((h, w)) * 255).astype(np.float32), (0, 0), 2.0)
+            _, ix, iy = edges.gradient(img, 255.0)
+            scale = 300
+        else:
+            ix, iy = (rng.integers(-32768, 32768, (h, w)).astype(np.int16) for _ in range(2))
+            scale = 40000
+        low, high = sorted(float(v) for v in rng.random(2) * scale)
+        yield ix, iy, low, high
+
+
+def test_canny_gives_opencvs_edges_on_random_derivatives():
+    for ix, iy, low, high in _cases(20, 1500):
+        want = cv2.Canny(ix, iy, low, high, L2gradient=True) > 0
+        got = native._gradients.canny(ix, iy, low, high)
+        assert got.dtype == bool and np.array_equal(got, want), (ix.shape, low, high)
+
+
+@pytest.mark.parametrize("name", ["camera", "coins", "moon", "text", "astronaut", "motorcycle_disp"])
+def test_detect_gives_opencvs_edges_and_threshold_on_the_corpus(name):
+    gray = structure(load_corpus()[name])
+    mag, ix, iy = edges.gradient(gray, 255.0)
+    top = float(mag.max())
+    levels = np.clip(np.multiply(mag, np.float32(255.0 / top)), 0, 255).astype(np.uint8)
+    otsu, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    assert native._gradients.otsu_level(mag, np.float32(255.0 / top)) == otsu
+    found, _, (low, high) = edges.detect(gray, 255.0)
+    assert np.array_equal(found, cv2.Canny(ix, iy, low * 16, high * 16, L2gradient=True) > 0)
+    # and with the thresholds swapped, as OpenCV swaps them
+    assert np.array_equal(native._gradients.canny(ix, iy, high * 16, low * 16),
+                          cv2.Canny(ix, iy, high * 16, low * 16, L2gradient=True) > 0)
+
+
+def test_otsu_level_gives_opencvs_threshold_on_random_magnitudes():
+    rng = np.random.default_rng(21)
+    for t in range(1500):
+        h, w = (int(v) for v in rng.integers(1, 64, 2))
+        mag = (rng.random((h, w)) ** (1 + 3 * (t % 3))).astype(np.float32) * float(rng.random() * 100 + 1e-3)
+        if t % 3 == 2:
+            mag[rng.random((h, w)) < 0.5] = 0
+        top = float(mag.max())
+        if top <= 0:
+            continue
+        levels = np.clip(np.multiply(mag, np.float32(255.0 / top)), 0, 255).astype(np.uint8)
+        want, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+        assert native._gradients.otsu_level(mag, np.float32(255.0 / top)) == want
+
+
+def test_kernels_refuse_mismatched_or_empty_planes():
+    with pytest.raises(ValueError):
+        native._gradients.canny(np.zeros((3, 4), np.int16), np.zeros((4, 3), np.int16), 1.0, 2.0)
+    with pytest.raises(ValueError):
+        native._gradients.canny(np.zeros((3, 4), np.int16), np.zeros((3, 4), np.int16), -1.0, 2.0)
+    assert native._gradients.canny(np.zeros((0, 4), np.int16), np.zeros((0, 4), np.int16), 1.0, 2.0).shape == (0, 4)
+    with pytest.raises(ValueError):
+        native._gradients.otsu_level(np.zeros((0, 3), np.float32), np.float32(1))
+
+
+class _Points:
+    def __init__(self, pixels=None, points=None):
+        self.pixels, self.points = pixels, points
+
+
+def test_excluded_is_opencvs_three_by_three_dilation():
+    rng = np.random.default_rng(22)
+    for _ in range(1000):
+        h, w = (int(v) for v in rng.integers(1, 40, 2))
+        n, m = int(rng.integers(0, 30)), int(rng.integers(0, 5))
+        lines = _Points(pixels=np.stack([rng.integers(0, w, n), rng.integers(0, h, n)], 1).astype(np.int64))
+        walls = _Points(points=np.stack([rng.integers(0, w, m), rng.integers(0, h, m)], 1).astype(np.int64))
+        mask = np.zeros((h, w), np.uint8)
+        mask[lines.pixels[:, 1], lines.pixels[:, 0]] = 1
+        mask[walls.points[:, 1], walls.points[:, 0]] = 1
+        want = cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
+        assert np.array_equal(adaptive._excluded(lines, walls, (h, w)), want)
