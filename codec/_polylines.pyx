@@ -13,6 +13,29 @@ from libc.string cimport memcpy
 import numpy as np
 
 
+# per 8-bit neighbourhood code: how many neighbours, the first and the last one's bit
+cdef uint8_t _COUNT[256]
+cdef uint8_t _FIRST[256]
+cdef uint8_t _LAST[256]
+
+
+cdef void _code_tables() noexcept:
+    cdef int code, k
+    for code in range(256):
+        _COUNT[code] = 0
+        _FIRST[code] = 0
+        _LAST[code] = 0
+        for k in range(8):
+            if code >> k & 1:
+                if _COUNT[code] == 0:
+                    _FIRST[code] = k
+                _LAST[code] = k
+                _COUNT[code] += 1
+
+
+_code_tables()
+
+
 def order_chains(const uint8_t[::1] simple, const int64_t[::1] offsets):
     """The pixels of the simple chains (every pixel with at most two 8-neighbours) of a
     flat mask padded by one pixel (offsets: the 8 neighbours' index offsets), chain by
@@ -28,10 +51,35 @@ def order_chains(const uint8_t[::1] simple, const int64_t[::1] offsets):
     for k in range(8):
         if abs(offsets[k]) >= size:
             raise ValueError("order_chains: a neighbour offset beyond the mask")
-    flat_a = np.flatnonzero(np.asarray(simple))
-    n = len(flat_a)
+    # the set pixels in index order, eight bytes tested at a time (np.flatnonzero of a
+    # uint8 mask takes numpy's slow generic path: 0.39 ms for a 512² image's mask)
+    cdef const uint8_t* s = &simple[0] if size else NULL
+    cdef uint64_t word
+    with nogil:
+        for i in range(0, size - 7, 8):
+            memcpy(&word, s + i, 8)
+            if word:
+                for k in range(i, i + 8):
+                    n += s[k] != 0
+        for i in range(size - size % 8, size):
+            n += s[i] != 0
     if n == 0:
-        return flat_a, flat_a.copy(), np.zeros(0, bool)
+        empty = np.zeros(0, np.int64)
+        return empty, empty.copy(), np.zeros(0, bool)
+    # one spare slot: each byte of a word is written and kept only if set (no branch)
+    flat_a = np.empty(n + 1, dtype=np.int64)
+    cdef int64_t[::1] flat_w = flat_a
+    with nogil:
+        j = 0
+        for i in range(0, size - 7, 8):
+            memcpy(&word, s + i, 8)
+            if word:
+                for k in range(i, i + 8):
+                    flat_w[j] = k
+                    j += s[k] != 0
+        for i in range(size - size % 8, size):
+            flat_w[j] = i
+            j += s[i] != 0
     # read only where `simple` is set, which the first loop below fills: no image-sized fill
     index_a = np.empty(size, dtype=np.int64)
     nb_a = np.full((n, 2), -1, dtype=np.int64)
@@ -49,29 +97,33 @@ def order_chains(const uint8_t[::1] simple, const int64_t[::1] offsets):
     cdef uint8_t[::1] is_start = is_start_a, closed_start = closed_start_a
     cdef uint8_t[::1] closed = closed_a.view(np.uint8)
     cdef bint bad = False, border = False
+    cdef int64_t[8] off
+    cdef int64_t low = 0, high = 0
+    cdef int code
     with nogil:
         for i in range(n):
             index[flat[i]] = i
-        # each pixel's neighbours in offset order: its first and its last
+        for k in range(8):
+            off[k] = offsets[k]
+            low = min(low, off[k])
+            high = max(high, off[k])
+        # each pixel's neighbours in offset order: its first and its last, from its
+        # 8-bit neighbourhood code by table (the branch a neighbour was mispredicted)
         for i in range(n):
             p = flat[i]
-            count = 0
-            for k in range(8):
-                q = p + offsets[k]
-                if q < 0 or q >= size:
-                    border = True
-                    break
-                if simple[q]:
-                    if count == 0:
-                        nb[i, 0] = index[q]
-                    else:
-                        nb[i, 1] = index[q]
-                    count += 1
-            if border:
+            if p + low < 0 or p + high >= size:
+                border = True
                 break
-            if count > 2:
+            code = ((s[p + off[0]] != 0) | (s[p + off[1]] != 0) << 1 | (s[p + off[2]] != 0) << 2
+                    | (s[p + off[3]] != 0) << 3 | (s[p + off[4]] != 0) << 4 | (s[p + off[5]] != 0) << 5
+                    | (s[p + off[6]] != 0) << 6 | (s[p + off[7]] != 0) << 7)
+            if _COUNT[code] > 2:
                 bad = True
                 break
+            if code:
+                nb[i, 0] = index[p + off[_FIRST[code]]]
+                if _COUNT[code] == 2:
+                    nb[i, 1] = index[p + off[_LAST[code]]]
         if not bad and not border:
             # components, found from their first pixel in scan-line order (the loop's
             # start), each pixel labelled with its component's first pixel

@@ -99,3 +99,18 @@ def test_excluded_is_opencvs_three_by_three_dilation():
         mask[walls.points[:, 1], walls.points[:, 0]] = 1
         want = cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
         assert np.array_equal(adaptive._excluded(lines, walls, (h, w)), want)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_order_chains_word_scan_and_code_tables_walk_as_by_hand(seed):
+    """order_chains finds its pixels eight bytes at a time (any width: the tail too)
+    and each pixel's two neighbours by its neighbourhood code's tables: the chains a
+    walk by hand gives, on masks wider than a word and of every width modulo 8."""
+    from tests.test_mesher_polylines import OFFSETS, _chains_by_hand, _simple_mask
+
+    rng = np.random.default_rng(300 + seed)
+    mask = _simple_mask(rng, int(rng.integers(20, 60)), int(rng.integers(17, 90)))
+    offsets = np.array([dy * mask.shape[1] + dx for dy, dx in OFFSETS], np.int64)
+    got = native._polylines.order_chains(mask.ravel().view(np.uint8), offsets)
+    for a, b in zip(got, _chains_by_hand(mask)):
+        assert np.array_equal(a, b)
