@@ -368,8 +368,9 @@ def thin_split(uint8_t[::1] on, Py_ssize_t stride, const uint8_t[::1] redundant)
                         n += o[k] != 0
             for x in range(y * stride + stride - stride % 8, y * stride + stride):
                 n += o[x] != 0
-    pixels_a = np.empty(n, np.intp)
-    colour_a = np.empty(n, np.uint8)
+    # one spare slot: each byte of a word is written and kept only if set (no branch)
+    pixels_a = np.empty(n + 1, np.intp)
+    colour_a = np.empty(n + 1, np.uint8)
     gone_a = np.empty(n, np.intp)
     junction_a = np.zeros(size, np.uint8)
     simple_a = np.zeros(size, np.uint8)
@@ -383,40 +384,33 @@ def thin_split(uint8_t[::1] on, Py_ssize_t stride, const uint8_t[::1] redundant)
                 memcpy(&word, o + x, 8)
                 if word:
                     for k in range(x, x + 8):
-                        if o[k]:
-                            pixels[j] = k
-                            colour[j] = (k - y * stride + y) & 1
-                            j += 1
+                        pixels[j] = k
+                        colour[j] = (k - y * stride + y) & 1
+                        j += o[k] != 0
             for x in range(y * stride + stride - stride % 8, y * stride + stride):
-                if o[x]:
-                    pixels[j] = x
-                    colour[j] = (x - y * stride + y) & 1
-                    j += 1
+                pixels[j] = x
+                colour[j] = (x - y * stride + y) & 1
+                j += o[x] != 0
         for parity in range(2):
             # every code of the pass from the mask as the pass found it, then the removals
+            # (kept or not without a branch: which pixels go is unpredictable)
             removed = 0
             for j in range(n):
                 p = pixels[j]
-                if not on[p] or colour[j] != parity:
-                    continue
                 code = ((o[p + off[0]] != 0) | (o[p + off[1]] != 0) << 1 | (o[p + off[2]] != 0) << 2
                         | (o[p + off[3]] != 0) << 3 | (o[p + off[4]] != 0) << 4 | (o[p + off[5]] != 0) << 5
                         | (o[p + off[6]] != 0) << 6 | (o[p + off[7]] != 0) << 7)
-                if redundant[code]:
-                    gone[removed] = p
-                    removed += 1
+                gone[removed] = p
+                removed += (redundant[code] != 0) & (o[p] != 0) & (colour[j] == parity)
             for j in range(removed):
                 on[gone[j]] = 0
         for j in range(n):
             p = pixels[j]
-            if not on[p]:
-                continue
             count = ((o[p + off[0]] != 0) + (o[p + off[1]] != 0) + (o[p + off[2]] != 0) + (o[p + off[3]] != 0)
                      + (o[p + off[4]] != 0) + (o[p + off[5]] != 0) + (o[p + off[6]] != 0) + (o[p + off[7]] != 0))
-            if count >= 3:
-                junction[p] = 1
-            else:
-                simple[p] = 1
+            # both written for every listed pixel (0 where it is not so), without a branch
+            junction[p] = (o[p] != 0) & (count >= 3)
+            simple[p] = (o[p] != 0) & (count < 3)
     return junction_a.view(bool), simple_a.view(bool)
 
 
