@@ -114,3 +114,33 @@ def test_order_chains_word_scan_and_code_tables_walk_as_by_hand(seed):
     got = native._polylines.order_chains(mask.ravel().view(np.uint8), offsets)
     for a, b in zip(got, _chains_by_hand(mask)):
         assert np.array_equal(a, b)
+
+
+def _varints_by_numpy(values) -> bytes:
+    """codec.coding.varints as it was written in numpy (repeat, shift, mask)."""
+    v = np.asarray(values, dtype=np.uint64).ravel()
+    if v.size == 0:
+        return b""
+    nbytes = np.ones(v.size, dtype=np.int64)
+    for k in range(1, 10):
+        nbytes += v >= (np.uint64(1) << np.uint64(7 * k))
+    rep = np.repeat(v, nbytes)
+    ends = np.cumsum(nbytes)
+    k = np.arange(ends[-1]) - np.repeat(ends - nbytes, nbytes)
+    out = (rep >> (np.uint64(7) * k.astype(np.uint64))) & np.uint64(0x7F)
+    more = k < np.repeat(nbytes - 1, nbytes)
+    return (out | (more.astype(np.uint64) << np.uint64(7))).astype(np.uint8).tobytes()
+
+
+def test_compiled_varints_are_the_numpy_ones():
+    from codec import coding
+
+    rng = np.random.default_rng(23)
+    for t in range(1000):
+        v = rng.integers(0, 2**63, int(rng.integers(0, 40)), dtype=np.uint64) >> rng.integers(0, 64, dtype=np.uint64)
+        if t % 4 == 0:
+            v = np.r_[v, np.array([2**64 - 1, 0, 127, 128, 2**35], np.uint64)]
+        assert coding.varints(v) == _varints_by_numpy(v)
+    for v in (np.arange(300, dtype=np.int64), [1, 2, 300], np.zeros((3, 2), np.int64), np.array([-1], np.int64), []):
+        assert coding.varints(v) == _varints_by_numpy(v)
+    assert native._samples.varints(np.zeros(0, np.uint64)) == b""
