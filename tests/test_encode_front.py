@@ -1,6 +1,6 @@
-"""The encoder's front in one thread: Canny, Otsu's threshold and the 3 x 3 exclusion
-zone computed without OpenCV's thread pool (codec._gradients.canny, .otsu_level,
-codec.mesher.adaptive._excluded) give exactly what the OpenCV calls they replace give."""
+"""The encoder's front and writing kernels give exactly what the code they replace
+gave: Canny and Otsu's threshold without OpenCV's thread pool (codec._gradients.canny,
+.otsu_level), the chain ordering's word scan and code tables, compiled varints."""
 
 from __future__ import annotations
 
@@ -80,25 +80,6 @@ def test_kernels_refuse_mismatched_or_empty_planes():
     assert native._gradients.canny(np.zeros((0, 4), np.int16), np.zeros((0, 4), np.int16), 1.0, 2.0).shape == (0, 4)
     with pytest.raises(ValueError):
         native._gradients.otsu_level(np.zeros((0, 3), np.float32), np.float32(1))
-
-
-class _Points:
-    def __init__(self, pixels=None, points=None):
-        self.pixels, self.points = pixels, points
-
-
-def test_excluded_is_opencvs_three_by_three_dilation():
-    rng = np.random.default_rng(22)
-    for _ in range(1000):
-        h, w = (int(v) for v in rng.integers(1, 40, 2))
-        n, m = int(rng.integers(0, 30)), int(rng.integers(0, 5))
-        lines = _Points(pixels=np.stack([rng.integers(0, w, n), rng.integers(0, h, n)], 1).astype(np.int64))
-        walls = _Points(points=np.stack([rng.integers(0, w, m), rng.integers(0, h, m)], 1).astype(np.int64))
-        mask = np.zeros((h, w), np.uint8)
-        mask[lines.pixels[:, 1], lines.pixels[:, 0]] = 1
-        mask[walls.points[:, 1], walls.points[:, 0]] = 1
-        want = cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
-        assert np.array_equal(adaptive._excluded(lines, walls, (h, w)), want)
 
 
 @pytest.mark.parametrize("seed", range(12))

@@ -102,16 +102,12 @@ def _reorder(lines: polyline_stage.Polylines, order: np.ndarray) -> polyline_sta
 
 def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, int]) -> np.ndarray:
     """Pixels on or next to the kept edges and walls: no region samples there."""
-    height, width = shape
-    pts = np.concatenate([lines.pixels, walls.points]).reshape(-1, 2)
-    mask = np.zeros(shape, dtype=bool)
-    # cv2.dilate's 3 x 3 square, marked around the few thousand points themselves (no
-    # image pass, and none of OpenCV's threads); a neighbour clipped back into the
-    # image is still within one pixel of its point
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            mask[np.clip(pts[:, 1] + dy, 0, height - 1), np.clip(pts[:, 0] + dx, 0, width - 1)] = True
-    return mask
+    import cv2
+
+    mask = np.zeros(shape, dtype=np.uint8)
+    mask[lines.pixels[:, 1], lines.pixels[:, 0]] = 1
+    mask[walls.points[:, 1], walls.points[:, 0]] = 1
+    return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
 
 def _off_edge_curvature(gray: np.ndarray, found: np.ndarray) -> float:
