@@ -501,3 +501,81 @@ def opposite_feet(const int64_t[:, ::1] points, const double[:, ::1] normal, con
             else:
                 left[i, 0] = px; left[i, 1] = py; right[i, 0] = ox; right[i, 1] = oy
     return left_a, right_a
+
+
+def chain_walks(const int64_t[::1] flat, const int64_t[::1] chain, const uint8_t[::1] closed,
+                const uint8_t[::1] junction, const int64_t[::1] offsets, const float[:, ::1] magnitude,
+                int64_t stride):
+    """polylines._attach and the chains' sums of squared gradient in one pass over
+    order_chains' output (flat padded indices in chain order, the chain of each, closed
+    per chain): each chain's pixels with, unless it is closed, the first junction pixel
+    (in offset order) next to its first pixel before them and the one next to its last
+    after them; a closed chain ends at its first pixel again. Returns (pixels, starts:
+    chain c is pixels[starts[c]:starts[c + 1]], sums: per chain, the squares of
+    `magnitude` (H x W, the unpadded image; as float64) added in pixel order, as
+    np.bincount adds its weights). ValueError on inconsistent input."""
+    cdef Py_ssize_t n = flat.shape[0], size = junction.shape[0], chains = closed.shape[0]
+    cdef Py_ssize_t h = magnitude.shape[0], w = magnitude.shape[1]
+    cdef Py_ssize_t i, j, c, k, a, b, q, p, out = 0
+    cdef double m, total
+    if chain.shape[0] != n or offsets.shape[0] != 8 or stride != w + 2 or size != (h + 2) * stride:
+        raise ValueError("chain_walks: the arrays do not fit together")
+    for k in range(8):
+        if abs(offsets[k]) > stride + 1:
+            raise ValueError("chain_walks: a neighbour offset beyond the 3 x 3 square")
+    pixels_a = np.empty(n + 2 * chains, dtype=np.int64)
+    starts_a = np.empty(chains + 1, dtype=np.int64)
+    sums_a = np.zeros(chains, dtype=np.float64)
+    cdef int64_t[::1] pixels = pixels_a, starts = starts_a
+    cdef double[::1] sums = sums_a
+    cdef const float* mag = &magnitude[0, 0] if h and w else NULL
+    cdef bint bad = False
+    with nogil:
+        # every index is checked before it is read: the pixels lie inside the border
+        for i in range(n):
+            p = flat[i]
+            if p < stride + 1 or p >= size - stride - 1 or chain[i] < 0 or chain[i] >= chains \
+                    or (i and chain[i] != chain[i - 1] and chain[i] != chain[i - 1] + 1) or (i == 0 and chain[0] != 0):
+                bad = True
+                break
+        if not bad and n and chain[n - 1] != chains - 1:
+            bad = True
+        if not bad:
+            a = 0
+            for c in range(chains):
+                b = a
+                while b < n and chain[b] == c:
+                    b += 1
+                starts[c] = out
+                if b > a and not closed[c]:
+                    for k in range(8):
+                        q = flat[a] + offsets[k]
+                        if junction[q]:
+                            pixels[out] = q
+                            out += 1
+                            break
+                for j in range(a, b):
+                    pixels[out] = flat[j]
+                    out += 1
+                if b > a:
+                    if closed[c]:
+                        pixels[out] = flat[a]
+                        out += 1
+                    else:
+                        for k in range(8):
+                            q = flat[b - 1] + offsets[k]
+                            if junction[q]:
+                                pixels[out] = q
+                                out += 1
+                                break
+                total = 0.0
+                for j in range(starts[c], out):
+                    p = pixels[j]
+                    m = <double>mag[(p // stride - 1) * w + (p % stride - 1)]
+                    total += m * m
+                sums[c] = total
+                a = b
+            starts[chains] = out
+    if bad:
+        raise ValueError("chain_walks: pixels outside the mask or chains out of order")
+    return pixels_a[:out], starts_a, sums_a

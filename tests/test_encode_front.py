@@ -125,3 +125,95 @@ def test_compiled_varints_are_the_numpy_ones():
     for v in (np.arange(300, dtype=np.int64), [1, 2, 300], np.zeros((3, 2), np.int64), np.array([-1], np.int64), []):
         assert coding.varints(v) == _varints_by_numpy(v)
     assert native._samples.varints(np.zeros(0, np.uint64)) == b""
+
+
+def _trace_by_numpy(edge_map, magnitude, segment_length=4, segment_error=1.0, min_pixels=3, max_pixels=None):
+    """polylines.trace as it was before codec._polylines.chain_walks: the chain ends
+    attached and the chains chosen and summed by numpy."""
+    from codec.mesher import polylines as P
+
+    grid = P._Grid(edge_map.astype(bool))
+    junction, simple = P.thin_split(grid)
+    flat_order, chain, closed = P._order_chains(simple, grid.offsets)
+    offsets = grid.offsets
+    nchains = int(chain.max()) + 1 if len(chain) else 0
+    first = np.searchsorted(chain, np.arange(nchains), side="left")
+    last = np.searchsorted(chain, np.arange(nchains), side="right") - 1
+
+    def adjacent_junction(p):
+        q = p[:, None] + offsets[None, :]
+        hit = junction[q]
+        return np.where(hit.any(axis=1), q[np.arange(len(p)), np.argmax(hit, axis=1)], -1)
+
+    head = np.where(closed, -1, adjacent_junction(flat_order[first]))
+    tail = np.where(closed, flat_order[first], adjacent_junction(flat_order[last]))
+    hk, tk = head >= 0, tail >= 0
+    pix = np.concatenate([flat_order, head[hk], tail[tk]])
+    ch = np.concatenate([chain, np.flatnonzero(hk), np.flatnonzero(tk)])
+    key = np.concatenate([np.arange(len(flat_order)) * 3, first[hk] * 3 - 1, last[tk] * 3 + 1])
+    order = np.argsort(key, kind="stable")
+    pix, ch = pix[order], ch[order]
+
+    def unpad(p):
+        return (p // grid.stride - 1) * grid.w + (p % grid.stride - 1)
+
+    if len(pix):
+        sizes = np.bincount(ch)
+        wanted = sizes >= max(2, min_pixels)
+        if max_pixels is not None and sizes[wanted].sum() > max_pixels:
+            mean = np.bincount(ch, weights=magnitude.ravel()[unpad(pix)].astype(np.float64) ** 2) / sizes
+            order = np.argsort(-np.where(wanted, mean, -1.0), kind="stable")
+            fits = np.cumsum(np.where(wanted, sizes, 0)[order]) <= max_pixels
+            wanted = np.zeros_like(wanted)
+            wanted[order[fits]] = True
+        keep = wanted[ch]
+        pix, ch = pix[keep], (np.cumsum(wanted) - 1)[ch[keep]]
+    xy = np.stack([pix % grid.stride - 1, pix // grid.stride - 1], axis=1).astype(np.int64)
+    nchains = int(ch.max()) + 1 if len(ch) else 0
+    first = np.searchsorted(ch, np.arange(nchains), side="left")
+    last = np.searchsorted(ch, np.arange(nchains), side="right") - 1
+    ctrl = P._control_points(xy.astype(np.float64), first, last, int(segment_length), float(segment_error))
+    starts = np.concatenate([[0], np.cumsum(np.bincount(ch[ctrl], minlength=nchains))])
+    strength = np.bincount(ch, weights=magnitude.ravel()[unpad(pix)].astype(np.float64) ** 2, minlength=nchains)
+    return xy[ctrl], starts, xy, ch, strength
+
+
+def _same_trace(edge_map, magnitude, **options):
+    from codec.mesher import polylines as P
+
+    got = P.trace(edge_map, magnitude, **options)
+    want = _trace_by_numpy(edge_map, magnitude, **options)
+    for a, b in zip((got.points, got.starts, got.pixels, got.pixel_line, got.strength), want):
+        assert a.shape == b.shape and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_chain_walks_trace_as_numpy_did_on_random_edges(seed):
+    rng = np.random.default_rng(400 + seed)
+    h, w = (int(v) for v in rng.integers(1, 70, 2))
+    edge_map = rng.random((h, w)) < rng.uniform(0.02, 0.5)
+    magnitude = (rng.random((h, w)) * 50).astype(np.float32)
+    for options in ({}, {"max_pixels": int(rng.integers(0, 60))}, {"min_pixels": 5, "segment_length": 2}):
+        _same_trace(edge_map, magnitude, **options)
+
+
+@pytest.mark.parametrize("name", ["camera", "astronaut", "motorcycle_disp"])
+def test_chain_walks_trace_as_numpy_did_on_the_corpus(name):
+    found, magnitude, _ = edges.detect(structure(load_corpus()[name]), 255.0)
+    _same_trace(found, magnitude)
+    _same_trace(found, magnitude, max_pixels=8 * int(0.3 * 0.028 * found.size))
+
+
+def test_chain_walks_refuses_what_does_not_fit():
+    offsets = np.array([-6, -5, -4, 1, 6, 5, 4, -1], np.int64)
+    junction = np.zeros(25, np.uint8)
+    mag = np.zeros((3, 3), np.float32)
+    with pytest.raises(ValueError, match="fit together"):
+        native._polylines.chain_walks(np.array([6], np.int64), np.array([0], np.int64), np.zeros(1, np.uint8),
+                                      junction, offsets, mag, 4)
+    with pytest.raises(ValueError, match="outside the mask"):
+        native._polylines.chain_walks(np.array([0], np.int64), np.array([0], np.int64), np.zeros(1, np.uint8),
+                                      junction, offsets, mag, 5)
+    with pytest.raises(ValueError, match="out of order"):
+        native._polylines.chain_walks(np.array([6, 7], np.int64), np.array([1, 0], np.int64), np.zeros(2, np.uint8),
+                                      junction, offsets, mag, 5)
