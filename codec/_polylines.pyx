@@ -579,3 +579,87 @@ def chain_walks(const int64_t[::1] flat, const int64_t[::1] chain, const uint8_t
     if bad:
         raise ValueError("chain_walks: pixels outside the mask or chains out of order")
     return pixels_a[:out], starts_a, sums_a
+
+
+cdef inline Py_ssize_t _slot(const int64_t* keys, Py_ssize_t mask, int64_t key) noexcept nogil:
+    """The slot of `key` in an open-addressing table (linear probing; -1 marks a free
+    slot): where it is, or the free slot where it goes."""
+    cdef Py_ssize_t i = <Py_ssize_t>((<uint64_t>key * 0x9E3779B97F4A7C15ULL) >> 32) & mask
+    while keys[i] != -1 and keys[i] != key:
+        i = (i + 1) & mask
+    return i
+
+
+def wall_segments(const int64_t[:, ::1] left, const int64_t[:, ::1] right, const int64_t[::1] starts,
+                  int64_t width, int64_t height):
+    """unfold's walls before their conflicts are dropped, in one pass: the feet (left
+    then right, N x 2 (x, y) each, N control points; polyline k is starts[k] ..
+    starts[k + 1] - 1) merged one vertex a pixel, numbered in order of first
+    appearance; each polyline's left wall's segments, then its right wall's, between
+    its consecutive control points; a segment whose ends merged dropped, and a segment
+    met before (either direction) kept only the first time. Returns (points M x 2,
+    segments S x 2, wall of each: 2k left of polyline k, 2k + 1 its right).
+    ValueError on feet outside the width x height image or starts that do not cover
+    the N points in order."""
+    cdef Py_ssize_t n = left.shape[0], lines = starts.shape[0] - 1, i, j, k, a, b, size, mask, slot
+    cdef Py_ssize_t count = 0, nseg = 0
+    cdef int64_t key, lo, hi, x, y
+    if right.shape[0] != n or (n and (left.shape[1] != 2 or right.shape[1] != 2)) or lines < 0:
+        raise ValueError("wall_segments: the feet and the polylines do not fit together")
+    if starts[0] != 0 or starts[lines] != n:
+        raise ValueError("wall_segments: the polylines do not cover the control points")
+    for k in range(lines):
+        if starts[k + 1] < starts[k]:
+            raise ValueError("wall_segments: the polylines do not cover the control points")
+    size = 16
+    while size < 4 * n:  # at most 2n keys in each table: at most half full
+        size *= 2
+    mask = size - 1
+    # one table for the pixels' keys (>= 0), one for the segments' keys; -1 is free
+    keys_a = np.full(size, -1, dtype=np.int64)
+    ids_a = np.empty(size, dtype=np.int64)
+    pair_a = np.full(size, -1, dtype=np.int64)
+    id_of_a = np.empty(2 * n, dtype=np.int64)
+    points_a = np.empty((2 * n, 2), dtype=np.int64)
+    segs_a = np.empty((2 * n, 2), dtype=np.int64)
+    wall_a = np.empty(2 * n, dtype=np.int64)
+    cdef int64_t[::1] keys = keys_a, ids = ids_a, pair = pair_a, id_of = id_of_a, wall = wall_a
+    cdef int64_t[:, ::1] points = points_a, segs = segs_a
+    cdef bint bad = False
+    with nogil:
+        for i in range(2 * n):
+            x = left[i, 0] if i < n else right[i - n, 0]
+            y = left[i, 1] if i < n else right[i - n, 1]
+            if x < 0 or x >= width or y < 0 or y >= height:
+                bad = True
+                break
+            key = y * width + x
+            slot = _slot(&keys[0], mask, key)
+            if keys[slot] == -1:
+                keys[slot] = key
+                ids[slot] = count
+                points[count, 0] = x
+                points[count, 1] = y
+                count += 1
+            id_of[i] = ids[slot]
+        if not bad:
+            for k in range(lines):
+                for j in range(2):  # the left wall, then the right one
+                    for i in range(starts[k], starts[k + 1] - 1):
+                        a = id_of[j * n + i]
+                        b = id_of[j * n + i + 1]
+                        if a == b:
+                            continue
+                        lo = a if a < b else b
+                        hi = b if a < b else a
+                        slot = _slot(&pair[0], mask, lo * count + hi)
+                        if pair[slot] != -1:
+                            continue
+                        pair[slot] = lo * count + hi
+                        segs[nseg, 0] = a
+                        segs[nseg, 1] = b
+                        wall[nseg] = 2 * k + j
+                        nseg += 1
+    if bad:
+        raise ValueError("wall_segments: a foot lies outside the image")
+    return points_a[:count].copy(), segs_a[:nseg].copy(), wall_a[:nseg].copy()

@@ -217,3 +217,58 @@ def test_chain_walks_refuses_what_does_not_fit():
     with pytest.raises(ValueError, match="out of order"):
         native._polylines.chain_walks(np.array([6, 7], np.int64), np.array([1, 0], np.int64), np.zeros(2, np.uint8),
                                       junction, offsets, mag, 5)
+
+
+def _walls_by_numpy(left, right, starts, width):
+    """unfold's merge of the feet and its wall segments as numpy made them before
+    codec._polylines.wall_segments."""
+    n = len(left)
+    points = np.concatenate([left, right])
+    key = points[:, 1] * width + points[:, 0]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    ids = rank[inverse.ravel()]
+    merged = points[first[order]]
+    line_of = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+    step = np.flatnonzero(line_of[1:] == line_of[:-1])
+    segs = np.concatenate([np.stack([ids[step], ids[step + 1]], 1), np.stack([ids[n + step], ids[n + step + 1]], 1)])
+    rank = np.concatenate([line_of[step] * 2, line_of[step] * 2 + 1])
+    order = np.argsort(rank, kind="stable")
+    segs, rank = segs[order], rank[order]
+    real = segs[:, 0] != segs[:, 1]
+    segs, rank = segs[real], rank[real]
+    key = np.minimum(segs[:, 0], segs[:, 1]) * len(merged) + np.maximum(segs[:, 0], segs[:, 1])
+    once = np.sort(np.unique(key, return_index=True)[1])
+    return merged, segs[once], rank[once]
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_wall_segments_are_numpys(seed):
+    rng = np.random.default_rng(500 + seed)
+    w, h = (int(v) for v in rng.integers(1, 12, 2))  # small images: many feet share a pixel
+    sizes = rng.integers(1, 8, int(rng.integers(1, 30)))
+    starts = np.r_[0, np.cumsum(sizes)].astype(np.int64)
+    n = int(starts[-1])
+    left = np.stack([rng.integers(0, w, n), rng.integers(0, h, n)], 1).astype(np.int64)
+    right = np.stack([rng.integers(0, w, n), rng.integers(0, h, n)], 1).astype(np.int64)
+    if seed % 3 == 0:  # walls that retrace each other: segments met twice, both ways
+        right = left[::-1].copy()
+    got = native._polylines.wall_segments(left, right, starts, w, h)
+    for a, b in zip(got, _walls_by_numpy(left, right, starts, w)):
+        assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_wall_segments_refuse_what_does_not_fit():
+    feet = np.zeros((3, 2), np.int64)
+    with pytest.raises(ValueError, match="cover"):
+        native._polylines.wall_segments(feet, feet, np.array([0, 2], np.int64), 4, 4)
+    with pytest.raises(ValueError, match="cover"):
+        native._polylines.wall_segments(feet, feet, np.array([0, 2, 1, 3], np.int64), 4, 4)
+    with pytest.raises(ValueError, match="outside"):
+        native._polylines.wall_segments(feet + [[4, 0]], feet, np.array([0, 3], np.int64), 4, 4)
+    with pytest.raises(ValueError, match="fit together"):
+        native._polylines.wall_segments(feet, feet[:2], np.array([0, 3], np.int64), 4, 4)
+    empty = native._polylines.wall_segments(feet[:0], feet[:0], np.array([0], np.int64), 4, 4)
+    assert [a.shape for a in empty] == [(0, 2), (0, 2), (0,)]

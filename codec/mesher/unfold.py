@@ -95,29 +95,11 @@ def unfold(lines: Polylines, gray: np.ndarray, *, min_step: float = 4.0) -> Wall
     if len(lines.points) == 0:
         return Walls(np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64), np.zeros(0, np.int64))
     left, right = opposite_points(lines, gray, min_step=min_step)
-    n = len(left)
-    points = np.concatenate([left, right])
-    # one vertex per pixel: merge the feet that landed on the same pixel, first come
-    # first numbered
-    key = points[:, 1] * gray.shape[1] + points[:, 0]
-    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    ids = rank[inverse.ravel()]
-    merged = points[first[order]]
-    # segments of the left walls, then the right walls, polyline by polyline
-    line_of = np.repeat(np.arange(len(lines)), np.diff(lines.starts))
-    step = np.flatnonzero(line_of[1:] == line_of[:-1])
-    segs = np.concatenate([np.stack([ids[step], ids[step + 1]], 1), np.stack([ids[n + step], ids[n + step + 1]], 1)])
-    rank = np.concatenate([line_of[step] * 2, line_of[step] * 2 + 1])
-    order = np.argsort(rank, kind="stable")
-    segs, rank = segs[order], rank[order]
-    real = segs[:, 0] != segs[:, 1]
-    segs, rank = segs[real], rank[real]
-    # the same segment twice (feet merged): keep the first
-    key = np.minimum(segs[:, 0], segs[:, 1]) * len(merged) + np.maximum(segs[:, 0], segs[:, 1])
-    once = np.sort(np.unique(key, return_index=True)[1])
-    segs, rank = segs[once], rank[once]
+    # one vertex per pixel (the feet that landed on the same pixel merged, first come
+    # first numbered); the segments of each polyline's left wall, then its right wall;
+    # none whose ends merged, none twice: one compiled pass
+    merged, segs, rank = native._polylines.wall_segments(
+        np.ascontiguousarray(left, dtype=np.int64), np.ascontiguousarray(right, dtype=np.int64),
+        np.ascontiguousarray(lines.starts, dtype=np.int64), gray.shape[1], gray.shape[0])
     keep = drop_conflicts(merged, segs)
     return Walls(merged, segs[keep], rank[keep])
