@@ -272,3 +272,40 @@ def test_wall_segments_refuse_what_does_not_fit():
         native._polylines.wall_segments(feet, feet[:2], np.array([0, 3], np.int64), 4, 4)
     empty = native._polylines.wall_segments(feet[:0], feet[:0], np.array([0], np.int64), 4, 4)
     assert [a.shape for a in empty] == [(0, 2), (0, 2), (0,)]
+
+
+def _select_lines_by_numpy(lines, budget):
+    """adaptive._select_lines as it was: select() in scan-line order, then _reorder by
+    worth (a double argsort and a stable argsort of every pixel's polyline)."""
+    from codec.mesher import polylines as P
+
+    feet = 2 * np.diff(lines.starts)
+    worth = lines.strength / np.maximum(feet, 1)
+    order = np.argsort(-worth, kind="stable")
+    fits = np.cumsum(feet[order]) <= budget
+    keep = np.zeros(len(lines), dtype=bool)
+    keep[order[fits]] = True
+    picked = lines.select(keep)
+    rank = np.argsort(np.argsort(-worth[keep], kind="stable"), kind="stable")
+    order = np.argsort(rank, kind="stable")
+    sizes = np.diff(picked.starts)
+    chosen = sizes[order]
+    idx = np.repeat(picked.starts[:-1][order] - (np.cumsum(chosen) - chosen), chosen) + np.arange(int(chosen.sum()))
+    new_of_old = np.empty(len(order), dtype=np.int64)
+    new_of_old[order] = np.arange(len(order))
+    px_order = np.argsort(new_of_old[picked.pixel_line], kind="stable")
+    return P.Polylines(picked.points[idx], np.concatenate([[0], np.cumsum(sizes[order])]), picked.pixels[px_order],
+                       new_of_old[picked.pixel_line][px_order], picked.strength[order])
+
+
+@pytest.mark.parametrize("name", ["camera", "astronaut", "motorcycle_disp", "text"])
+def test_select_lines_takes_the_worthiest_as_select_and_reorder_did(name):
+    from codec.mesher import polylines as P
+
+    found, magnitude, _ = edges.detect(structure(load_corpus()[name]), 255.0)
+    lines = P.trace(found, magnitude)
+    for budget in (0, 10, 500, 2202, 10**9):
+        got, want = adaptive._select_lines(lines, budget), _select_lines_by_numpy(lines, budget)
+        for field in ("points", "starts", "pixels", "pixel_line", "strength"):
+            a, b = getattr(got, field), getattr(want, field)
+            assert a.shape == b.shape and np.array_equal(a, b), field

@@ -523,10 +523,10 @@ def test_tile_sampling_refuses_bounds_that_do_not_tile_the_image() -> None:
 
 
 def test_reordered_polylines_keep_their_points_together() -> None:
-    """adaptive._reorder gathers each polyline's points in the new order without a
-    Python loop: the same points as one arange per polyline, including empty orders."""
-    from codec.mesher.adaptive import _reorder
-
+    """Polylines.take (adaptive._reorder before it) gathers each polyline's points in
+    the new order without a Python loop: the same points as one arange per polyline,
+    including empty orders; its pixels by polyline in the new order, as a stable sort
+    of their new polyline numbers gave them."""
     rng = np.random.default_rng(2)
     for count in (0, 1, 7, 60):
         sizes = rng.integers(2, 9, count)
@@ -535,10 +535,16 @@ def test_reordered_polylines_keep_their_points_together() -> None:
         pixel_line = rng.integers(0, max(count, 1), 3 * count)
         lines = polylines.Polylines(points, starts, rng.integers(0, 100, (3 * count, 2)), pixel_line, rng.random(count))
         order = rng.permutation(count)
-        got = _reorder(lines, order)
+        got = lines.take(order)
         want = np.concatenate([points[starts[k] : starts[k + 1]] for k in order]) if count else points[:0]
         assert np.array_equal(got.points, want)
         assert np.array_equal(got.starts, np.r_[0, np.cumsum(sizes[order])])
+        new_of_old = np.empty(count, np.int64)
+        new_of_old[order] = np.arange(count)
+        px_order = np.argsort(new_of_old[pixel_line], kind="stable")
+        assert np.array_equal(got.pixels, lines.pixels[px_order])
+        assert np.array_equal(got.pixel_line, new_of_old[pixel_line][px_order])
+        assert np.array_equal(got.strength, lines.strength[order])
 
 
 def _numpy_opposite_points(lines, gray, reach=3, min_step=4.0):

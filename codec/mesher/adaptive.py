@@ -69,35 +69,13 @@ def _check_share(value, name: str) -> float:
 
 def _select_lines(lines: polyline_stage.Polylines, budget: int) -> polyline_stage.Polylines:
     """The polylines most worth their vertices (summed squared gradient per foot), as
-    many as `budget` feet allow, most worthy first (so they win wall conflicts)."""
+    many as `budget` feet allow, most worthy first (so they win wall conflicts; ties in
+    scan-line order)."""
     feet = 2 * np.diff(lines.starts)
     worth = lines.strength / np.maximum(feet, 1)
     order = np.argsort(-worth, kind="stable")
-    fits = np.cumsum(feet[order]) <= budget
-    chosen = order[fits]
-    keep = np.zeros(len(lines), dtype=bool)
-    keep[chosen] = True
-    picked = lines.select(keep)
-    # select() keeps scan-line order; reorder by worth
-    rank = np.argsort(np.argsort(-worth[keep], kind="stable"), kind="stable")
-    return _reorder(picked, np.argsort(rank, kind="stable"))
-
-
-def _reorder(lines: polyline_stage.Polylines, order: np.ndarray) -> polyline_stage.Polylines:
-    sizes = np.diff(lines.starts)
-    # the points of each polyline in `order`, one after another (no Python loop over them)
-    picked = sizes[order]
-    idx = np.repeat(lines.starts[:-1][order] - (np.cumsum(picked) - picked), picked) + np.arange(int(picked.sum()))
-    new_of_old = np.empty(len(order), dtype=np.int64)
-    new_of_old[order] = np.arange(len(order))
-    px_order = np.argsort(new_of_old[lines.pixel_line], kind="stable")
-    return polyline_stage.Polylines(
-        lines.points[idx],
-        np.concatenate([[0], np.cumsum(sizes[order])]),
-        lines.pixels[px_order],
-        new_of_old[lines.pixel_line][px_order],
-        lines.strength[order],
-    )
+    # a stable order's prefix sums: the chosen ones are already most worthy first
+    return lines.take(order[np.cumsum(feet[order]) <= budget])
 
 
 def _excluded(lines: polyline_stage.Polylines, walls: Walls, shape: tuple[int, int]) -> np.ndarray:

@@ -99,6 +99,29 @@ class Polylines:
     def line(self, k: int) -> np.ndarray:
         return self.points[self.starts[k] : self.starts[k + 1]]
 
+    def take(self, chosen: np.ndarray) -> "Polylines":
+        """The polylines chosen[0], chosen[1], ... (distinct indices), in that order."""
+        chosen = np.asarray(chosen, dtype=np.int64)
+        sizes = np.diff(self.starts)[chosen]
+        # each chosen polyline's points, then its pixels, one block after another
+        points = self.points[_blocks(self.starts[:-1][chosen], sizes)]
+        line = self.pixel_line
+        if len(line) and not (line[1:] >= line[:-1]).all():
+            # pixels not grouped by polyline (trace's are): grouped first, stably
+            grouped = np.argsort(line, kind="stable")
+            pixels, line = self.pixels[grouped], line[grouped]
+        else:
+            pixels = self.pixels
+        counts = np.bincount(line, minlength=len(self))
+        firsts = np.cumsum(counts) - counts
+        return Polylines(
+            points,
+            np.concatenate([[0], np.cumsum(sizes)]),
+            pixels[_blocks(firsts[chosen], counts[chosen])],
+            np.repeat(np.arange(len(chosen), dtype=np.int64), counts[chosen]),
+            self.strength[chosen],
+        )
+
     def select(self, keep: np.ndarray) -> "Polylines":
         """The polylines with keep[k] True, in their order."""
         keep = np.asarray(keep, dtype=bool)
@@ -113,6 +136,11 @@ class Polylines:
             renum[self.pixel_line[px_keep]],
             self.strength[keep],
         )
+
+
+def _blocks(firsts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """Indices of the runs firsts[k] .. firsts[k] + sizes[k] - 1, one after another."""
+    return np.repeat(firsts - (np.cumsum(sizes) - sizes), sizes) + np.arange(int(sizes.sum()))
 
 
 def _order_chains(simple: np.ndarray, offsets: np.ndarray):
