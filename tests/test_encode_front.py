@@ -275,7 +275,8 @@ def test_wall_segments_refuse_what_does_not_fit():
 
 
 def _select_lines_by_numpy(lines, budget):
-    """adaptive._select_lines as it was: select() in scan-line order, then _reorder by
+    """adaptive._select_lines as it was: Polylines.select() (the kept polylines in
+    scan-line order), then _reorder by
     worth (a double argsort and a stable argsort of every pixel's polyline)."""
     from codec.mesher import polylines as P
 
@@ -285,7 +286,11 @@ def _select_lines_by_numpy(lines, budget):
     fits = np.cumsum(feet[order]) <= budget
     keep = np.zeros(len(lines), dtype=bool)
     keep[order[fits]] = True
-    picked = lines.select(keep)
+    sizes = np.diff(lines.starts)
+    renum = np.cumsum(keep) - 1
+    px_keep = keep[lines.pixel_line]
+    picked = P.Polylines(lines.points[np.repeat(keep, sizes)], np.concatenate([[0], np.cumsum(sizes[keep])]),
+                         lines.pixels[px_keep], renum[lines.pixel_line[px_keep]], lines.strength[keep])
     rank = np.argsort(np.argsort(-worth[keep], kind="stable"), kind="stable")
     order = np.argsort(rank, kind="stable")
     sizes = np.diff(picked.starts)

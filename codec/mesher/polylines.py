@@ -122,21 +122,6 @@ class Polylines:
             self.strength[chosen],
         )
 
-    def select(self, keep: np.ndarray) -> "Polylines":
-        """The polylines with keep[k] True, in their order."""
-        keep = np.asarray(keep, dtype=bool)
-        sizes = np.diff(self.starts)
-        pt_keep = np.repeat(keep, sizes)
-        renum = np.cumsum(keep) - 1
-        px_keep = keep[self.pixel_line]
-        return Polylines(
-            self.points[pt_keep],
-            np.concatenate([[0], np.cumsum(sizes[keep])]),
-            self.pixels[px_keep],
-            renum[self.pixel_line[px_keep]],
-            self.strength[keep],
-        )
-
 
 def _blocks(firsts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     """Indices of the runs firsts[k] .. firsts[k] + sizes[k] - 1, one after another."""
