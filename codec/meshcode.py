@@ -14,7 +14,7 @@ step (finer where the triangles are larger).
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -284,10 +284,18 @@ class Layout:
     free: np.ndarray
     curve_keys: np.ndarray
     parents: np.ndarray
+    #: steps() made so far, by (step, top_pinned): quantise and encode_band ask alike
+    _steps: dict = field(default_factory=dict, init=False, repr=False)
 
     def steps(self, step: int, top_pinned: bool) -> np.ndarray:
-        """Every stored vertex's quantisation step (vertex_steps)."""
-        return vertex_steps(self.vertices, self.triangles, step, top_pinned, self.areas)
+        """Every stored vertex's quantisation step (vertex_steps; read-only, made once
+        per (step, top_pinned) for this layout)."""
+        key = (int(step), bool(top_pinned))
+        if key not in self._steps:
+            steps = vertex_steps(self.vertices, self.triangles, step, top_pinned, self.areas)
+            steps.flags.writeable = False
+            self._steps[key] = steps
+        return self._steps[key]
 
 
 def layout(mesh: Mesh) -> Layout:
