@@ -1,6 +1,6 @@
 """Encoder work and output: triangulations, encode time and a fingerprint of the bytes.
 
-    python benchmarks/profile_encode.py [--hash] [--profile N] [--repeat 3]
+    python benchmarks/profile_encode.py [--hash] [--profile N] [--repeat 3] [--stages N [--sides ...]]
 
 * calls: how many triangulations `codec.encode` makes while it encodes camera as one
   band, as 16 bands, and at an error bound (quality=50): calls of codec's own
@@ -16,6 +16,9 @@
   quality 50, the disparity map with its holes as float data), and over their
   decodes: a refactoring that keeps both digests keeps the files and the pixels.
 * --profile N: the N costliest functions (cumulative time) of one camera encode.
+* --stages N [--sides 512 2048]: only the CPU budget of the encoder's stages (STAGES),
+  ms per encode over N encodes of camera and astronaut at 2.8 % vertices, at each side
+  (cubic resizes).
 
 Measures and prints; asserts nothing.
 """
@@ -43,6 +46,18 @@ from tests.corpus import disparity_raw, load_corpus  # noqa: E402
 DENSITIES = (0.01, 0.028)
 
 
+def _timed(function, clock, add):
+    """`function` wrapped to hand add() the `clock` time of each call."""
+    def timed(*args, **kwargs):
+        t0 = clock()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            add(clock() - t0)
+
+    return timed
+
+
 class TriangleCounter:
     """Counts (and times) the calls of codec.triangulate.triangulate while installed,
     wherever codec imported it by name, and the rounds of codec.triangulate.Triangulation
@@ -58,14 +73,7 @@ class TriangleCounter:
         self._methods: dict = {}
 
     def __enter__(self) -> "TriangleCounter":
-        def counted(*args, **kwargs):
-            t0 = time.perf_counter()
-            try:
-                return self._real(*args, **kwargs)
-            finally:
-                self.calls += 1
-                self.seconds += time.perf_counter() - t0
-
+        counted = self._timed(self._real, True)
         for name in ("codec.pipeline", "codec.meshcode", "codec.mesher.adaptive", "codec.mesher.uniform"):
             importlib.import_module(name)  # the meshers are imported on first use
         self._holders = [
@@ -81,15 +89,11 @@ class TriangleCounter:
         return self
 
     def _timed(self, method, counts: bool):
-        def timed(*args, **kwargs):
-            t0 = time.perf_counter()
-            try:
-                return method(*args, **kwargs)
-            finally:
-                self.calls += counts
-                self.seconds += time.perf_counter() - t0
+        def add(seconds: float) -> None:
+            self.calls += counts
+            self.seconds += seconds
 
-        return timed
+        return _timed(method, time.perf_counter, add)
 
     def __exit__(self, *exc) -> None:
         for m in self._holders:
@@ -122,13 +126,91 @@ def fingerprint(images: dict[str, np.ndarray]) -> tuple[str, str]:
     return enc.hexdigest(), dec.hexdigest()
 
 
+#: The encoder's stages the --stages budget times: (module, name where the encoder
+#: looks it up) pairs, front to writing; a stage's time includes any of these it calls
+#: (write_band's includes encode_band and compress_parts).
+STAGES = (
+    ("codec.mesher.edges", "detect"), ("codec.mesher.adaptive", "_off_edge_curvature"),
+    ("codec.mesher.polylines", "trace"), ("codec.mesher.adaptive", "_select_lines"),
+    ("codec.mesher.adaptive", "unfold"), ("codec.mesher.adaptive", "_excluded"),
+    ("codec.mesher.sampling", "curvature"), ("codec.mesher.sampling", "density"),
+    ("codec.mesher.sampling", "sample"), ("codec.mesher.adaptive", "refine_to_budget"),
+    ("codec.mesher.values", "from_statistics"), ("codec.pipeline", "meshcode.in_stored_order"),
+    ("codec.pipeline", "meshcode.layout"), ("codec.pipeline", "meshcode.quantise"),
+    ("codec.container", "Writer.write_band"), ("codec.container", "meshcode.encode_band"),
+    ("codec.container", "frames.compress_parts"),
+)
+
+
+class StageTimer:
+    """Process CPU time (OpenCV's and zstd's threads included) spent in each of STAGES
+    while installed, by wrapping each where the encoder looks it up."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._saved: list = []
+
+    def __enter__(self) -> "StageTimer":
+        for module, path in STAGES:
+            *owner_path, name = path.split(".")
+            owner = importlib.import_module(module)
+            for part in owner_path:
+                owner = getattr(owner, part)
+            real = getattr(owner, name)
+            self._saved.append((owner, name, real))
+            setattr(owner, name, self._timed(real, name))
+        return self
+
+    def _timed(self, real, name: str):
+        def add(seconds: float) -> None:
+            self.seconds[name] = self.seconds.get(name, 0.0) + seconds
+
+        return _timed(real, time.process_time, add)
+
+    def __exit__(self, *exc) -> None:
+        for owner, name, real in reversed(self._saved):
+            setattr(owner, name, real)
+
+
+def stage_budget(images: dict[str, np.ndarray], sides: list[int], encodes: int) -> None:
+    """Print the CPU ms per encode of every stage (and of the whole encode) of camera
+    and astronaut at 2.8 % vertices, at each side (cubic resizes)."""
+    import cv2
+
+    rows = []
+    for side in sides:
+        for name in ("camera", "astronaut"):
+            image = images[name]
+            if image.shape != (side, side):
+                image = cv2.resize(image, (side, side), interpolation=cv2.INTER_CUBIC)
+            points = round(0.028 * image.size)
+            codec.encode(image, points=points)  # warm
+            with StageTimer() as timer:
+                t0 = time.process_time()
+                for _ in range(encodes):
+                    codec.encode(image, points=points)
+                total = time.process_time() - t0
+            rows.append((f"{name}@{side}", total / encodes, {k: v / encodes for k, v in timer.seconds.items()}))
+    names = [path.split(".")[-1] for _, path in STAGES]
+    print(f"{'stage (CPU ms an encode)':<26}" + "".join(f"{label:>16}" for label, _, _ in rows))
+    print(f"{'whole encode':<26}" + "".join(f"{total * 1e3:>16.2f}" for _, total, _ in rows))
+    for stage in names:
+        print(f"{stage:<26}" + "".join(f"{times.get(stage, 0.0) * 1e3:>16.2f}" for _, _, times in rows))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=3, help="timed rounds")
     parser.add_argument("--hash", action="store_true", help="fingerprint the corpus encodes")
     parser.add_argument("--profile", type=int, default=0, metavar="N", help="top N functions of a camera encode")
+    parser.add_argument("--stages", type=int, default=0, metavar="N",
+                        help="only the CPU budget per stage, over N encodes of camera and astronaut")
+    parser.add_argument("--sides", type=int, nargs="+", default=[512, 2048], help="image sides for --stages")
     args = parser.parse_args(argv)
     images = load_corpus()
+    if args.stages:
+        stage_budget(images, args.sides, args.stages)
+        return 0
     camera = images["camera"]
     runs = {
         "camera, 1 band": dict(points=round(0.028 * camera.size)),

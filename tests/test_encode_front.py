@@ -341,3 +341,30 @@ def test_a_layout_makes_its_vertex_steps_once_for_quantise_and_encode_band(monke
     fields = meshcode.encode_band(0, quantised, 5, True, lay)
     assert len(made) == 1 and not lay.steps(5, False).flags.writeable
     assert fields == fresh
+
+
+def test_profile_encode_prints_a_cpu_budget_per_stage_and_puts_the_stages_back():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    run = subprocess.run([sys.executable, "benchmarks/profile_encode.py", "--stages", "1", "--sides", "64"],
+                         cwd=root, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    rows = {line.split()[0]: [float(v) for v in line.split()[-2:]] for line in run.stdout.splitlines()[2:]}
+    assert run.stdout.split()[5:7] == ["camera@64", "astronaut@64"]
+    for stage in ("detect", "trace", "unfold", "refine_to_budget", "write_band", "encode_band", "compress_parts"):
+        assert all(v > 0 for v in rows[stage]), stage
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        import profile_encode
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    from codec import container
+    from codec.mesher import polylines as P
+
+    before = (P.trace, container.Writer.write_band, container.frames.compress_parts)
+    with profile_encode.StageTimer():
+        assert P.trace is not before[0]
+    assert (P.trace, container.Writer.write_band, container.frames.compress_parts) == before
