@@ -29,6 +29,17 @@ ctypedef fused plane_t:
     float
     double
 
+# What triangle_statistics sums a span from: a prefix table (table_t's types), or one
+# 8- or 16-bit plane itself, summed pixel by pixel in int64 (the integers the table's
+# differences give, without the table: 12 bytes a pixel built per image, for a walk
+# that then reads two of its cache lines a span instead of one of the plane's)
+ctypedef fused source_t:
+    uint8_t
+    uint16_t
+    int32_t
+    int64_t
+    double
+
 
 cdef inline void _sort3(int64_t* ys, int64_t* xs) noexcept nogil:
     # the compare-and-swap network of elements._sort3: stable for equal rows
@@ -66,11 +77,12 @@ cdef inline void _edge_start(_Edge* e, int64_t n0, int64_t s, int64_t d, int64_t
 
 
 cdef inline void _edge_step(_Edge* e) noexcept nogil:
-    e.q += e.sq
-    e.r -= e.sr
-    if e.r < 0:
-        e.r += e.d
-        e.q += 1
+    # r - sr < 0 wraps the remainder and carries one into q, without a branch (which
+    # an edge's slope makes hard to predict)
+    cdef int64_t r = e.r - e.sr
+    cdef int64_t wrap = r >> 63  # -1 where r < 0, else 0
+    e.r = r + (e.d & wrap)
+    e.q += e.sq - wrap
 
 
 cdef struct _Rows:
@@ -97,11 +109,16 @@ cdef inline void _rows_start(_Rows* w, const int64_t* ys, const int64_t* xs, int
     w.lower_s = xs[2] - xs[1]
 
 
+cdef void _rows_lower(_Rows* w) noexcept nogil:
+    # the lower short edge takes over (kept out of _rows_next, so that it is inlined)
+    _edge_start(&w.short_edge, w.lower_n0, w.lower_s, w.lower_d, w.dy)
+
+
 cdef inline void _rows_next(_Rows* w, int64_t* left, int64_t* count) noexcept nogil:
     """Columns [left, left + count) of the next row (row ya + dy, dy from 0)."""
     cdef int64_t a, b
     if w.dy == w.up:
-        _edge_start(&w.short_edge, w.lower_n0, w.lower_s, w.lower_d, w.dy)
+        _rows_lower(w)
     a = w.long_edge.q
     b = w.short_edge.q
     if a < b:
@@ -115,26 +132,43 @@ cdef inline void _rows_next(_Rows* w, int64_t* left, int64_t* count) noexcept no
     w.dy += 1
 
 
-cdef bint _corners(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
-                   int64_t width, int64_t height, int64_t* ys, int64_t* xs) noexcept nogil:
+cdef struct _Mesh:
+    # the kernels' vertices (n x 2) and triangles (M x 3) as pointers: a memoryview
+    # handed to a helper per triangle is a struct of some 200 bytes copied each time
+    const int64_t* xy
+    const int64_t* tri
+    int64_t n, width, height
+
+
+cdef _Mesh _mesh(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                 int64_t height):
+    cdef _Mesh mesh
+    mesh.xy = &vertices[0, 0] if vertices.shape[0] else NULL
+    mesh.tri = &triangles[0, 0] if triangles.shape[0] else NULL
+    mesh.n = vertices.shape[0]
+    mesh.width = width
+    mesh.height = height
+    return mesh
+
+
+cdef inline bint _corners(const _Mesh* mesh, int64_t t, int64_t* ys, int64_t* xs) noexcept nogil:
     """The triangle's corners (False if an index or a coordinate is out of range)."""
     cdef int64_t i, v
     for i in range(3):
-        v = triangles[t, i]
-        if v < 0 or v >= vertices.shape[0]:
+        v = mesh.tri[3 * t + i]
+        if v < 0 or v >= mesh.n:
             return False
-        xs[i] = vertices[v, 0]
-        ys[i] = vertices[v, 1]
-        if xs[i] < 0 or xs[i] >= width or ys[i] < 0 or ys[i] >= height:
+        xs[i] = mesh.xy[2 * v]
+        ys[i] = mesh.xy[2 * v + 1]
+        if xs[i] < 0 or xs[i] >= mesh.width or ys[i] < 0 or ys[i] >= mesh.height:
             return False
     return True
 
 
-cdef bint _start(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
-                 int64_t width, int64_t height, int64_t* ys, int64_t* xs, int64_t* up) noexcept nogil:
+cdef inline bint _start(const _Mesh* mesh, int64_t t, int64_t* ys, int64_t* xs, int64_t* up) noexcept nogil:
     """The triangle's corners sorted by row and the rows of its upper piece (down to the
     middle corner's row, the last of all rows excluded); False if out of range."""
-    if not _corners(vertices, triangles, t, width, height, ys, xs):
+    if not _corners(mesh, t, ys, xs):
         return False
     _sort3(ys, xs)
     up[0] = ys[1] - ys[0] + 1
@@ -179,12 +213,11 @@ cdef inline void _affine(const int64_t* px, const int64_t* py, int64_t ox, int64
         f[k] = f[k] / den
 
 
-cdef bint _start_listed(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
-                        int64_t width, int64_t height, int64_t* py, int64_t* px, int64_t* ys, int64_t* xs,
-                        int64_t* up) noexcept nogil:
+cdef inline bint _start_listed(const _Mesh* mesh, int64_t t, int64_t* py, int64_t* px, int64_t* ys,
+                               int64_t* xs, int64_t* up) noexcept nogil:
     """_start, keeping the corners as listed too (py, px)."""
     cdef int i
-    if not _corners(vertices, triangles, t, width, height, py, px):
+    if not _corners(mesh, t, py, px):
         return False
     for i in range(3):
         ys[i] = py[i]
@@ -205,7 +238,7 @@ def _check(vertices, triangles, width, height):
 
 @cython.cdivision(True)
 def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                        int64_t height, const table_t[:, ::1] table, const double[::1] power1,
+                        int64_t height, const source_t[:, ::1] table, const double[::1] power1,
                         const double[::1] power2, const int64_t[::1] columns, const int64_t[::1] blocks,
                         const double[::1] z):
     """(M x C statistics, M squared errors or None) of the triangles: per triangle the sums
@@ -218,11 +251,18 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     sums b, ub, vb). With z (a value per vertex; empty: none), also each triangle's
     squared error against the plane through its corners' values, as
     elements.element_sse gives it (the same float64 operations in the same order, so
-    the same numbers). ValueError on an index or coordinate out of range."""
+    the same numbers). `table` may instead be the one plane itself (H x W, 8 or 16
+    bits, K = 3: b, x b, b b), whose spans are summed pixel by pixel in int64: the
+    integers an integer table's differences give, so the same statistics. ValueError
+    on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
-    cdef int64_t m = triangles.shape[0], kk = table.shape[1], stride = width + 1
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
+    cdef bint direct = source_t is uint8_t or source_t is uint16_t
+    cdef int64_t m = triangles.shape[0], kk = 3 if direct else table.shape[1], stride = width + 1
     cdef int64_t nc = columns.shape[0], nb = blocks.shape[0], raw = 6 + 2 * kk
-    if table.shape[0] != height * stride or power1.shape[0] <= width or power2.shape[0] <= width:
+    if direct and (table.shape[0] != height or table.shape[1] != width):
+        raise ValueError("triangle_statistics: the plane does not match the image size")
+    if (not direct and table.shape[0] != height * stride) or power1.shape[0] <= width or power2.shape[0] <= width:
         raise ValueError("triangle_statistics: tables do not match the image size")
     cdef int64_t q
     if nc < 10:
@@ -250,11 +290,13 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef int64_t py[3]
     cdef double f[3]
     cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
-    cdef table_t dk
+    cdef source_t dk
+    cdef const source_t* pix
+    cdef int64_t b, span_b, span_xb, span_bb
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
+            if not _start_listed(&geometry, t, py, px, ys, xs, &up):
                 bad = True
                 break
             for k in range(raw):
@@ -276,13 +318,33 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                 sums[3] += x2s
                 sums[4] += yf * x1s
                 sums[5] += yf * yn
-                lo = y * stride + x0
-                hi = lo + n
-                for k in range(kk):
-                    dk = table[hi, k] - table[lo, k]
-                    d = <double>dk
-                    sums[6 + k] += d
-                    sums[6 + kk + k] += yf * d
+                if source_t is uint8_t or source_t is uint16_t:
+                    pix = &table[y, x0]
+                    span_b = 0
+                    span_xb = 0
+                    span_bb = 0
+                    for i in range(n):
+                        b = pix[i]
+                        span_b += b
+                        span_xb += (x0 + i) * b
+                        span_bb += b * b
+                    d = <double>span_b
+                    sums[6] += d
+                    sums[9] += yf * d
+                    d = <double>span_xb
+                    sums[7] += d
+                    sums[10] += yf * d
+                    d = <double>span_bb
+                    sums[8] += d
+                    sums[11] += yf * d
+                else:
+                    lo = y * stride + x0
+                    hi = lo + n
+                    for k in range(kk):
+                        dk = table[hi, k] - table[lo, k]
+                        d = <double>dk
+                        sums[6 + k] += d
+                        sums[6 + kk + k] += yf * d
             for c in range(nc):
                 o[t, c] = sums[columns[c]]
             _origin(px, py, width, &ox, &oy)
@@ -318,6 +380,7 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     the first in raster order of those tied: (x, y, |error| (-1 where the triangle owns
     no pixel)). ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0]
     if z.shape[0] != vertices.shape[0]:
         raise ValueError("worst_pixels: z needs a value per vertex")
@@ -339,7 +402,7 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
+            if not _start_listed(&geometry, t, py, px, ys, xs, &up):
                 bad = True
                 break
             _origin(px, py, width, &ox, &oy)
@@ -374,6 +437,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     row, left to right (Raster.pixels of their triangle_raster). ValueError on an
     index or coordinate out of range."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], total = 0, t, dy, y, x0, n, x, up, j = 0
     cdef _Rows rows
     cdef int64_t ys[3]
@@ -381,7 +445,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start(&geometry, t, ys, xs, &up):
                 bad = True
                 break
             _rows_start(&rows, ys, xs, up)
@@ -396,7 +460,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     cdef int64_t[::1] pe = e_out, px = x_out, py = y_out
     with nogil:
         for t in range(m):
-            _start(vertices, triangles, t, width, height, ys, xs, &up)
+            _start(&geometry, t, ys, xs, &up)
             _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
                 _rows_next(&rows, &x0, &n)
@@ -477,6 +541,47 @@ def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] chann
                     acc[4 + 2 * k] += b * xv
                     o[base + x + 1, 3 + 2 * k] = acc[3 + 2 * k]
                     o[base + x + 1, 4 + 2 * k] = acc[4 + 2 * k]
+    return out
+
+
+ctypedef fused narrow_t:
+    uint8_t
+    uint16_t
+
+
+def span_sums(const narrow_t[:, ::1] plane, const int64_t[::1] span_y, const int64_t[::1] span_x,
+              const int64_t[::1] span_n):
+    """3 x S int64: the sums of b, x b and b b over each span (row y, columns [x, x + n))
+    of an 8- or 16-bit plane b, pixel by pixel: the integers its prefix table's
+    differences give (Raster.span_sums). ValueError on a span outside the plane."""
+    cdef int64_t s = span_y.shape[0], h = plane.shape[0], w = plane.shape[1], j, x, y, n, b
+    if span_x.shape[0] != s or span_n.shape[0] != s:
+        raise ValueError("span_sums: a row, a column and a count per span")
+    out = np.empty((3, s), dtype=np.int64)
+    cdef int64_t[:, ::1] o = out
+    cdef int64_t sb, sxb, sbb
+    cdef bint bad = False
+    with nogil:
+        for j in range(s):
+            y = span_y[j]
+            x = span_x[j]
+            n = span_n[j]
+            if y < 0 or y >= h or x < 0 or n < 0 or x > w - n:
+                bad = True
+                break
+            sb = 0
+            sxb = 0
+            sbb = 0
+            for x in range(x, x + n):
+                b = plane[y, x]
+                sb += b
+                sxb += x * b
+                sbb += b * b
+            o[0, j] = sb
+            o[1, j] = sxb
+            o[2, j] = sbb
+    if bad:
+        raise ValueError("span_sums: a span outside the plane")
     return out
 
 
@@ -588,6 +693,7 @@ def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     denominator (twice the area). Integers, so the very numbers numpy gave. ValueError
     on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], t, i, j, k, ox, oy
     origin_out = np.empty((m, 2), dtype=np.int64)
     coef_out = np.empty((m, 3, 3), dtype=np.int64)
@@ -600,7 +706,7 @@ def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _corners(vertices, triangles, t, width, height, py, px):
+            if not _corners(&geometry, t, py, px):
                 bad = True
                 break
             _origin(px, py, width, &ox, &oy)
@@ -661,6 +767,7 @@ def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     values._planar_refit took from every pixel's (element, x, y) arrays, without them.
     ValueError on an index or coordinate out of range or tables that do not match."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], t, dy, y, x0, n, x, up, count = 0
     if affine.shape[0] < m or affine.shape[1] != 3 or origin.shape[0] < m or origin.shape[1] != 2:
         raise ValueError("outlier_sums: an affine and an origin per triangle")
@@ -676,7 +783,7 @@ def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start(&geometry, t, ys, xs, &up):
                 bad = True
                 break
             a = affine[t, 0]

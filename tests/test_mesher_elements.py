@@ -250,3 +250,43 @@ def test_first_of_each_marks_the_first_of_every_value() -> None:
         expected = np.zeros(n, bool)
         expected[first] = True
         assert np.array_equal(native._elements.first_of_each(keys), expected)
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("kind", [np.uint8, np.uint16])
+def test_one_narrow_plane_is_summed_without_a_prefix_table(seed: int, kind) -> None:
+    # an 8- or 16-bit plane alone: the kernels sum its spans pixel by pixel, and must
+    # give the numbers of its prefix table (the encoder's bytes depend on them), up to
+    # the largest values and on widths where the table needs int64
+    rng = np.random.default_rng(40 + seed)
+    top = np.iinfo(kind).max
+    width, height = (int(rng.integers(3, 90)), int(rng.integers(3, 70))) if seed else (3000, 5)
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid=seed == 1)
+    plane = rng.integers(0, top + 1, (height, width)).astype(kind)
+    plane[0, : width // 2] = top
+    for fit in ("structure", None):
+        layout = Statistics(plane, fit)
+        assert layout._plane is not None and layout._planes is None  # no table made
+        z = rng.normal(top / 2, top / 4, len(v))
+        stats, sse = layout.of_triangles(v, t, z)
+        raster = triangle_raster(v, t, width, height)
+        by_spans = layout(raster)
+        table = layout.planes.table
+        assert table.dtype == (np.int32 if kind is np.uint8 and width < 2000 else np.int64)
+        want = native._elements.triangle_statistics(v, t, width, height, table, layout._powers[1], layout._powers[2],
+                                                    layout._from_kernel, layout._blocks, z)
+        assert np.array_equal(stats, want[0]) and np.array_equal(sse, want[1])
+        assert np.array_equal(by_spans, stats)
+        spans = (raster.span_y, raster.span_x, raster.span_n)
+        assert np.array_equal(native._elements.span_sums(plane, *spans), raster.span_sums(layout.planes))
+
+
+def test_narrow_span_sums_refuse_spans_outside_the_plane() -> None:
+    plane = np.zeros((4, 5), np.uint8)
+    one = np.ones(1, np.int64)
+    for y, x, n in ((4, 0, 1), (-1, 0, 1), (0, -1, 1), (0, 4, 2), (0, 0, -1)):
+        with pytest.raises(ValueError, match="outside the plane"):
+            native._elements.span_sums(plane, one * y, one * x, one * n)
+    with pytest.raises(ValueError, match="per span"):
+        native._elements.span_sums(plane, one, one, np.ones(2, np.int64))
+    assert native._elements.span_sums(plane, one * 3, one * 0, one * 5).tolist() == [[0], [0], [0]]

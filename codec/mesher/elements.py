@@ -188,16 +188,20 @@ class Statistics:
             top = max(np.iinfo(a.dtype).max for a in [structure] + channels)
             if max(top * (w - 1), top * top) * w < 2**31:
                 kind = np.int32
-        planes = Planes(structure.astype(kind), [c.astype(kind) for c in channels])
+        self._planes: Planes | None = None
+        self._make_planes = lambda: Planes(structure.astype(kind), [c.astype(kind) for c in channels])
+        # one 8- or 16-bit plane: the kernels sum its spans pixel by pixel in int64, the
+        # integers its prefix table's differences give, so no table is made (12 bytes a
+        # pixel, faulted in and filled for every band)
+        self._plane = np.ascontiguousarray(structure) if not channels and structure.dtype in (np.uint8, np.uint16) else None
         self.channels = 0 if fit is None else max(1, len(channels))
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
         self.shape = (h, w)
-        self.planes = planes
         # the columns of the kernel's sums (codec._elements.triangle_sums) in the order of
         # __call__'s: the moments, b, xb, y b, bb, then per channel b_c, x b_c, y b_c
-        k = planes.table.shape[1]
+        k = 3 + 2 * len(channels)
         self._from_kernel = np.array(
             [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
         )
@@ -208,9 +212,24 @@ class Statistics:
         cols = np.arange(w, dtype=np.float64)
         self._powers = [None] + [np.r_[0.0, np.cumsum(cols**k)] for k in (1, 2)]
 
+    @property
+    def planes(self) -> Planes:
+        """The planes' prefix sums (made on first use: one 8- or 16-bit plane needs none)."""
+        if self._planes is None:
+            self._planes = self._make_planes()
+        return self._planes
+
+    def _source(self) -> np.ndarray:
+        """What the kernels sum spans from: the one plane itself, or the prefix table."""
+        return self._plane if self._plane is not None else self.planes.table
+
     def __call__(self, raster: Raster) -> np.ndarray:
         """E x width: the statistics of every element of `raster`."""
-        d = raster.span_sums(self.planes)
+        if self._plane is not None:
+            d = native._elements.span_sums(self._plane, *(np.ascontiguousarray(a, dtype=np.int64) for a in
+                                                         (raster.span_y, raster.span_x, raster.span_n)))
+        else:
+            d = raster.span_sums(self.planes)
         y = raster.span_y.astype(np.float64)
         x0, x1 = raster.span_x, raster.span_x + raster.span_n
         # per span, in image coordinates: 1, x, y, xx, xy, yy, then b, xb, yb (and bb)
@@ -240,7 +259,7 @@ class Statistics:
         z = np.zeros(0) if vertex_values is None else np.ascontiguousarray(vertex_values, dtype=np.float64)
         return native._elements.triangle_statistics(
             np.ascontiguousarray(vertices, dtype=np.int64), np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
-            w, h, self.planes.table, self._powers[1], self._powers[2], self._from_kernel, self._blocks, z,
+            w, h, self._source(), self._powers[1], self._powers[2], self._from_kernel, self._blocks, z,
         )
 
     def _to_origin(self, out: np.ndarray, origin: np.ndarray) -> np.ndarray:
