@@ -815,3 +815,119 @@ def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     if bad:
         raise ValueError("outlier_sums: a corner index or coordinate out of range")
     return count, drop_a
+
+
+def line_elements(const int64_t[:, ::1] vertices, int64_t width, int64_t height):
+    """(corners, origin, coef, den, span_elem, span_y, span_x, span_n), int64, of the
+    border lines' elements (elements.line_raster): the bottom row's pixels 0 .. W-1,
+    then (if H > 1) the right column's 0 .. H-2, each line cut into pieces between
+    consecutive vertices on it, the last vertex owning its own pixel: a piece from
+    vertex a at position p to b at q has corners (a, b, b), origin a, weight
+    numerators (q - p - s, s) along the line (s = x - p on the row, y - p on the
+    column) and denominator q - p; the row's pieces are one span each, the column's
+    one span a pixel. ValueError on a vertex outside the image or a line with none."""
+    cdef int64_t n = vertices.shape[0], lines = 2 if height > 1 else 1, i, line, axis, fixed, length, p
+    cdef int64_t k, e, s, a, b, la, start, count, elements = 0, spans = 0, last
+    if vertices.shape[1] != 2:
+        raise ValueError("line_elements: vertices must be N x 2")
+    if not 0 < width < 2**20 or not 0 < height < 2**20:
+        raise ValueError(f"line_elements: image size {width} x {height} out of range")
+    for i in range(n):
+        if not (0 <= vertices[i, 0] < width and 0 <= vertices[i, 1] < height):
+            raise ValueError("line_elements: a vertex outside the image")
+    # each line's vertices by position along it (positions are distinct: distinct pixels)
+    at_arr = np.full((2, max(width, height)), -1, dtype=np.int64)
+    cdef int64_t[:, ::1] at = at_arr
+    cdef int64_t on[2]
+    on[0] = on[1] = 0
+    for i in range(n):
+        if vertices[i, 1] == height - 1:
+            at[0, vertices[i, 0]] = i
+            on[0] += 1
+        if lines == 2 and vertices[i, 0] == width - 1:
+            at[1, vertices[i, 1]] = i
+            on[1] += 1
+    for line in range(lines):
+        if on[line] == 0:
+            raise ValueError("line_elements: a border line without a vertex (the image corners are vertices)")
+        elements += on[line]
+        length = width if line == 0 else height - 1
+        # the row's pieces are a span each (all start inside it); the column's pixels
+        # below its last vertex's row are spans of their own
+        spans += on[line] if line == 0 else length
+    corners_a = np.empty((elements, 3), dtype=np.int64)
+    origin_a = np.empty((elements, 2), dtype=np.int64)
+    coef_a = np.zeros((elements, 3, 3), dtype=np.int64)
+    den_a = np.empty(elements, dtype=np.int64)
+    elem_a = np.empty(spans, dtype=np.int64)
+    y_a = np.empty(spans, dtype=np.int64)
+    x_a = np.empty(spans, dtype=np.int64)
+    n_a = np.empty(spans, dtype=np.int64)
+    cdef int64_t[:, ::1] corners = corners_a, origin = origin_a
+    cdef int64_t[:, :, ::1] coef = coef_a
+    cdef int64_t[::1] den = den_a, span_elem = elem_a, span_y = y_a, span_x = x_a, span_n = n_a
+    e = 0
+    s = 0
+    for line in range(lines):
+        axis = line
+        fixed = height - 1 if line == 0 else width - 1
+        length = width if line == 0 else height - 1
+        a = -1
+        for p in range(length + 1 if line == 1 else length):
+            b = at[line, p]
+            if b < 0:
+                continue
+            if a >= 0:
+                la = vertices[b, axis] - vertices[a, axis]
+                _line_piece(corners, origin, coef, den, e, a, b, vertices[a, 0], vertices[a, 1], axis, la)
+                s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, vertices[a, axis], la, length)
+                e += 1
+            a = b
+        # the last vertex: its own pixel (on the column, the corner the row owns: none)
+        _line_piece(corners, origin, coef, den, e, a, a, vertices[a, 0], vertices[a, 1], axis, 0)
+        start = vertices[a, axis]
+        if start < length:
+            s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, start, 1, length)
+        e += 1
+    return corners_a, origin_a, coef_a, den_a, elem_a[:s], y_a[:s], x_a[:s], n_a[:s]
+
+
+cdef void _line_piece(int64_t[:, ::1] corners, int64_t[:, ::1] origin, int64_t[:, :, ::1] coef,
+                      int64_t[::1] den, int64_t e, int64_t a, int64_t b, int64_t ox, int64_t oy, int64_t axis,
+                      int64_t la):
+    # a piece from a to b (la > 0), or the last vertex alone (a == b, la == 0)
+    corners[e, 0] = a
+    corners[e, 1] = b
+    corners[e, 2] = b
+    origin[e, 0] = ox
+    origin[e, 1] = oy
+    if la > 0:
+        coef[e, 0, axis] = -1
+        coef[e, 0, 2] = la
+        coef[e, 1, axis] = 1
+        den[e] = la
+    else:
+        coef[e, 0, 2] = 1
+        den[e] = 1
+
+
+cdef int64_t _line_spans(int64_t[::1] span_elem, int64_t[::1] span_y, int64_t[::1] span_x, int64_t[::1] span_n,
+                         int64_t s, int64_t e, int64_t axis, int64_t fixed, int64_t start, int64_t count,
+                         int64_t length):
+    # the spans of element e: pixels start .. start + count - 1 of its line, cut at length
+    cdef int64_t j
+    if count > length - start:
+        count = length - start
+    if axis == 0:
+        span_elem[s] = e
+        span_y[s] = fixed
+        span_x[s] = start
+        span_n[s] = count
+        return s + 1
+    for j in range(count):
+        span_elem[s] = e
+        span_y[s] = start + j
+        span_x[s] = fixed
+        span_n[s] = 1
+        s += 1
+    return s

@@ -290,3 +290,69 @@ def test_narrow_span_sums_refuse_spans_outside_the_plane() -> None:
     with pytest.raises(ValueError, match="per span"):
         native._elements.span_sums(plane, one, one, np.ones(2, np.int64))
     assert native._elements.span_sums(plane, one * 3, one * 0, one * 5).tolist() == [[0], [0], [0]]
+
+
+def _lines_by_hand(v: np.ndarray, width: int, height: int):
+    """elements.line_raster's elements, piece by piece in plain Python: the bottom row,
+    then the right column (pixels 0 .. H-2), cut between consecutive vertices on each."""
+    corners, origin, coef, den, spans = [], [], [], [], []
+    for axis, fixed, length in ((0, height - 1, width), (1, width - 1, height - 1))[: 2 if height > 1 else 1]:
+        on = sorted((int(v[i, axis]), i) for i in range(len(v)) if v[i, 1 - axis] == fixed)
+        for (p, a), nxt in zip(on, on[1:] + [None]):
+            b, la = (a, 0) if nxt is None else (nxt[1], nxt[0] - p)
+            w = np.zeros((3, 3), np.int64)
+            if la:
+                w[0, axis], w[0, 2], w[1, axis] = -1, la, 1
+            else:
+                w[0, 2] = 1
+            e = len(corners)
+            corners.append([a, b, b])
+            origin.append(v[a])
+            coef.append(w)
+            den.append(max(la, 1))
+            for q in range(p, min(p + max(la, 1), length)):
+                if axis == 0 and q == p:
+                    spans.append((e, fixed, p, min(max(la, 1), length - p)))
+                elif axis == 1:
+                    spans.append((e, q, fixed, 1))
+    return corners, origin, coef, den, np.array(spans, np.int64).reshape(-1, 4).T
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_border_lines_elements_are_those_made_by_hand(seed: int) -> None:
+    from codec.mesher.elements import line_raster
+
+    rng = np.random.default_rng(60 + seed)
+    width, height = (int(rng.integers(1, 40)), int(rng.integers(1, 40))) if seed > 2 else [(1, 9), (9, 1), (2, 2)][seed]
+    v, _ = _mesh(rng, width, height, int(rng.integers(0, 60)), False) if width > 2 and height > 2 else (None, None)
+    if v is None:
+        v = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.int64)
+        v = v[np.unique(v[:, 1] * width + v[:, 0], return_index=True)[1]]
+    # more vertices on the two lines, in no order
+    extra = np.concatenate([np.stack([rng.integers(0, width, 6), np.full(6, height - 1)], 1),
+                            np.stack([np.full(6, width - 1), rng.integers(0, height, 6)], 1)])
+    v = np.concatenate([v, rng.permutation(extra)])
+    v = v[np.sort(np.unique(v[:, 1] * width + v[:, 0], return_index=True)[1])]
+    got = line_raster(v, width, height)
+    corners, origin, coef, den, (elem, ys, xs, ns) = _lines_by_hand(v, width, height)
+    assert np.array_equal(got.corners, np.array(corners, np.int64).reshape(-1, 3))
+    assert np.array_equal(got.origin, np.array(origin, np.int64).reshape(-1, 2))
+    assert np.array_equal(got.coef, np.array(coef, np.int64).reshape(-1, 3, 3))
+    assert np.array_equal(got.den, np.array(den, np.int64))
+    for a, b in zip((got.span_elem, got.span_y, got.span_x, got.span_n), (elem, ys, xs, ns)):
+        assert a.dtype == np.int64 and np.array_equal(a, b)
+    # with the triangles', every pixel owned once
+    if width > 1 and height > 1:
+        t = triangle_raster(v, triangulate(v), width, height)
+        _, x, y = t.pixels()
+        e, lx, ly = got.pixels()
+        owned = np.sort(np.r_[y * width + x, ly * width + lx])
+        assert np.array_equal(owned, np.arange(width * height))
+
+
+def test_the_border_lines_refuse_vertices_off_the_image() -> None:
+    v = np.array([[0, 0], [4, 0], [0, 3], [4, 3]], np.int64)
+    with pytest.raises(ValueError, match="outside the image"):
+        native._elements.line_elements(v, 4, 4)
+    with pytest.raises(ValueError, match="without a vertex"):
+        native._elements.line_elements(v[:2], 5, 4)
