@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ATMError
 from ..native import _elements, _renumber
-from ..triangulate import Triangulation, split_at_vertices, triangulate
+from ..triangulate import Triangulation, triangulate
 from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
@@ -151,8 +151,9 @@ def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_w
     order = np.argsort(vertices[:, 1] * width + vertices[:, 0], kind="stable")
     renumber = np.empty(len(order), np.int64)
     renumber[order] = np.arange(len(order))
-    vertices = vertices[order]
-    segments = split_at_vertices(vertices, renumber[segments], width)
+    vertices = np.ascontiguousarray(vertices[order], dtype=np.int64)
+    # split_at_vertices' pieces, found by a table of the vertices' pixels in one pass
+    segments = _renumber.split_in_raster_order(vertices, np.ascontiguousarray(renumber[segments].reshape(-1, 2)), width)
     if sort_walls and len(segments):
         firsts = np.r_[0, run_breaks(segments)]
         first_vertex = np.repeat(segments[firsts, 0], np.diff(np.r_[firsts, len(segments)]))
