@@ -931,3 +931,32 @@ cdef int64_t _line_spans(int64_t[::1] span_elem, int64_t[::1] span_y, int64_t[::
         span_n[s] = 1
         s += 1
     return s
+
+
+def gather_rows(list parts, const int64_t[::1] rows, double[:, ::1] out):
+    """Set out[i] to row rows[i] of the parts (K-column float64 arrays) stacked one
+    after another, for every i: refinement's statistics of its last triangulation from the
+    parts measured round by round, in one pass a part instead of a mask and a fancy
+    index a part. ValueError on a row beyond the parts or shapes that do not match."""
+    cdef int64_t r = rows.shape[0], k = out.shape[1], first = 0, i, j, at
+    cdef double[:, ::1] part
+    cdef bint bad = False
+    if out.shape[0] != r:
+        raise ValueError("gather_rows: a row of out per row asked for")
+    for i in range(r):
+        if rows[i] < 0:
+            raise ValueError("gather_rows: a row beyond the parts")
+    for p in parts:
+        part = p
+        if part.shape[1] != k:
+            raise ValueError("gather_rows: the parts' columns do not match out's")
+        with nogil:
+            for i in range(r):
+                at = rows[i] - first
+                if 0 <= at < part.shape[0]:
+                    for j in range(k):
+                        out[i, j] = part[at, j]
+        first += part.shape[0]
+    for i in range(r):
+        if rows[i] >= first:
+            raise ValueError("gather_rows: a row beyond the parts")

@@ -356,3 +356,21 @@ def test_the_border_lines_refuse_vertices_off_the_image() -> None:
         native._elements.line_elements(v, 4, 4)
     with pytest.raises(ValueError, match="without a vertex"):
         native._elements.line_elements(v[:2], 5, 4)
+
+
+def test_rows_gathered_from_parts_are_those_of_the_parts_stacked() -> None:
+    rng = np.random.default_rng(5)
+    parts = [rng.normal(size=(int(rng.integers(0, 40)), 10)) for _ in range(6)]
+    stacked = np.concatenate(parts)
+    rows = rng.integers(0, len(stacked), 300)
+    out = np.full((300, 10), np.nan)
+    native._elements.gather_rows(parts, rows, out)
+    assert np.array_equal(out, stacked[rows])
+    with pytest.raises(ValueError, match="beyond the parts"):
+        native._elements.gather_rows(parts, np.array([len(stacked)]), np.empty((1, 10)))
+    with pytest.raises(ValueError, match="beyond the parts"):
+        native._elements.gather_rows(parts, np.array([-1]), np.empty((1, 10)))
+    with pytest.raises(ValueError, match="do not match"):
+        native._elements.gather_rows(parts + [np.zeros((2, 9))], rows, out)
+    with pytest.raises(ValueError, match="per row"):
+        native._elements.gather_rows(parts, rows, out[:-1])
