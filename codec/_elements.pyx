@@ -373,6 +373,30 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     return out, (sse_out if errors else None)
 
 
+cdef inline double _span_worst(const plane_t* line, int64_t y, int64_t x0, int64_t n, int64_t ox, double a,
+                               double row, double c, double best, int64_t* bx, int64_t* by) noexcept nogil:
+    """The span's pixels (line: its row of the plane) against the mesh a (x - ox) + row + c,
+    summed in that order as elements.Raster.worst_pixels sums it: the largest error
+    (from best), its first pixel in (bx, by)."""
+    cdef int64_t x
+    cdef double mesh, e
+    for x in range(x0, x0 + n):
+        mesh = a * <double>(x - ox)
+        mesh += row
+        mesh += c
+        e = fabs(<double>line[x] - mesh)
+        if e > best:
+            best = e
+            bx[0] = x
+            by[0] = y
+    return best
+
+
+def _worst_outputs(int64_t k):
+    """(x, y, |error|) per element for the worst-pixel kernels: none found yet."""
+    return np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.full(k, -1.0)
+
+
 def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
                  int64_t height, const double[::1] z, const plane_t[:, ::1] plane):
     """Per triangle, its owned pixel farthest from the plane through its corners' values
@@ -386,19 +410,17 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
         raise ValueError("worst_pixels: z needs a value per vertex")
     if plane.shape[0] != height or plane.shape[1] != width:
         raise ValueError("worst_pixels: the plane does not match the image size")
-    xs_out = np.zeros(m, dtype=np.int64)
-    ys_out = np.zeros(m, dtype=np.int64)
-    err_out = np.full(m, -1.0)
+    xs_out, ys_out, err_out = _worst_outputs(m)
     cdef int64_t[::1] bx = xs_out, by = ys_out
     cdef double[::1] be = err_out
-    cdef int64_t t, dy, y, x0, n, x, up, ox, oy, i
+    cdef int64_t t, dy, y, x0, n, up, ox, oy
     cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
     cdef int64_t py[3]
     cdef double f[3]
-    cdef double a, row, c, mesh, e, best
+    cdef double row, best
     cdef bint bad = False
     with nogil:
         for t in range(m):
@@ -407,24 +429,13 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
                 break
             _origin(px, py, width, &ox, &oy)
             _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
-            a = f[0]
-            c = f[2]
             best = -1.0
             _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
                 _rows_next(&rows, &x0, &n)
                 y = ys[0] + dy
-                # as elements.Raster.worst_pixels sums it: a u, then + b v, then + c
                 row = f[1] * <double>(y - oy)
-                for x in range(x0, x0 + n):
-                    mesh = a * <double>(x - ox)
-                    mesh += row
-                    mesh += c
-                    e = fabs(<double>plane[y, x] - mesh)
-                    if e > best:
-                        best = e
-                        bx[t] = x
-                        by[t] = y
+                best = _span_worst(&plane[y, 0], y, x0, n, ox, f[0], row, f[2], best, &bx[t], &by[t])
             be[t] = best
     if bad:
         raise ValueError("worst_pixels: a corner index or coordinate out of range")
@@ -960,3 +971,54 @@ def gather_rows(list parts, const int64_t[::1] rows, double[:, ::1] out):
     for i in range(r):
         if rows[i] >= first:
             raise ValueError("gather_rows: a row beyond the parts")
+
+
+def element_worst_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, ::1] coef, const int64_t[::1] den,
+                         const int64_t[:, ::1] origin, const int64_t[::1] bounds, const int64_t[::1] span_y,
+                         const int64_t[::1] span_x, const int64_t[::1] span_n, const int64_t[::1] elements,
+                         const double[::1] z, const plane_t[:, ::1] plane):
+    """Raster.worst_pixels of a raster's `elements` from its arrays (element e's spans
+    are bounds[e] .. bounds[e + 1] - 1): per element, its pixel farthest from the plane
+    through its corners' values z (Raster.affine's: corner after corner, then / D;
+    evaluated as a u, then + b v, then + c), the first of those tied in span order:
+    (x, y, |error| (-1 where it owns no pixel)). ValueError on an index out of range."""
+    cdef int64_t ne = den.shape[0], ns = span_y.shape[0], k = elements.shape[0], i, j, e, c, x, y, n
+    cdef int64_t h = plane.shape[0], w = plane.shape[1], ox, oy
+    if (corners.shape[0] != ne or corners.shape[1] != 3 or coef.shape[0] != ne or coef.shape[1] != 3
+            or coef.shape[2] != 3 or origin.shape[0] != ne or origin.shape[1] != 2 or bounds.shape[0] != ne + 1
+            or span_x.shape[0] != ns or span_n.shape[0] != ns):
+        raise ValueError("element_worst_pixels: the raster's arrays do not match")
+    for i in range(k):
+        e = elements[i]
+        if not 0 <= e < ne or not 0 <= bounds[e] <= bounds[e + 1] <= ns:
+            raise ValueError("element_worst_pixels: an element or its spans out of range")
+        for c in range(3):
+            if not 0 <= corners[e, c] < z.shape[0]:
+                raise ValueError("element_worst_pixels: a corner out of range")
+        for j in range(bounds[e], bounds[e + 1]):
+            if span_n[j] > 0 and not (0 <= span_y[j] < h and 0 <= span_x[j] and span_x[j] + span_n[j] <= w):
+                raise ValueError("element_worst_pixels: a span outside the plane")
+    xs_out, ys_out, err_out = _worst_outputs(k)
+    cdef int64_t[::1] bx = xs_out, by = ys_out
+    cdef double[::1] be = err_out
+    cdef double f[3]
+    cdef double row, best
+    with nogil:
+        for i in range(k):
+            e = elements[i]
+            for c in range(3):
+                f[c] = <double>coef[e, 0, c] * z[corners[e, 0]]
+                f[c] = f[c] + <double>coef[e, 1, c] * z[corners[e, 1]]
+                f[c] = f[c] + <double>coef[e, 2, c] * z[corners[e, 2]]
+                f[c] = f[c] / <double>den[e]
+            ox = origin[e, 0]
+            oy = origin[e, 1]
+            best = -1.0
+            for j in range(bounds[e], bounds[e + 1]):
+                if span_n[j] <= 0:
+                    continue
+                y = span_y[j]
+                row = f[1] * <double>(y - oy)
+                best = _span_worst(&plane[y, 0], y, span_x[j], span_n[j], ox, f[0], row, f[2], best, &bx[i], &by[i])
+            be[i] = best
+    return xs_out, ys_out, err_out

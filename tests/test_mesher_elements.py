@@ -374,3 +374,48 @@ def test_rows_gathered_from_parts_are_those_of_the_parts_stacked() -> None:
         native._elements.gather_rows(parts + [np.zeros((2, 9))], rows, out)
     with pytest.raises(ValueError, match="per row"):
         native._elements.gather_rows(parts, rows, out[:-1])
+
+
+def _worst_in_numpy(raster, plane: np.ndarray, z: np.ndarray, elements: np.ndarray):
+    """Raster.worst_pixels as numpy computed it, pixel arrays and all."""
+    from codec.mesher.elements import _segments
+
+    spans = raster._spans_of(elements)
+    spans = spans[raster.span_n[spans] > 0]
+    e, y, x0, n = raster.span_elem[spans], raster.span_y[spans], raster.span_x[spans], raster.span_n[spans]
+    if len(e) == 0:
+        return e, x0, y, np.zeros(0)
+    f = raster.affine(z, elements)[np.searchsorted(elements, e)]
+    u = _segments(x0 - raster.origin[e, 0], n)
+    index = np.repeat(y * plane.shape[1] + x0, n) + u - np.repeat(u[np.r_[0, np.cumsum(n)[:-1]]], n)
+    mesh = np.repeat(f[:, 0], n) * u
+    mesh += np.repeat(f[:, 1] * (y - raster.origin[e, 1]), n)
+    mesh += np.repeat(f[:, 2], n)
+    err = np.abs(np.take(plane, index) - mesh)
+    elem_first = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
+    peak = np.maximum.reduceat(err, np.r_[0, np.cumsum(n)[:-1]][elem_first])
+    owner = np.repeat(np.cumsum(np.r_[True, e[1:] != e[:-1]]) - 1, n)
+    at_peak = np.flatnonzero(err == peak[owner])
+    best = at_peak[np.r_[True, owner[at_peak][1:] != owner[at_peak][:-1]]]
+    w = plane.shape[1]
+    return e[elem_first], index[best] % w, index[best] // w, err[best]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_worst_pixels_of_any_elements_are_numpys(seed: int) -> None:
+    from codec.mesher.elements import line_raster, rasterize
+
+    rng = np.random.default_rng(70 + seed)
+    width, height = int(rng.integers(3, 80)), int(rng.integers(3, 60))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 150)), seed % 2 == 1)
+    plane = (rng.integers(0, 4, (height, width)) * 20).astype(np.float32)  # plateaus: ties
+    for raster in (rasterize(v, t, width, height), line_raster(v, width, height)):
+        for z in (plane[v[:, 1], v[:, 0]].astype(np.float64), rng.normal(30, 20, len(v))):
+            for which in (np.arange(len(raster)), np.sort(rng.choice(len(raster), len(raster) // 3, replace=False))):
+                want = _worst_in_numpy(raster, plane, z, which)
+                for p in (plane, plane.astype(np.float64)):
+                    got = raster.worst_pixels(p, z, which)
+                    for a, b in zip(got, want):
+                        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="out of range"):
+        raster.worst_pixels(plane, z, np.array([len(raster)]))

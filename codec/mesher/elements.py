@@ -123,29 +123,20 @@ class Raster:
         """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
         from the mesh through `vertex_values`, the first in raster order of those
         tied. Returns (element, x, y, |error|)."""
-        spans = self._spans_of(elements)
-        spans = spans[self.span_n[spans] > 0]
-        e, y, x0, n = self.span_elem[spans], self.span_y[spans], self.span_x[spans], self.span_n[spans]
-        if len(e) == 0:
-            return e, x0, y, np.zeros(0)
-        elements = np.asarray(elements, dtype=np.int64)
-        f = self.affine(vertex_values, elements)[np.searchsorted(elements, e)]
-        u = _segments(x0 - self.origin[e, 0], n)
-        index = np.repeat(y * plane.shape[1] + x0, n) + u - np.repeat(u[np.r_[0, np.cumsum(n)[:-1]]], n)
-        mesh = np.repeat(f[:, 0], n) * u
-        mesh += np.repeat(f[:, 1] * (y - self.origin[e, 1]), n)
-        mesh += np.repeat(f[:, 2], n)
-        err = np.abs(np.take(plane, index) - mesh)
-        # each element's first pixel at its maximum: spans of an element are contiguous
-        span_first = np.r_[0, np.cumsum(n)[:-1]]
-        elem_first = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
-        starts = span_first[elem_first]
-        peak = np.maximum.reduceat(err, starts)
-        owner = np.repeat(np.cumsum(np.r_[True, e[1:] != e[:-1]]) - 1, n)
-        at_peak = np.flatnonzero(err == peak[owner])
-        best = at_peak[np.r_[True, owner[at_peak][1:] != owner[at_peak][:-1]]]
-        w = plane.shape[1]
-        return e[elem_first], index[best] % w, index[best] // w, err[best]
+        # one compiled pass over their spans (the numbers of the numpy expressions it
+        # replaced, which made a dozen arrays of the pixels)
+        elements = np.ascontiguousarray(elements, dtype=np.int64)
+        if plane.dtype != np.float32:
+            plane = plane.astype(np.float64)
+        x, y, err = native._elements.element_worst_pixels(
+            np.ascontiguousarray(self.corners, dtype=np.int64), np.ascontiguousarray(self.coef, dtype=np.int64),
+            np.ascontiguousarray(self.den, dtype=np.int64), np.ascontiguousarray(self.origin, dtype=np.int64),
+            np.ascontiguousarray(self.bounds, dtype=np.int64),
+            *(np.ascontiguousarray(a, dtype=np.int64) for a in (self.span_y, self.span_x, self.span_n)),
+            elements, np.ascontiguousarray(vertex_values, dtype=np.float64), np.ascontiguousarray(plane),
+        )
+        owns = np.flatnonzero(err >= 0)
+        return elements[owns], x[owns], y[owns], err[owns]
 
 
 class Planes:
