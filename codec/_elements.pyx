@@ -41,6 +41,11 @@ ctypedef fused source_t:
     double
 
 
+cdef enum:
+    # most planes prefix_table sums: the structure's three and two per fitted channel
+    MAX_PLANES = 32
+
+
 cdef inline void _sort3(int64_t* ys, int64_t* xs) noexcept nogil:
     # the compare-and-swap network of elements._sort3: stable for equal rows
     cdef int64_t t
@@ -236,6 +241,72 @@ def _check(vertices, triangles, width, height):
         raise ValueError(f"image size {width} x {height} out of range")
 
 
+cdef inline void _add_span(double* sums, const source_t* table, int64_t width, int64_t kk, int64_t y,
+                           int64_t x0, int64_t n, const double* power1, const double* power2) noexcept nogil:
+    """A span's terms (row y, columns [x0, x0 + n), n > 0) added to the raw sums
+    sums[0 .. 6 + 2 kk) of triangle_statistics: n, X1, y n, X2, y X1, y (y n), then each
+    plane's sum d_k and y d_k, from the plane itself (8 or 16 bits) or its prefix
+    table ((H (W + 1)) x kk)."""
+    cdef int64_t lo, hi, k, i, b, span_b, span_xb, span_bb
+    cdef double yf = <double>y, nf = <double>n, x1s, x2s, yn, d
+    cdef source_t dk
+    cdef const source_t* pix
+    x1s = power1[x0 + n] - power1[x0]
+    x2s = power2[x0 + n] - power2[x0]
+    yn = yf * nf
+    sums[0] += nf
+    sums[1] += x1s
+    sums[2] += yn
+    sums[3] += x2s
+    sums[4] += yf * x1s
+    sums[5] += yf * yn
+    if source_t is uint8_t or source_t is uint16_t:
+        pix = table + y * width + x0
+        span_b = 0
+        span_xb = 0
+        span_bb = 0
+        for i in range(n):
+            b = pix[i]
+            span_b += b
+            span_xb += (x0 + i) * b
+            span_bb += b * b
+        d = <double>span_b
+        sums[6] += d
+        sums[9] += yf * d
+        d = <double>span_xb
+        sums[7] += d
+        sums[10] += yf * d
+        d = <double>span_bb
+        sums[8] += d
+        sums[11] += yf * d
+    else:
+        lo = (y * (width + 1) + x0) * kk
+        hi = lo + n * kk
+        for k in range(kk):
+            dk = table[hi + k] - table[lo + k]
+            d = <double>dk
+            sums[6 + k] += d
+            sums[6 + kk + k] += yf * d
+
+
+cdef inline void _moved(double* row, double fx, double fy, const int64_t* blocks, int64_t nb) noexcept nogil:
+    """A row of statistics in image coordinates moved to the origin (fx, fy):
+    elements.Statistics._to_origin, operation for operation (blocks: the first
+    columns of the image sums b, ub, vb)."""
+    cdef double sn = row[0], sx = row[1], sy = row[2], sxx = row[3], sxy = row[4], syy = row[5], sb
+    cdef int64_t j, first
+    row[1] = sx - fx * sn
+    row[2] = sy - fy * sn
+    row[3] = sxx - 2 * fx * sx + fx * fx * sn
+    row[4] = sxy - fx * sy - fy * sx + fx * fy * sn
+    row[5] = syy - 2 * fy * sy + fy * fy * sn
+    for j in range(nb):
+        first = blocks[j]
+        sb = row[first]
+        row[first + 1] = row[first + 1] - fx * sb
+        row[first + 2] = row[first + 2] - fy * sb
+
+
 @cython.cdivision(True)
 def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
                         int64_t height, const source_t[:, ::1] table, const double[::1] power1,
@@ -282,17 +353,13 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef double[:, ::1] o = out
     cdef double[::1] e = sse_out
     cdef double[::1] sums = sums_buf
-    cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy
+    cdef int64_t t, dy, x0, n, k, up, c, ox, oy
     cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
     cdef int64_t py[3]
     cdef double f[3]
-    cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
-    cdef source_t dk
-    cdef const source_t* pix
-    cdef int64_t b, span_b, span_xb, span_bb
     cdef bint bad = False
     with nogil:
         for t in range(m):
@@ -306,62 +373,11 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                 _rows_next(&rows, &x0, &n)
                 if n <= 0:
                     continue  # an empty span adds nothing to any sum
-                y = ys[0] + dy
-                yf = <double>y
-                nf = <double>n
-                x1s = power1[x0 + n] - power1[x0]
-                x2s = power2[x0 + n] - power2[x0]
-                yn = yf * nf
-                sums[0] += nf
-                sums[1] += x1s
-                sums[2] += yn
-                sums[3] += x2s
-                sums[4] += yf * x1s
-                sums[5] += yf * yn
-                if source_t is uint8_t or source_t is uint16_t:
-                    pix = &table[y, x0]
-                    span_b = 0
-                    span_xb = 0
-                    span_bb = 0
-                    for i in range(n):
-                        b = pix[i]
-                        span_b += b
-                        span_xb += (x0 + i) * b
-                        span_bb += b * b
-                    d = <double>span_b
-                    sums[6] += d
-                    sums[9] += yf * d
-                    d = <double>span_xb
-                    sums[7] += d
-                    sums[10] += yf * d
-                    d = <double>span_bb
-                    sums[8] += d
-                    sums[11] += yf * d
-                else:
-                    lo = y * stride + x0
-                    hi = lo + n
-                    for k in range(kk):
-                        dk = table[hi, k] - table[lo, k]
-                        d = <double>dk
-                        sums[6 + k] += d
-                        sums[6 + kk + k] += yf * d
+                _add_span(&sums[0], &table[0, 0], width, kk, ys[0] + dy, x0, n, &power1[0], &power2[0])
             for c in range(nc):
                 o[t, c] = sums[columns[c]]
             _origin(px, py, width, &ox, &oy)
-            fx = <double>ox
-            fy = <double>oy
-            # elements.Statistics._to_origin, operation for operation
-            sn = o[t, 0]; sx = o[t, 1]; sy = o[t, 2]; sxx = o[t, 3]; sxy = o[t, 4]; syy = o[t, 5]
-            o[t, 1] = sx - fx * sn
-            o[t, 2] = sy - fy * sn
-            o[t, 3] = sxx - 2 * fx * sx + fx * fx * sn
-            o[t, 4] = sxy - fx * sy - fy * sx + fx * fy * sn
-            o[t, 5] = syy - 2 * fy * sy + fy * fy * sn
-            for j in range(nb):
-                first = blocks[j]
-                sb = o[t, first]
-                o[t, first + 1] = o[t, first + 1] - fx * sb
-                o[t, first + 2] = o[t, first + 2] - fy * sb
+            _moved(&o[t, 0], <double>ox, <double>oy, &blocks[0] if nb else NULL, nb)
             if not errors:
                 continue
             _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
@@ -390,6 +406,61 @@ cdef inline double _span_worst(const plane_t* line, int64_t y, int64_t x0, int64
             bx[0] = x
             by[0] = y
     return best
+
+
+def span_statistics(const source_t[:, ::1] table, const int64_t[::1] bounds, const int64_t[::1] span_y,
+                    const int64_t[::1] span_x, const int64_t[::1] span_n, const int64_t[:, ::1] origin,
+                    const double[::1] power1, const double[::1] power2, const int64_t[::1] columns,
+                    const int64_t[::1] blocks):
+    """Statistics.__call__ of a raster from its spans (element e's are bounds[e] ..
+    bounds[e + 1] - 1) and origins: triangle_statistics' sums over given spans instead
+    of a triangle's, the same numbers as the numpy columns and their row sums. `table`:
+    an 8- or 16-bit plane (H x W) or a prefix table ((H (W + 1)) x K, W = len(power1) - 1).
+    ValueError on a span outside the image or tables that do not match."""
+    cdef int64_t e_count = bounds.shape[0] - 1, s = span_y.shape[0], nc = columns.shape[0], nb = blocks.shape[0]
+    cdef int64_t width = power1.shape[0] - 1, height, kk, e, j, c
+    cdef bint direct = source_t is uint8_t or source_t is uint16_t
+    if direct:
+        height = table.shape[0]
+        kk = 3
+        if table.shape[1] != width:
+            raise ValueError("span_statistics: the plane does not match the image size")
+    else:
+        height = table.shape[0] // (width + 1)
+        kk = table.shape[1]
+        if table.shape[0] != height * (width + 1):
+            raise ValueError("span_statistics: tables do not match the image size")
+    if (e_count < 0 or span_x.shape[0] != s or span_n.shape[0] != s or origin.shape[0] != e_count
+            or origin.shape[1] != 2 or power2.shape[0] != width + 1 or kk > MAX_PLANES or nc < 10):
+        raise ValueError("span_statistics: the arrays do not match")
+    for c in range(nc):
+        if not 0 <= columns[c] < 6 + 2 * kk:
+            raise ValueError("span_statistics: a column out of range")
+    for c in range(nb):
+        if not 6 <= blocks[c] < nc - 2:
+            raise ValueError("span_statistics: a column out of range")
+    if bounds[0] != 0 or bounds[e_count] != s:
+        raise ValueError("span_statistics: bounds must run from 0 to the number of spans")
+    for e in range(e_count):
+        if bounds[e + 1] < bounds[e]:
+            raise ValueError("span_statistics: bounds must not decrease")
+    for j in range(s):
+        if span_n[j] > 0 and not (0 <= span_y[j] < height and 0 <= span_x[j] and span_x[j] + span_n[j] <= width):
+            raise ValueError("span_statistics: a span outside the image")
+    out = np.empty((e_count, nc), dtype=np.float64)
+    cdef double[:, ::1] o = out
+    cdef double sums[6 + 2 * MAX_PLANES]
+    with nogil:
+        for e in range(e_count):
+            for c in range(6 + 2 * kk):
+                sums[c] = 0.0
+            for j in range(bounds[e], bounds[e + 1]):
+                if span_n[j] > 0:  # an empty span adds nothing to any sum
+                    _add_span(sums, &table[0, 0], width, kk, span_y[j], span_x[j], span_n[j], &power1[0], &power2[0])
+            for c in range(nc):
+                o[e, c] = sums[columns[c]]
+            _moved(&o[e, 0], <double>origin[e, 0], <double>origin[e, 1], &blocks[0] if nb else NULL, nb)
+    return out
 
 
 def _worst_outputs(int64_t k):
@@ -507,11 +578,6 @@ def evaluate(const double[:, ::1] affine, const int64_t[:, ::1] origin, const in
     return out_a
 
 
-cdef enum:
-    # most planes prefix_table sums: the structure's three and two per fitted channel
-    MAX_PLANES = 32
-
-
 def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] channels):
     """(H (W + 1)) x K prefix sums along the rows of the planes b, x b, b b of the
     structure b (H x W) and b_c, x b_c of each of the C channels (C x H x W), in the
@@ -552,47 +618,6 @@ def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] chann
                     acc[4 + 2 * k] += b * xv
                     o[base + x + 1, 3 + 2 * k] = acc[3 + 2 * k]
                     o[base + x + 1, 4 + 2 * k] = acc[4 + 2 * k]
-    return out
-
-
-ctypedef fused narrow_t:
-    uint8_t
-    uint16_t
-
-
-def span_sums(const narrow_t[:, ::1] plane, const int64_t[::1] span_y, const int64_t[::1] span_x,
-              const int64_t[::1] span_n):
-    """3 x S int64: the sums of b, x b and b b over each span (row y, columns [x, x + n))
-    of an 8- or 16-bit plane b, pixel by pixel: the integers its prefix table's
-    differences give (Raster.span_sums). ValueError on a span outside the plane."""
-    cdef int64_t s = span_y.shape[0], h = plane.shape[0], w = plane.shape[1], j, x, y, n, b
-    if span_x.shape[0] != s or span_n.shape[0] != s:
-        raise ValueError("span_sums: a row, a column and a count per span")
-    out = np.empty((3, s), dtype=np.int64)
-    cdef int64_t[:, ::1] o = out
-    cdef int64_t sb, sxb, sbb
-    cdef bint bad = False
-    with nogil:
-        for j in range(s):
-            y = span_y[j]
-            x = span_x[j]
-            n = span_n[j]
-            if y < 0 or y >= h or x < 0 or n < 0 or x > w - n:
-                bad = True
-                break
-            sb = 0
-            sxb = 0
-            sbb = 0
-            for x in range(x, x + n):
-                b = plane[y, x]
-                sb += b
-                sxb += x * b
-                sbb += b * b
-            o[0, j] = sb
-            o[1, j] = sxb
-            o[2, j] = sbb
-    if bad:
-        raise ValueError("span_sums: a span outside the plane")
     return out
 
 

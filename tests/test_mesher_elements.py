@@ -255,6 +255,8 @@ def test_first_of_each_marks_the_first_of_every_value() -> None:
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("kind", [np.uint8, np.uint16])
 def test_one_narrow_plane_is_summed_without_a_prefix_table(seed: int, kind) -> None:
+    import copy
+
     # an 8- or 16-bit plane alone: the kernels sum its spans pixel by pixel, and must
     # give the numbers of its prefix table (the encoder's bytes depend on them), up to
     # the largest values and on widths where the table needs int64
@@ -277,19 +279,9 @@ def test_one_narrow_plane_is_summed_without_a_prefix_table(seed: int, kind) -> N
                                                     layout._from_kernel, layout._blocks, z)
         assert np.array_equal(stats, want[0]) and np.array_equal(sse, want[1])
         assert np.array_equal(by_spans, stats)
-        spans = (raster.span_y, raster.span_x, raster.span_n)
-        assert np.array_equal(native._elements.span_sums(plane, *spans), raster.span_sums(layout.planes))
-
-
-def test_narrow_span_sums_refuse_spans_outside_the_plane() -> None:
-    plane = np.zeros((4, 5), np.uint8)
-    one = np.ones(1, np.int64)
-    for y, x, n in ((4, 0, 1), (-1, 0, 1), (0, -1, 1), (0, 4, 2), (0, 0, -1)):
-        with pytest.raises(ValueError, match="outside the plane"):
-            native._elements.span_sums(plane, one * y, one * x, one * n)
-    with pytest.raises(ValueError, match="per span"):
-        native._elements.span_sums(plane, one, one, np.ones(2, np.int64))
-    assert native._elements.span_sums(plane, one * 3, one * 0, one * 5).tolist() == [[0], [0], [0]]
+        by_table = copy.copy(layout)
+        by_table._plane = None  # numpy's columns from the prefix table
+        assert np.array_equal(by_table(raster), stats)
 
 
 def _lines_by_hand(v: np.ndarray, width: int, height: int):
@@ -419,3 +411,39 @@ def test_the_worst_pixels_of_any_elements_are_numpys(seed: int) -> None:
                         assert np.array_equal(a, b)
     with pytest.raises(ValueError, match="out of range"):
         raster.worst_pixels(plane, z, np.array([len(raster)]))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_span_statistics_are_the_numpy_columns_summed(seed: int) -> None:
+    # Statistics of a raster's spans in one compiled pass (one narrow plane: pixel by
+    # pixel; any layout: from its prefix table) against the numpy columns and row sums
+    # the table path still takes, on triangle and border-line rasters
+    import copy
+
+    from codec.mesher.elements import line_raster, rasterize
+
+    rng = np.random.default_rng(80 + seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), seed % 2 == 1)
+    for structure, fit in _images(rng, width, height):
+        layout = Statistics(structure, fit)
+        by_table = copy.copy(layout)
+        by_table._plane = None  # the numpy path, from the prefix table
+        for raster in (rasterize(v, t, width, height), line_raster(v, width, height)):
+            want = by_table(raster)
+            assert np.array_equal(layout(raster), want)
+            got = native._elements.span_statistics(
+                layout.planes.table, raster.bounds, raster.span_y, raster.span_x, raster.span_n, raster.origin,
+                layout._powers[1], layout._powers[2], layout._from_kernel, layout._blocks)
+            assert np.array_equal(got, want)
+    raster = line_raster(v, width, height)
+    args = (layout._powers[1], layout._powers[2], layout._from_kernel, layout._blocks)
+    plane = np.zeros((height, width), np.uint8)
+    outside = raster.span_y.copy()
+    outside[0] = height
+    with pytest.raises(ValueError, match="outside the image"):
+        native._elements.span_statistics(plane, raster.bounds, outside, raster.span_x, raster.span_n, raster.origin, *args)
+    late = raster.bounds.copy()
+    late[0] = 1
+    with pytest.raises(ValueError, match="from 0 to the number of spans"):
+        native._elements.span_statistics(plane, late, raster.span_y, raster.span_x, raster.span_n, raster.origin, *args)

@@ -217,10 +217,13 @@ class Statistics:
     def __call__(self, raster: Raster) -> np.ndarray:
         """E x width: the statistics of every element of `raster`."""
         if self._plane is not None:
-            d = native._elements.span_sums(self._plane, *(np.ascontiguousarray(a, dtype=np.int64) for a in
-                                                         (raster.span_y, raster.span_x, raster.span_n)))
-        else:
-            d = raster.span_sums(self.planes)
+            # one compiled pass: the numbers of the columns below and their row sums
+            return native._elements.span_statistics(
+                self._plane, np.ascontiguousarray(raster.bounds, dtype=np.int64),
+                *(np.ascontiguousarray(a, dtype=np.int64) for a in (raster.span_y, raster.span_x, raster.span_n)),
+                np.ascontiguousarray(raster.origin, dtype=np.int64), self._powers[1], self._powers[2],
+                self._from_kernel, self._blocks)
+        d = raster.span_sums(self.planes)
         y = raster.span_y.astype(np.float64)
         x0, x1 = raster.span_x, raster.span_x + raster.span_n
         # per span, in image coordinates: 1, x, y, xx, xy, yy, then b, xb, yb (and bb)
