@@ -876,13 +876,14 @@ def line_elements(const int64_t[:, ::1] vertices, int64_t width, int64_t height)
     cdef int64_t[:, ::1] at = at_arr
     cdef int64_t on[2]
     on[0] = on[1] = 0
-    for i in range(n):
-        if vertices[i, 1] == height - 1:
-            at[0, vertices[i, 0]] = i
-            on[0] += 1
-        if lines == 2 and vertices[i, 0] == width - 1:
-            at[1, vertices[i, 1]] = i
-            on[1] += 1
+    with nogil:
+        for i in range(n):
+            if vertices[i, 1] == height - 1:
+                at[0, vertices[i, 0]] = i
+                on[0] += 1
+            if lines == 2 and vertices[i, 0] == width - 1:
+                at[1, vertices[i, 1]] = i
+                on[1] += 1
     for line in range(lines):
         if on[line] == 0:
             raise ValueError("line_elements: a border line without a vertex (the image corners are vertices)")
@@ -904,33 +905,34 @@ def line_elements(const int64_t[:, ::1] vertices, int64_t width, int64_t height)
     cdef int64_t[::1] den = den_a, span_elem = elem_a, span_y = y_a, span_x = x_a, span_n = n_a
     e = 0
     s = 0
-    for line in range(lines):
-        axis = line
-        fixed = height - 1 if line == 0 else width - 1
-        length = width if line == 0 else height - 1
-        a = -1
-        for p in range(length + 1 if line == 1 else length):
-            b = at[line, p]
-            if b < 0:
-                continue
-            if a >= 0:
-                la = vertices[b, axis] - vertices[a, axis]
-                _line_piece(corners, origin, coef, den, e, a, b, vertices[a, 0], vertices[a, 1], axis, la)
-                s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, vertices[a, axis], la, length)
-                e += 1
-            a = b
-        # the last vertex: its own pixel (on the column, the corner the row owns: none)
-        _line_piece(corners, origin, coef, den, e, a, a, vertices[a, 0], vertices[a, 1], axis, 0)
-        start = vertices[a, axis]
-        if start < length:
-            s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, start, 1, length)
-        e += 1
+    with nogil:
+        for line in range(lines):
+            axis = line
+            fixed = height - 1 if line == 0 else width - 1
+            length = width if line == 0 else height - 1
+            a = -1
+            for p in range(length + 1 if line == 1 else length):
+                b = at[line, p]
+                if b < 0:
+                    continue
+                if a >= 0:
+                    la = vertices[b, axis] - vertices[a, axis]
+                    _line_piece(corners, origin, coef, den, e, a, b, vertices[a, 0], vertices[a, 1], axis, la)
+                    s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, vertices[a, axis], la, length)
+                    e += 1
+                a = b
+            # the last vertex: its own pixel (on the column, the corner the row owns: none)
+            _line_piece(corners, origin, coef, den, e, a, a, vertices[a, 0], vertices[a, 1], axis, 0)
+            start = vertices[a, axis]
+            if start < length:
+                s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, start, 1, length)
+            e += 1
     return corners_a, origin_a, coef_a, den_a, elem_a[:s], y_a[:s], x_a[:s], n_a[:s]
 
 
 cdef void _line_piece(int64_t[:, ::1] corners, int64_t[:, ::1] origin, int64_t[:, :, ::1] coef,
                       int64_t[::1] den, int64_t e, int64_t a, int64_t b, int64_t ox, int64_t oy, int64_t axis,
-                      int64_t la):
+                      int64_t la) noexcept nogil:
     # a piece from a to b (la > 0), or the last vertex alone (a == b, la == 0)
     corners[e, 0] = a
     corners[e, 1] = b
@@ -949,7 +951,7 @@ cdef void _line_piece(int64_t[:, ::1] corners, int64_t[:, ::1] origin, int64_t[:
 
 cdef int64_t _line_spans(int64_t[::1] span_elem, int64_t[::1] span_y, int64_t[::1] span_x, int64_t[::1] span_n,
                          int64_t s, int64_t e, int64_t axis, int64_t fixed, int64_t start, int64_t count,
-                         int64_t length):
+                         int64_t length) noexcept nogil:
     # the spans of element e: pixels start .. start + count - 1 of its line, cut at length
     cdef int64_t j
     if count > length - start:
