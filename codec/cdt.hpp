@@ -1042,8 +1042,8 @@ class CDT {
   i32 last = 0;
   bool broken = false;
 
-  // insert's checks: the positions of every vertex, and the hull's corners
-  // counterclockwise (made at the first insert; the hull never changes after it)
+  // insert's checks: the positions of every vertex, and the hull's corners in the
+  // order of its edges (made at the first insert; the hull never changes after it)
   Positions positions;
   std::vector<Pt> ring;
 
