@@ -29,6 +29,22 @@ ctypedef fused plane_t:
     float
     double
 
+# What triangle_statistics sums a span from: a prefix table (table_t's types), or one
+# 8- or 16-bit plane itself, summed pixel by pixel in int64 (the integers the table's
+# differences give, without the table: 12 bytes a pixel built per image, for a walk
+# that then reads two of its cache lines a span instead of one of the plane's)
+ctypedef fused source_t:
+    uint8_t
+    uint16_t
+    int32_t
+    int64_t
+    double
+
+
+cdef enum:
+    # most planes prefix_table sums: the structure's three and two per fitted channel
+    MAX_PLANES = 32
+
 
 cdef inline void _sort3(int64_t* ys, int64_t* xs) noexcept nogil:
     # the compare-and-swap network of elements._sort3: stable for equal rows
@@ -66,11 +82,12 @@ cdef inline void _edge_start(_Edge* e, int64_t n0, int64_t s, int64_t d, int64_t
 
 
 cdef inline void _edge_step(_Edge* e) noexcept nogil:
-    e.q += e.sq
-    e.r -= e.sr
-    if e.r < 0:
-        e.r += e.d
-        e.q += 1
+    # r - sr < 0 wraps the remainder and carries one into q, without a branch (which
+    # an edge's slope makes hard to predict)
+    cdef int64_t r = e.r - e.sr
+    cdef int64_t wrap = r >> 63  # -1 where r < 0, else 0
+    e.r = r + (e.d & wrap)
+    e.q += e.sq - wrap
 
 
 cdef struct _Rows:
@@ -97,11 +114,16 @@ cdef inline void _rows_start(_Rows* w, const int64_t* ys, const int64_t* xs, int
     w.lower_s = xs[2] - xs[1]
 
 
+cdef void _rows_lower(_Rows* w) noexcept nogil:
+    # the lower short edge takes over (kept out of _rows_next, so that it is inlined)
+    _edge_start(&w.short_edge, w.lower_n0, w.lower_s, w.lower_d, w.dy)
+
+
 cdef inline void _rows_next(_Rows* w, int64_t* left, int64_t* count) noexcept nogil:
     """Columns [left, left + count) of the next row (row ya + dy, dy from 0)."""
     cdef int64_t a, b
     if w.dy == w.up:
-        _edge_start(&w.short_edge, w.lower_n0, w.lower_s, w.lower_d, w.dy)
+        _rows_lower(w)
     a = w.long_edge.q
     b = w.short_edge.q
     if a < b:
@@ -115,26 +137,43 @@ cdef inline void _rows_next(_Rows* w, int64_t* left, int64_t* count) noexcept no
     w.dy += 1
 
 
-cdef bint _corners(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
-                   int64_t width, int64_t height, int64_t* ys, int64_t* xs) noexcept nogil:
+cdef struct _Mesh:
+    # the kernels' vertices (n x 2) and triangles (M x 3) as pointers: a memoryview
+    # handed to a helper per triangle is a struct of some 200 bytes copied each time
+    const int64_t* xy
+    const int64_t* tri
+    int64_t n, width, height
+
+
+cdef _Mesh _mesh(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
+                 int64_t height):
+    cdef _Mesh mesh
+    mesh.xy = &vertices[0, 0] if vertices.shape[0] else NULL
+    mesh.tri = &triangles[0, 0] if triangles.shape[0] else NULL
+    mesh.n = vertices.shape[0]
+    mesh.width = width
+    mesh.height = height
+    return mesh
+
+
+cdef inline bint _corners(const _Mesh* mesh, int64_t t, int64_t* ys, int64_t* xs) noexcept nogil:
     """The triangle's corners (False if an index or a coordinate is out of range)."""
     cdef int64_t i, v
     for i in range(3):
-        v = triangles[t, i]
-        if v < 0 or v >= vertices.shape[0]:
+        v = mesh.tri[3 * t + i]
+        if v < 0 or v >= mesh.n:
             return False
-        xs[i] = vertices[v, 0]
-        ys[i] = vertices[v, 1]
-        if xs[i] < 0 or xs[i] >= width or ys[i] < 0 or ys[i] >= height:
+        xs[i] = mesh.xy[2 * v]
+        ys[i] = mesh.xy[2 * v + 1]
+        if xs[i] < 0 or xs[i] >= mesh.width or ys[i] < 0 or ys[i] >= mesh.height:
             return False
     return True
 
 
-cdef bint _start(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
-                 int64_t width, int64_t height, int64_t* ys, int64_t* xs, int64_t* up) noexcept nogil:
+cdef inline bint _start(const _Mesh* mesh, int64_t t, int64_t* ys, int64_t* xs, int64_t* up) noexcept nogil:
     """The triangle's corners sorted by row and the rows of its upper piece (down to the
     middle corner's row, the last of all rows excluded); False if out of range."""
-    if not _corners(vertices, triangles, t, width, height, ys, xs):
+    if not _corners(mesh, t, ys, xs):
         return False
     _sort3(ys, xs)
     up[0] = ys[1] - ys[0] + 1
@@ -179,12 +218,11 @@ cdef inline void _affine(const int64_t* px, const int64_t* py, int64_t ox, int64
         f[k] = f[k] / den
 
 
-cdef bint _start_listed(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t t,
-                        int64_t width, int64_t height, int64_t* py, int64_t* px, int64_t* ys, int64_t* xs,
-                        int64_t* up) noexcept nogil:
+cdef inline bint _start_listed(const _Mesh* mesh, int64_t t, int64_t* py, int64_t* px, int64_t* ys,
+                               int64_t* xs, int64_t* up) noexcept nogil:
     """_start, keeping the corners as listed too (py, px)."""
     cdef int i
-    if not _corners(vertices, triangles, t, width, height, py, px):
+    if not _corners(mesh, t, py, px):
         return False
     for i in range(3):
         ys[i] = py[i]
@@ -203,9 +241,75 @@ def _check(vertices, triangles, width, height):
         raise ValueError(f"image size {width} x {height} out of range")
 
 
+cdef inline void _add_span(double* sums, const source_t* table, int64_t width, int64_t kk, int64_t y,
+                           int64_t x0, int64_t n, const double* power1, const double* power2) noexcept nogil:
+    """A span's terms (row y, columns [x0, x0 + n), n > 0) added to the raw sums
+    sums[0 .. 6 + 2 kk) of triangle_statistics: n, X1, y n, X2, y X1, y (y n), then each
+    plane's sum d_k and y d_k, from the plane itself (8 or 16 bits) or its prefix
+    table ((H (W + 1)) x kk)."""
+    cdef int64_t lo, hi, k, i, b, span_b, span_xb, span_bb
+    cdef double yf = <double>y, nf = <double>n, x1s, x2s, yn, d
+    cdef source_t dk
+    cdef const source_t* pix
+    x1s = power1[x0 + n] - power1[x0]
+    x2s = power2[x0 + n] - power2[x0]
+    yn = yf * nf
+    sums[0] += nf
+    sums[1] += x1s
+    sums[2] += yn
+    sums[3] += x2s
+    sums[4] += yf * x1s
+    sums[5] += yf * yn
+    if source_t is uint8_t or source_t is uint16_t:
+        pix = table + y * width + x0
+        span_b = 0
+        span_xb = 0
+        span_bb = 0
+        for i in range(n):
+            b = pix[i]
+            span_b += b
+            span_xb += (x0 + i) * b
+            span_bb += b * b
+        d = <double>span_b
+        sums[6] += d
+        sums[9] += yf * d
+        d = <double>span_xb
+        sums[7] += d
+        sums[10] += yf * d
+        d = <double>span_bb
+        sums[8] += d
+        sums[11] += yf * d
+    else:
+        lo = (y * (width + 1) + x0) * kk
+        hi = lo + n * kk
+        for k in range(kk):
+            dk = table[hi + k] - table[lo + k]
+            d = <double>dk
+            sums[6 + k] += d
+            sums[6 + kk + k] += yf * d
+
+
+cdef inline void _moved(double* row, double fx, double fy, const int64_t* blocks, int64_t nb) noexcept nogil:
+    """A row of statistics in image coordinates moved to the origin (fx, fy):
+    elements.Statistics._to_origin, operation for operation (blocks: the first
+    columns of the image sums b, ub, vb)."""
+    cdef double sn = row[0], sx = row[1], sy = row[2], sxx = row[3], sxy = row[4], syy = row[5], sb
+    cdef int64_t j, first
+    row[1] = sx - fx * sn
+    row[2] = sy - fy * sn
+    row[3] = sxx - 2 * fx * sx + fx * fx * sn
+    row[4] = sxy - fx * sy - fy * sx + fx * fy * sn
+    row[5] = syy - 2 * fy * sy + fy * fy * sn
+    for j in range(nb):
+        first = blocks[j]
+        sb = row[first]
+        row[first + 1] = row[first + 1] - fx * sb
+        row[first + 2] = row[first + 2] - fy * sb
+
+
 @cython.cdivision(True)
 def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                        int64_t height, const table_t[:, ::1] table, const double[::1] power1,
+                        int64_t height, const source_t[:, ::1] table, const double[::1] power1,
                         const double[::1] power2, const int64_t[::1] columns, const int64_t[::1] blocks,
                         const double[::1] z):
     """(M x C statistics, M squared errors or None) of the triangles: per triangle the sums
@@ -218,11 +322,18 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     sums b, ub, vb). With z (a value per vertex; empty: none), also each triangle's
     squared error against the plane through its corners' values, as
     elements.element_sse gives it (the same float64 operations in the same order, so
-    the same numbers). ValueError on an index or coordinate out of range."""
+    the same numbers). `table` may instead be the one plane itself (H x W, 8 or 16
+    bits, K = 3: b, x b, b b), whose spans are summed pixel by pixel in int64: the
+    integers an integer table's differences give, so the same statistics. ValueError
+    on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
-    cdef int64_t m = triangles.shape[0], kk = table.shape[1], stride = width + 1
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
+    cdef bint direct = source_t is uint8_t or source_t is uint16_t
+    cdef int64_t m = triangles.shape[0], kk = 3 if direct else table.shape[1], stride = width + 1
     cdef int64_t nc = columns.shape[0], nb = blocks.shape[0], raw = 6 + 2 * kk
-    if table.shape[0] != height * stride or power1.shape[0] <= width or power2.shape[0] <= width:
+    if direct and (table.shape[0] != height or table.shape[1] != width):
+        raise ValueError("triangle_statistics: the plane does not match the image size")
+    if (not direct and table.shape[0] != height * stride) or power1.shape[0] <= width or power2.shape[0] <= width:
         raise ValueError("triangle_statistics: tables do not match the image size")
     cdef int64_t q
     if nc < 10:
@@ -242,19 +353,17 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef double[:, ::1] o = out
     cdef double[::1] e = sse_out
     cdef double[::1] sums = sums_buf
-    cdef int64_t t, dy, y, x0, n, lo, hi, k, up, c, i, j, first, ox, oy
+    cdef int64_t t, dy, x0, n, k, up, c, ox, oy
     cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
     cdef int64_t py[3]
     cdef double f[3]
-    cdef double yf, nf, x1s, x2s, yn, d, fx, fy, sn, sx, sy, sxx, sxy, syy, sb
-    cdef table_t dk
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
+            if not _start_listed(&geometry, t, py, px, ys, xs, &up):
                 bad = True
                 break
             for k in range(raw):
@@ -264,42 +373,11 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                 _rows_next(&rows, &x0, &n)
                 if n <= 0:
                     continue  # an empty span adds nothing to any sum
-                y = ys[0] + dy
-                yf = <double>y
-                nf = <double>n
-                x1s = power1[x0 + n] - power1[x0]
-                x2s = power2[x0 + n] - power2[x0]
-                yn = yf * nf
-                sums[0] += nf
-                sums[1] += x1s
-                sums[2] += yn
-                sums[3] += x2s
-                sums[4] += yf * x1s
-                sums[5] += yf * yn
-                lo = y * stride + x0
-                hi = lo + n
-                for k in range(kk):
-                    dk = table[hi, k] - table[lo, k]
-                    d = <double>dk
-                    sums[6 + k] += d
-                    sums[6 + kk + k] += yf * d
+                _add_span(&sums[0], &table[0, 0], width, kk, ys[0] + dy, x0, n, &power1[0], &power2[0])
             for c in range(nc):
                 o[t, c] = sums[columns[c]]
             _origin(px, py, width, &ox, &oy)
-            fx = <double>ox
-            fy = <double>oy
-            # elements.Statistics._to_origin, operation for operation
-            sn = o[t, 0]; sx = o[t, 1]; sy = o[t, 2]; sxx = o[t, 3]; sxy = o[t, 4]; syy = o[t, 5]
-            o[t, 1] = sx - fx * sn
-            o[t, 2] = sy - fy * sn
-            o[t, 3] = sxx - 2 * fx * sx + fx * fx * sn
-            o[t, 4] = sxy - fx * sy - fy * sx + fx * fy * sn
-            o[t, 5] = syy - 2 * fy * sy + fy * fy * sn
-            for j in range(nb):
-                first = blocks[j]
-                sb = o[t, first]
-                o[t, first + 1] = o[t, first + 1] - fx * sb
-                o[t, first + 2] = o[t, first + 2] - fy * sb
+            _moved(&o[t, 0], <double>ox, <double>oy, &blocks[0] if nb else NULL, nb)
             if not errors:
                 continue
             _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
@@ -311,6 +389,85 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     return out, (sse_out if errors else None)
 
 
+cdef inline double _span_worst(const plane_t* line, int64_t y, int64_t x0, int64_t n, int64_t ox, double a,
+                               double row, double c, double best, int64_t* bx, int64_t* by) noexcept nogil:
+    """The span's pixels (line: its row of the plane) against the mesh a (x - ox) + row + c,
+    summed in that order as elements.Raster.worst_pixels sums it: the largest error
+    (from best), its first pixel in (bx, by)."""
+    cdef int64_t x
+    cdef double mesh, e
+    for x in range(x0, x0 + n):
+        mesh = a * <double>(x - ox)
+        mesh += row
+        mesh += c
+        e = fabs(<double>line[x] - mesh)
+        if e > best:
+            best = e
+            bx[0] = x
+            by[0] = y
+    return best
+
+
+def span_statistics(const source_t[:, ::1] table, const int64_t[::1] bounds, const int64_t[::1] span_y,
+                    const int64_t[::1] span_x, const int64_t[::1] span_n, const int64_t[:, ::1] origin,
+                    const double[::1] power1, const double[::1] power2, const int64_t[::1] columns,
+                    const int64_t[::1] blocks):
+    """Statistics.__call__ of a raster from its spans (element e's are bounds[e] ..
+    bounds[e + 1] - 1) and origins: triangle_statistics' sums over given spans instead
+    of a triangle's, the same numbers as the numpy columns and their row sums. `table`:
+    an 8- or 16-bit plane (H x W) or a prefix table ((H (W + 1)) x K, W = len(power1) - 1).
+    ValueError on a span outside the image or tables that do not match."""
+    cdef int64_t e_count = bounds.shape[0] - 1, s = span_y.shape[0], nc = columns.shape[0], nb = blocks.shape[0]
+    cdef int64_t width = power1.shape[0] - 1, height, kk, e, j, c
+    cdef bint direct = source_t is uint8_t or source_t is uint16_t
+    if direct:
+        height = table.shape[0]
+        kk = 3
+        if table.shape[1] != width:
+            raise ValueError("span_statistics: the plane does not match the image size")
+    else:
+        height = table.shape[0] // (width + 1)
+        kk = table.shape[1]
+        if table.shape[0] != height * (width + 1):
+            raise ValueError("span_statistics: tables do not match the image size")
+    if (e_count < 0 or span_x.shape[0] != s or span_n.shape[0] != s or origin.shape[0] != e_count
+            or origin.shape[1] != 2 or power2.shape[0] != width + 1 or kk > MAX_PLANES or nc < 10):
+        raise ValueError("span_statistics: the arrays do not match")
+    for c in range(nc):
+        if not 0 <= columns[c] < 6 + 2 * kk:
+            raise ValueError("span_statistics: a column out of range")
+    for c in range(nb):
+        if not 6 <= blocks[c] < nc - 2:
+            raise ValueError("span_statistics: a column out of range")
+    if bounds[0] != 0 or bounds[e_count] != s:
+        raise ValueError("span_statistics: bounds must run from 0 to the number of spans")
+    for e in range(e_count):
+        if bounds[e + 1] < bounds[e]:
+            raise ValueError("span_statistics: bounds must not decrease")
+    for j in range(s):
+        if span_n[j] > 0 and not (0 <= span_y[j] < height and 0 <= span_x[j] and span_x[j] + span_n[j] <= width):
+            raise ValueError("span_statistics: a span outside the image")
+    out = np.empty((e_count, nc), dtype=np.float64)
+    cdef double[:, ::1] o = out
+    cdef double sums[6 + 2 * MAX_PLANES]
+    with nogil:
+        for e in range(e_count):
+            for c in range(6 + 2 * kk):
+                sums[c] = 0.0
+            for j in range(bounds[e], bounds[e + 1]):
+                if span_n[j] > 0:  # an empty span adds nothing to any sum
+                    _add_span(sums, &table[0, 0], width, kk, span_y[j], span_x[j], span_n[j], &power1[0], &power2[0])
+            for c in range(nc):
+                o[e, c] = sums[columns[c]]
+            _moved(&o[e, 0], <double>origin[e, 0], <double>origin[e, 1], &blocks[0] if nb else NULL, nb)
+    return out
+
+
+def _worst_outputs(int64_t k):
+    """(x, y, |error|) per element for the worst-pixel kernels: none found yet."""
+    return np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.full(k, -1.0)
+
+
 def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
                  int64_t height, const double[::1] z, const plane_t[:, ::1] plane):
     """Per triangle, its owned pixel farthest from the plane through its corners' values
@@ -318,50 +475,38 @@ def worst_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     the first in raster order of those tied: (x, y, |error| (-1 where the triangle owns
     no pixel)). ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0]
     if z.shape[0] != vertices.shape[0]:
         raise ValueError("worst_pixels: z needs a value per vertex")
     if plane.shape[0] != height or plane.shape[1] != width:
         raise ValueError("worst_pixels: the plane does not match the image size")
-    xs_out = np.zeros(m, dtype=np.int64)
-    ys_out = np.zeros(m, dtype=np.int64)
-    err_out = np.full(m, -1.0)
+    xs_out, ys_out, err_out = _worst_outputs(m)
     cdef int64_t[::1] bx = xs_out, by = ys_out
     cdef double[::1] be = err_out
-    cdef int64_t t, dy, y, x0, n, x, up, ox, oy, i
+    cdef int64_t t, dy, y, x0, n, up, ox, oy
     cdef _Rows rows
     cdef int64_t ys[3]
     cdef int64_t xs[3]
     cdef int64_t px[3]
     cdef int64_t py[3]
     cdef double f[3]
-    cdef double a, row, c, mesh, e, best
+    cdef double row, best
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start_listed(vertices, triangles, t, width, height, py, px, ys, xs, &up):
+            if not _start_listed(&geometry, t, py, px, ys, xs, &up):
                 bad = True
                 break
             _origin(px, py, width, &ox, &oy)
             _affine(px, py, ox, oy, z[triangles[t, 0]], z[triangles[t, 1]], z[triangles[t, 2]], f)
-            a = f[0]
-            c = f[2]
             best = -1.0
             _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
                 _rows_next(&rows, &x0, &n)
                 y = ys[0] + dy
-                # as elements.Raster.worst_pixels sums it: a u, then + b v, then + c
                 row = f[1] * <double>(y - oy)
-                for x in range(x0, x0 + n):
-                    mesh = a * <double>(x - ox)
-                    mesh += row
-                    mesh += c
-                    e = fabs(<double>plane[y, x] - mesh)
-                    if e > best:
-                        best = e
-                        bx[t] = x
-                        by[t] = y
+                best = _span_worst(&plane[y, 0], y, x0, n, ox, f[0], row, f[2], best, &bx[t], &by[t])
             be[t] = best
     if bad:
         raise ValueError("worst_pixels: a corner index or coordinate out of range")
@@ -374,6 +519,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     row, left to right (Raster.pixels of their triangle_raster). ValueError on an
     index or coordinate out of range."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], total = 0, t, dy, y, x0, n, x, up, j = 0
     cdef _Rows rows
     cdef int64_t ys[3]
@@ -381,7 +527,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start(&geometry, t, ys, xs, &up):
                 bad = True
                 break
             _rows_start(&rows, ys, xs, up)
@@ -396,7 +542,7 @@ def triangle_pixels(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triang
     cdef int64_t[::1] pe = e_out, px = x_out, py = y_out
     with nogil:
         for t in range(m):
-            _start(vertices, triangles, t, width, height, ys, xs, &up)
+            _start(&geometry, t, ys, xs, &up)
             _rows_start(&rows, ys, xs, up)
             for dy in range(ys[2] - ys[0]):
                 _rows_next(&rows, &x0, &n)
@@ -430,11 +576,6 @@ def evaluate(const double[:, ::1] affine, const int64_t[:, ::1] origin, const in
     if bad:
         raise ValueError("evaluate: an element index out of range")
     return out_a
-
-
-cdef enum:
-    # most planes prefix_table sums: the structure's three and two per fitted channel
-    MAX_PLANES = 32
 
 
 def prefix_table(const table_t[:, ::1] structure, const table_t[:, :, ::1] channels):
@@ -588,6 +729,7 @@ def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     denominator (twice the area). Integers, so the very numbers numpy gave. ValueError
     on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], t, i, j, k, ox, oy
     origin_out = np.empty((m, 2), dtype=np.int64)
     coef_out = np.empty((m, 3, 3), dtype=np.int64)
@@ -600,7 +742,7 @@ def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] trian
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _corners(vertices, triangles, t, width, height, py, px):
+            if not _corners(&geometry, t, py, px):
                 bad = True
                 break
             _origin(px, py, width, &ox, &oy)
@@ -661,6 +803,7 @@ def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     values._planar_refit took from every pixel's (element, x, y) arrays, without them.
     ValueError on an index or coordinate out of range or tables that do not match."""
     _check(vertices, triangles, width, height)
+    cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], t, dy, y, x0, n, x, up, count = 0
     if affine.shape[0] < m or affine.shape[1] != 3 or origin.shape[0] < m or origin.shape[1] != 2:
         raise ValueError("outlier_sums: an affine and an origin per triangle")
@@ -676,7 +819,7 @@ def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     cdef bint bad = False
     with nogil:
         for t in range(m):
-            if not _start(vertices, triangles, t, width, height, ys, xs, &up):
+            if not _start(&geometry, t, ys, xs, &up):
                 bad = True
                 break
             a = affine[t, 0]
@@ -708,3 +851,201 @@ def outlier_sums(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles
     if bad:
         raise ValueError("outlier_sums: a corner index or coordinate out of range")
     return count, drop_a
+
+
+def line_elements(const int64_t[:, ::1] vertices, int64_t width, int64_t height):
+    """(corners, origin, coef, den, span_elem, span_y, span_x, span_n), int64, of the
+    border lines' elements (elements.line_raster): the bottom row's pixels 0 .. W-1,
+    then (if H > 1) the right column's 0 .. H-2, each line cut into pieces between
+    consecutive vertices on it, the last vertex owning its own pixel: a piece from
+    vertex a at position p to b at q has corners (a, b, b), origin a, weight
+    numerators (q - p - s, s) along the line (s = x - p on the row, y - p on the
+    column) and denominator q - p; the row's pieces are one span each, the column's
+    one span a pixel. ValueError on a vertex outside the image or a line with none."""
+    cdef int64_t n = vertices.shape[0], lines = 2 if height > 1 else 1, i, line, axis, fixed, length, p
+    cdef int64_t k, e, s, a, b, la, start, count, elements = 0, spans = 0, last
+    if vertices.shape[1] != 2:
+        raise ValueError("line_elements: vertices must be N x 2")
+    if not 0 < width < 2**20 or not 0 < height < 2**20:
+        raise ValueError(f"line_elements: image size {width} x {height} out of range")
+    for i in range(n):
+        if not (0 <= vertices[i, 0] < width and 0 <= vertices[i, 1] < height):
+            raise ValueError("line_elements: a vertex outside the image")
+    # each line's vertices by position along it (positions are distinct: distinct pixels)
+    at_arr = np.full((2, max(width, height)), -1, dtype=np.int64)
+    cdef int64_t[:, ::1] at = at_arr
+    cdef int64_t on[2]
+    on[0] = on[1] = 0
+    with nogil:
+        for i in range(n):
+            if vertices[i, 1] == height - 1:
+                at[0, vertices[i, 0]] = i
+                on[0] += 1
+            if lines == 2 and vertices[i, 0] == width - 1:
+                at[1, vertices[i, 1]] = i
+                on[1] += 1
+    for line in range(lines):
+        if on[line] == 0:
+            raise ValueError("line_elements: a border line without a vertex (the image corners are vertices)")
+        elements += on[line]
+        length = width if line == 0 else height - 1
+        # the row's pieces are a span each (all start inside it); the column's pixels
+        # below its last vertex's row are spans of their own
+        spans += on[line] if line == 0 else length
+    corners_a = np.empty((elements, 3), dtype=np.int64)
+    origin_a = np.empty((elements, 2), dtype=np.int64)
+    coef_a = np.zeros((elements, 3, 3), dtype=np.int64)
+    den_a = np.empty(elements, dtype=np.int64)
+    elem_a = np.empty(spans, dtype=np.int64)
+    y_a = np.empty(spans, dtype=np.int64)
+    x_a = np.empty(spans, dtype=np.int64)
+    n_a = np.empty(spans, dtype=np.int64)
+    cdef int64_t[:, ::1] corners = corners_a, origin = origin_a
+    cdef int64_t[:, :, ::1] coef = coef_a
+    cdef int64_t[::1] den = den_a, span_elem = elem_a, span_y = y_a, span_x = x_a, span_n = n_a
+    e = 0
+    s = 0
+    with nogil:
+        for line in range(lines):
+            axis = line
+            fixed = height - 1 if line == 0 else width - 1
+            length = width if line == 0 else height - 1
+            a = -1
+            for p in range(length + 1 if line == 1 else length):
+                b = at[line, p]
+                if b < 0:
+                    continue
+                if a >= 0:
+                    la = vertices[b, axis] - vertices[a, axis]
+                    _line_piece(corners, origin, coef, den, e, a, b, vertices[a, 0], vertices[a, 1], axis, la)
+                    s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, vertices[a, axis], la, length)
+                    e += 1
+                a = b
+            # the last vertex: its own pixel (on the column, the corner the row owns: none)
+            _line_piece(corners, origin, coef, den, e, a, a, vertices[a, 0], vertices[a, 1], axis, 0)
+            start = vertices[a, axis]
+            if start < length:
+                s = _line_spans(span_elem, span_y, span_x, span_n, s, e, axis, fixed, start, 1, length)
+            e += 1
+    return corners_a, origin_a, coef_a, den_a, elem_a[:s], y_a[:s], x_a[:s], n_a[:s]
+
+
+cdef void _line_piece(int64_t[:, ::1] corners, int64_t[:, ::1] origin, int64_t[:, :, ::1] coef,
+                      int64_t[::1] den, int64_t e, int64_t a, int64_t b, int64_t ox, int64_t oy, int64_t axis,
+                      int64_t la) noexcept nogil:
+    # a piece from a to b (la > 0), or the last vertex alone (a == b, la == 0)
+    corners[e, 0] = a
+    corners[e, 1] = b
+    corners[e, 2] = b
+    origin[e, 0] = ox
+    origin[e, 1] = oy
+    if la > 0:
+        coef[e, 0, axis] = -1
+        coef[e, 0, 2] = la
+        coef[e, 1, axis] = 1
+        den[e] = la
+    else:
+        coef[e, 0, 2] = 1
+        den[e] = 1
+
+
+cdef int64_t _line_spans(int64_t[::1] span_elem, int64_t[::1] span_y, int64_t[::1] span_x, int64_t[::1] span_n,
+                         int64_t s, int64_t e, int64_t axis, int64_t fixed, int64_t start, int64_t count,
+                         int64_t length) noexcept nogil:
+    # the spans of element e: pixels start .. start + count - 1 of its line, cut at length
+    cdef int64_t j
+    if count > length - start:
+        count = length - start
+    if axis == 0:
+        span_elem[s] = e
+        span_y[s] = fixed
+        span_x[s] = start
+        span_n[s] = count
+        return s + 1
+    for j in range(count):
+        span_elem[s] = e
+        span_y[s] = start + j
+        span_x[s] = fixed
+        span_n[s] = 1
+        s += 1
+    return s
+
+
+def gather_rows(list parts, const int64_t[::1] rows, double[:, ::1] out):
+    """Set out[i] to row rows[i] of the parts (K-column float64 arrays) stacked one
+    after another, for every i: refinement's statistics of its last triangulation from the
+    parts measured round by round, in one pass a part instead of a mask and a fancy
+    index a part. ValueError on a row beyond the parts or shapes that do not match."""
+    cdef int64_t r = rows.shape[0], k = out.shape[1], first = 0, i, j, at
+    cdef double[:, ::1] part
+    cdef bint bad = False
+    if out.shape[0] != r:
+        raise ValueError("gather_rows: a row of out per row asked for")
+    for i in range(r):
+        if rows[i] < 0:
+            raise ValueError("gather_rows: a row beyond the parts")
+    for p in parts:
+        part = p
+        if part.shape[1] != k:
+            raise ValueError("gather_rows: the parts' columns do not match out's")
+        with nogil:
+            for i in range(r):
+                at = rows[i] - first
+                if 0 <= at < part.shape[0]:
+                    for j in range(k):
+                        out[i, j] = part[at, j]
+        first += part.shape[0]
+    for i in range(r):
+        if rows[i] >= first:
+            raise ValueError("gather_rows: a row beyond the parts")
+
+
+def element_worst_pixels(const int64_t[:, ::1] corners, const int64_t[:, :, ::1] coef, const int64_t[::1] den,
+                         const int64_t[:, ::1] origin, const int64_t[::1] bounds, const int64_t[::1] span_y,
+                         const int64_t[::1] span_x, const int64_t[::1] span_n, const int64_t[::1] elements,
+                         const double[::1] z, const plane_t[:, ::1] plane):
+    """Raster.worst_pixels of a raster's `elements` from its arrays (element e's spans
+    are bounds[e] .. bounds[e + 1] - 1): per element, its pixel farthest from the plane
+    through its corners' values z (Raster.affine's: corner after corner, then / D;
+    evaluated as a u, then + b v, then + c), the first of those tied in span order:
+    (x, y, |error| (-1 where it owns no pixel)). ValueError on an index out of range."""
+    cdef int64_t ne = den.shape[0], ns = span_y.shape[0], k = elements.shape[0], i, j, e, c, x, y, n
+    cdef int64_t h = plane.shape[0], w = plane.shape[1], ox, oy
+    if (corners.shape[0] != ne or corners.shape[1] != 3 or coef.shape[0] != ne or coef.shape[1] != 3
+            or coef.shape[2] != 3 or origin.shape[0] != ne or origin.shape[1] != 2 or bounds.shape[0] != ne + 1
+            or span_x.shape[0] != ns or span_n.shape[0] != ns):
+        raise ValueError("element_worst_pixels: the raster's arrays do not match")
+    for i in range(k):
+        e = elements[i]
+        if not 0 <= e < ne or not 0 <= bounds[e] <= bounds[e + 1] <= ns:
+            raise ValueError("element_worst_pixels: an element or its spans out of range")
+        for c in range(3):
+            if not 0 <= corners[e, c] < z.shape[0]:
+                raise ValueError("element_worst_pixels: a corner out of range")
+        for j in range(bounds[e], bounds[e + 1]):
+            if span_n[j] > 0 and not (0 <= span_y[j] < h and 0 <= span_x[j] and span_x[j] + span_n[j] <= w):
+                raise ValueError("element_worst_pixels: a span outside the plane")
+    xs_out, ys_out, err_out = _worst_outputs(k)
+    cdef int64_t[::1] bx = xs_out, by = ys_out
+    cdef double[::1] be = err_out
+    cdef double f[3]
+    cdef double row, best
+    with nogil:
+        for i in range(k):
+            e = elements[i]
+            for c in range(3):
+                f[c] = <double>coef[e, 0, c] * z[corners[e, 0]]
+                f[c] = f[c] + <double>coef[e, 1, c] * z[corners[e, 1]]
+                f[c] = f[c] + <double>coef[e, 2, c] * z[corners[e, 2]]
+                f[c] = f[c] / <double>den[e]
+            ox = origin[e, 0]
+            oy = origin[e, 1]
+            best = -1.0
+            for j in range(bounds[e], bounds[e + 1]):
+                if span_n[j] <= 0:
+                    continue
+                y = span_y[j]
+                row = f[1] * <double>(y - oy)
+                best = _span_worst(&plane[y, 0], y, span_x[j], span_n[j], ox, f[0], row, f[2], best, &bx[i], &by[i])
+            be[i] = best
+    return xs_out, ys_out, err_out

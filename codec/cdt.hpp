@@ -146,6 +146,45 @@ class Stack {
 };
 typedef Stack<i32> EdgeStack;
 
+// A set of positions (open addressing, Fibonacci hashing), for the incremental
+// triangulation's check that a point's position is not taken.
+class Positions {
+ public:
+  bool has(Pt p) const {
+    if (slot_.empty()) return false;
+    uint64_t k = key(p);
+    for (size_t s = at(k);; s = (s + 1) & (slot_.size() - 1)) {
+      if (slot_[s] == k) return true;
+      if (slot_[s] == EMPTY) return false;
+    }
+  }
+  void add(Pt p) {
+    if (2 * (count_ + 1) > slot_.size()) grow();
+    uint64_t k = key(p);
+    size_t s = at(k);
+    while (slot_[s] != EMPTY && slot_[s] != k) s = (s + 1) & (slot_.size() - 1);
+    if (slot_[s] == EMPTY) { slot_[s] = k; ++count_; }
+  }
+
+ private:
+  static const uint64_t EMPTY = ~uint64_t(0);
+  std::vector<uint64_t> slot_;
+  size_t count_ = 0;
+  int bits_ = 0;
+  static uint64_t key(Pt p) { return (uint64_t)(uint32_t)p.y << 32 | (uint32_t)p.x; }
+  size_t at(uint64_t k) const { return (size_t)((k * 0x9E3779B97F4A7C15ull) >> (64 - bits_)); }
+  void grow() {
+    std::vector<uint64_t> old;
+    old.swap(slot_);
+    bits_ = bits_ ? bits_ + 1 : 6;
+    const uint64_t empty = EMPTY;  // a copy: assign() takes a reference, which a
+    slot_.assign(size_t(1) << bits_, empty);  // class constant has no storage for
+    count_ = 0;
+    for (uint64_t k : old)
+      if (k != EMPTY) add(Pt{(i32)(uint32_t)k, (i32)(k >> 32)});
+  }
+};
+
 class CDT {
  public:
   // vertices in raster order (y, then x): the index is the priority of §4.2.5
@@ -1003,6 +1042,37 @@ class CDT {
   i32 last = 0;
   bool broken = false;
 
+  // insert's checks: the positions of every vertex, and the hull's corners in the
+  // order of its edges (made at the first insert; the hull never changes after it)
+  Positions positions;
+  std::vector<Pt> ring;
+
+  // ring: the hull's edges (those without a twin) followed around, keeping the
+  // vertices where it turns
+  void hull_ring() {
+    std::vector<i32> after(pt.size(), -1);
+    i32 start = -1;
+    for (i32 e = 0; e < (i32)V.size(); ++e)
+      if (T[e] < 0) { after[V[e]] = V[nxt(e)]; start = V[e]; }
+    if (start < 0) return;
+    std::vector<i32> loop;
+    i32 v = start;
+    do { loop.push_back(v); v = after[v]; } while (v != start && v >= 0 && loop.size() <= pt.size());
+    size_t h = loop.size();
+    for (size_t i = 0; i < h; ++i)
+      if (orient(loop[(i + h - 1) % h], loop[i], loop[(i + 1) % h]) != 0) ring.push_back(pt[loop[i]]);
+  }
+
+  // q inside the hull or on it: on no hull edge's outer side
+  bool in_hull(Pt q) const {
+    size_t h = ring.size();
+    for (size_t i = 0; i < h; ++i) {
+      const Pt &a = ring[i], &b = ring[i + 1 == h ? 0 : i + 1];
+      if ((i64)(b.x - a.x) * (q.y - a.y) - (i64)(b.y - a.y) * (q.x - a.x) < 0) return false;
+    }
+    return h > 0;
+  }
+
   // Insert k points (xy, k x 2) inside the hull as vertices pt.size(), pt.size() + 1,
   // ... in their order, with Lawson flips (no segment is flipped): the constrained
   // triangulation of §4.2.5 of all the points. All are checked first (coordinates,
@@ -1025,12 +1095,21 @@ class CDT {
         break;
       }
     if (first + limit > MAX_VERTICES) refuse(MAX_VERTICES - first, CDT_MEMORY);
-    // the same position twice among them: the later one is refused
-    std::vector<std::pair<i64, i64>> where((size_t)limit);  // (position, j)
-    for (i64 j = 0; j < limit; ++j) where[j] = {xy[2 * j + 1] << 28 | xy[2 * j], j};
-    std::sort(where.begin(), where.end());
-    for (size_t j = 1; j < where.size(); ++j)
-      if (where[j].first == where[j - 1].first) refuse(where[j].second, CDT_DUPLICATE);
+    // in their order: a point at a position taken (by a vertex, or a point before it) or
+    // outside the hull is refused, and so are those after it. Checked by a table of the
+    // positions and the hull's corners, not by locating each point twice (once before
+    // any goes in, once to put it in): the hull does not change, as every point goes in
+    // inside it
+    if (limit > 0 && ring.empty()) {
+      hull_ring();
+      for (const Pt& q : pt) positions.add(q);
+    }
+    for (i64 j = 0; j < limit; ++j) {
+      Pt q{(i32)xy[2 * j], (i32)xy[2 * j + 1]};
+      if (positions.has(q)) refuse(j, CDT_DUPLICATE);
+      else if (!in_hull(q)) refuse(j, CDT_OUTSIDE);
+      else positions.add(q);
+    }
     for (i64 j = 0; j < limit; ++j) {
       pt.push_back(Pt{(i32)xy[2 * j], (i32)xy[2 * j + 1]});
       vinc.push_back(-1);
@@ -1038,17 +1117,6 @@ class CDT {
     std::vector<i32> batch((size_t)limit);
     for (i64 j = 0; j < limit; ++j) batch[j] = (i32)(first + j);
     std::vector<uint64_t> keys = insertion_order(batch);
-    // outside the hull or on a vertex already there (neither changes as the others go in)
-    i32 from = vinc[last];
-    for (uint64_t key : keys) {
-      i32 p = (i32)(key & INDEX_MASK), on = -1, t = locate(from, p, &on);
-      if (t < 0) { refuse(p - first, CDT_OUTSIDE); continue; }
-      for (int j = 0; j < 3; ++j)
-        if (pt[V[3 * t + j]].x == pt[p].x && pt[V[3 * t + j]].y == pt[p].y) refuse(p - first, CDT_DUPLICATE);
-      from = 3 * t;
-    }
-    pt.resize(first + limit);
-    vinc.resize(first + limit);
     Status st = insert_in_order(keys, first + limit);
     if (st != CDT_OK) {
       // a bug: the points that went in (vinc set) are no prefix of the batch, and the

@@ -250,3 +250,200 @@ def test_first_of_each_marks_the_first_of_every_value() -> None:
         expected = np.zeros(n, bool)
         expected[first] = True
         assert np.array_equal(native._elements.first_of_each(keys), expected)
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("kind", [np.uint8, np.uint16])
+def test_one_narrow_plane_is_summed_without_a_prefix_table(seed: int, kind) -> None:
+    import copy
+
+    # an 8- or 16-bit plane alone: the kernels sum its spans pixel by pixel, and must
+    # give the numbers of its prefix table (the encoder's bytes depend on them), up to
+    # the largest values and on widths where the table needs int64
+    rng = np.random.default_rng(40 + seed)
+    top = np.iinfo(kind).max
+    width, height = (int(rng.integers(3, 90)), int(rng.integers(3, 70))) if seed else (3000, 5)
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), grid=seed == 1)
+    plane = rng.integers(0, top + 1, (height, width)).astype(kind)
+    plane[0, : width // 2] = top
+    for fit in ("structure", None):
+        layout = Statistics(plane, fit)
+        assert layout._plane is not None and layout._planes is None  # no table made
+        z = rng.normal(top / 2, top / 4, len(v))
+        stats, sse = layout.of_triangles(v, t, z)
+        raster = triangle_raster(v, t, width, height)
+        by_spans = layout(raster)
+        table = layout.planes.table
+        assert table.dtype == (np.int32 if kind is np.uint8 and width < 2000 else np.int64)
+        want = native._elements.triangle_statistics(v, t, width, height, table, layout._powers[1], layout._powers[2],
+                                                    layout._from_kernel, layout._blocks, z)
+        assert np.array_equal(stats, want[0]) and np.array_equal(sse, want[1])
+        assert np.array_equal(by_spans, stats)
+        by_table = copy.copy(layout)
+        by_table._plane = None  # numpy's columns from the prefix table
+        assert np.array_equal(by_table(raster), stats)
+
+
+def _lines_by_hand(v: np.ndarray, width: int, height: int):
+    """elements.line_raster's elements, piece by piece in plain Python: the bottom row,
+    then the right column (pixels 0 .. H-2), cut between consecutive vertices on each."""
+    corners, origin, coef, den, spans = [], [], [], [], []
+    for axis, fixed, length in ((0, height - 1, width), (1, width - 1, height - 1))[: 2 if height > 1 else 1]:
+        on = sorted((int(v[i, axis]), i) for i in range(len(v)) if v[i, 1 - axis] == fixed)
+        for (p, a), nxt in zip(on, on[1:] + [None]):
+            b, la = (a, 0) if nxt is None else (nxt[1], nxt[0] - p)
+            w = np.zeros((3, 3), np.int64)
+            if la:
+                w[0, axis], w[0, 2], w[1, axis] = -1, la, 1
+            else:
+                w[0, 2] = 1
+            e = len(corners)
+            corners.append([a, b, b])
+            origin.append(v[a])
+            coef.append(w)
+            den.append(max(la, 1))
+            for q in range(p, min(p + max(la, 1), length)):
+                if axis == 0 and q == p:
+                    spans.append((e, fixed, p, min(max(la, 1), length - p)))
+                elif axis == 1:
+                    spans.append((e, q, fixed, 1))
+    return corners, origin, coef, den, np.array(spans, np.int64).reshape(-1, 4).T
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_border_lines_elements_are_those_made_by_hand(seed: int) -> None:
+    from codec.mesher.elements import line_raster
+
+    rng = np.random.default_rng(60 + seed)
+    width, height = (int(rng.integers(1, 40)), int(rng.integers(1, 40))) if seed > 2 else [(1, 9), (9, 1), (2, 2)][seed]
+    v, _ = _mesh(rng, width, height, int(rng.integers(0, 60)), False) if width > 2 and height > 2 else (None, None)
+    if v is None:
+        v = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.int64)
+        v = v[np.unique(v[:, 1] * width + v[:, 0], return_index=True)[1]]
+    # more vertices on the two lines, in no order
+    extra = np.concatenate([np.stack([rng.integers(0, width, 6), np.full(6, height - 1)], 1),
+                            np.stack([np.full(6, width - 1), rng.integers(0, height, 6)], 1)])
+    v = np.concatenate([v, rng.permutation(extra)])
+    v = v[np.sort(np.unique(v[:, 1] * width + v[:, 0], return_index=True)[1])]
+    got = line_raster(v, width, height)
+    corners, origin, coef, den, (elem, ys, xs, ns) = _lines_by_hand(v, width, height)
+    assert np.array_equal(got.corners, np.array(corners, np.int64).reshape(-1, 3))
+    assert np.array_equal(got.origin, np.array(origin, np.int64).reshape(-1, 2))
+    assert np.array_equal(got.coef, np.array(coef, np.int64).reshape(-1, 3, 3))
+    assert np.array_equal(got.den, np.array(den, np.int64))
+    for a, b in zip((got.span_elem, got.span_y, got.span_x, got.span_n), (elem, ys, xs, ns)):
+        assert a.dtype == np.int64 and np.array_equal(a, b)
+    # with the triangles', every pixel owned once
+    if width > 1 and height > 1:
+        t = triangle_raster(v, triangulate(v), width, height)
+        _, x, y = t.pixels()
+        e, lx, ly = got.pixels()
+        owned = np.sort(np.r_[y * width + x, ly * width + lx])
+        assert np.array_equal(owned, np.arange(width * height))
+
+
+def test_the_border_lines_refuse_vertices_off_the_image() -> None:
+    v = np.array([[0, 0], [4, 0], [0, 3], [4, 3]], np.int64)
+    with pytest.raises(ValueError, match="outside the image"):
+        native._elements.line_elements(v, 4, 4)
+    with pytest.raises(ValueError, match="without a vertex"):
+        native._elements.line_elements(v[:2], 5, 4)
+
+
+def test_rows_gathered_from_parts_are_those_of_the_parts_stacked() -> None:
+    rng = np.random.default_rng(5)
+    parts = [rng.normal(size=(int(rng.integers(0, 40)), 10)) for _ in range(6)]
+    stacked = np.concatenate(parts)
+    rows = rng.integers(0, len(stacked), 300)
+    out = np.full((300, 10), np.nan)
+    native._elements.gather_rows(parts, rows, out)
+    assert np.array_equal(out, stacked[rows])
+    with pytest.raises(ValueError, match="beyond the parts"):
+        native._elements.gather_rows(parts, np.array([len(stacked)]), np.empty((1, 10)))
+    with pytest.raises(ValueError, match="beyond the parts"):
+        native._elements.gather_rows(parts, np.array([-1]), np.empty((1, 10)))
+    with pytest.raises(ValueError, match="do not match"):
+        native._elements.gather_rows(parts + [np.zeros((2, 9))], rows, out)
+    with pytest.raises(ValueError, match="per row"):
+        native._elements.gather_rows(parts, rows, out[:-1])
+
+
+def _worst_in_numpy(raster, plane: np.ndarray, z: np.ndarray, elements: np.ndarray):
+    """Raster.worst_pixels as numpy computed it, pixel arrays and all."""
+    from codec.mesher.elements import _segments
+
+    spans = raster._spans_of(elements)
+    spans = spans[raster.span_n[spans] > 0]
+    e, y, x0, n = raster.span_elem[spans], raster.span_y[spans], raster.span_x[spans], raster.span_n[spans]
+    if len(e) == 0:
+        return e, x0, y, np.zeros(0)
+    f = raster.affine(z, elements)[np.searchsorted(elements, e)]
+    u = _segments(x0 - raster.origin[e, 0], n)
+    index = np.repeat(y * plane.shape[1] + x0, n) + u - np.repeat(u[np.r_[0, np.cumsum(n)[:-1]]], n)
+    mesh = np.repeat(f[:, 0], n) * u
+    mesh += np.repeat(f[:, 1] * (y - raster.origin[e, 1]), n)
+    mesh += np.repeat(f[:, 2], n)
+    err = np.abs(np.take(plane, index) - mesh)
+    elem_first = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
+    peak = np.maximum.reduceat(err, np.r_[0, np.cumsum(n)[:-1]][elem_first])
+    owner = np.repeat(np.cumsum(np.r_[True, e[1:] != e[:-1]]) - 1, n)
+    at_peak = np.flatnonzero(err == peak[owner])
+    best = at_peak[np.r_[True, owner[at_peak][1:] != owner[at_peak][:-1]]]
+    w = plane.shape[1]
+    return e[elem_first], index[best] % w, index[best] // w, err[best]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_worst_pixels_of_any_elements_are_numpys(seed: int) -> None:
+    from codec.mesher.elements import line_raster, rasterize
+
+    rng = np.random.default_rng(70 + seed)
+    width, height = int(rng.integers(3, 80)), int(rng.integers(3, 60))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 150)), seed % 2 == 1)
+    plane = (rng.integers(0, 4, (height, width)) * 20).astype(np.float32)  # plateaus: ties
+    for raster in (rasterize(v, t, width, height), line_raster(v, width, height)):
+        for z in (plane[v[:, 1], v[:, 0]].astype(np.float64), rng.normal(30, 20, len(v))):
+            for which in (np.arange(len(raster)), np.sort(rng.choice(len(raster), len(raster) // 3, replace=False))):
+                want = _worst_in_numpy(raster, plane, z, which)
+                for p in (plane, plane.astype(np.float64)):
+                    got = raster.worst_pixels(p, z, which)
+                    for a, b in zip(got, want):
+                        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="out of range"):
+        raster.worst_pixels(plane, z, np.array([len(raster)]))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_span_statistics_are_the_numpy_columns_summed(seed: int) -> None:
+    # Statistics of a raster's spans in one compiled pass (one narrow plane: pixel by
+    # pixel; any layout: from its prefix table) against the numpy columns and row sums
+    # the table path still takes, on triangle and border-line rasters
+    import copy
+
+    from codec.mesher.elements import line_raster, rasterize
+
+    rng = np.random.default_rng(80 + seed)
+    width, height = int(rng.integers(3, 90)), int(rng.integers(3, 70))
+    v, t = _mesh(rng, width, height, int(rng.integers(1, 200)), seed % 2 == 1)
+    for structure, fit in _images(rng, width, height):
+        layout = Statistics(structure, fit)
+        by_table = copy.copy(layout)
+        by_table._plane = None  # the numpy path, from the prefix table
+        for raster in (rasterize(v, t, width, height), line_raster(v, width, height)):
+            want = by_table(raster)
+            assert np.array_equal(layout(raster), want)
+            got = native._elements.span_statistics(
+                layout.planes.table, raster.bounds, raster.span_y, raster.span_x, raster.span_n, raster.origin,
+                layout._powers[1], layout._powers[2], layout._from_kernel, layout._blocks)
+            assert np.array_equal(got, want)
+    raster = line_raster(v, width, height)
+    args = (layout._powers[1], layout._powers[2], layout._from_kernel, layout._blocks)
+    plane = np.zeros((height, width), np.uint8)
+    outside = raster.span_y.copy()
+    outside[0] = height
+    with pytest.raises(ValueError, match="outside the image"):
+        native._elements.span_statistics(plane, raster.bounds, outside, raster.span_x, raster.span_n, raster.origin, *args)
+    late = raster.bounds.copy()
+    late[0] = 1
+    with pytest.raises(ValueError, match="from 0 to the number of spans"):
+        native._elements.span_statistics(plane, late, raster.span_y, raster.span_x, raster.span_n, raster.origin, *args)

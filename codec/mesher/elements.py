@@ -123,29 +123,20 @@ class Raster:
         """For each of `elements` (sorted, distinct) that owns pixels: its pixel farthest
         from the mesh through `vertex_values`, the first in raster order of those
         tied. Returns (element, x, y, |error|)."""
-        spans = self._spans_of(elements)
-        spans = spans[self.span_n[spans] > 0]
-        e, y, x0, n = self.span_elem[spans], self.span_y[spans], self.span_x[spans], self.span_n[spans]
-        if len(e) == 0:
-            return e, x0, y, np.zeros(0)
-        elements = np.asarray(elements, dtype=np.int64)
-        f = self.affine(vertex_values, elements)[np.searchsorted(elements, e)]
-        u = _segments(x0 - self.origin[e, 0], n)
-        index = np.repeat(y * plane.shape[1] + x0, n) + u - np.repeat(u[np.r_[0, np.cumsum(n)[:-1]]], n)
-        mesh = np.repeat(f[:, 0], n) * u
-        mesh += np.repeat(f[:, 1] * (y - self.origin[e, 1]), n)
-        mesh += np.repeat(f[:, 2], n)
-        err = np.abs(np.take(plane, index) - mesh)
-        # each element's first pixel at its maximum: spans of an element are contiguous
-        span_first = np.r_[0, np.cumsum(n)[:-1]]
-        elem_first = np.flatnonzero(np.r_[True, e[1:] != e[:-1]])
-        starts = span_first[elem_first]
-        peak = np.maximum.reduceat(err, starts)
-        owner = np.repeat(np.cumsum(np.r_[True, e[1:] != e[:-1]]) - 1, n)
-        at_peak = np.flatnonzero(err == peak[owner])
-        best = at_peak[np.r_[True, owner[at_peak][1:] != owner[at_peak][:-1]]]
-        w = plane.shape[1]
-        return e[elem_first], index[best] % w, index[best] // w, err[best]
+        # one compiled pass over their spans (the numbers of the numpy expressions it
+        # replaced, which made a dozen arrays of the pixels)
+        elements = np.ascontiguousarray(elements, dtype=np.int64)
+        if plane.dtype != np.float32:
+            plane = plane.astype(np.float64)
+        x, y, err = native._elements.element_worst_pixels(
+            np.ascontiguousarray(self.corners, dtype=np.int64), np.ascontiguousarray(self.coef, dtype=np.int64),
+            np.ascontiguousarray(self.den, dtype=np.int64), np.ascontiguousarray(self.origin, dtype=np.int64),
+            np.ascontiguousarray(self.bounds, dtype=np.int64),
+            *(np.ascontiguousarray(a, dtype=np.int64) for a in (self.span_y, self.span_x, self.span_n)),
+            elements, np.ascontiguousarray(vertex_values, dtype=np.float64), np.ascontiguousarray(plane),
+        )
+        owns = np.flatnonzero(err >= 0)
+        return elements[owns], x[owns], y[owns], err[owns]
 
 
 class Planes:
@@ -188,16 +179,20 @@ class Statistics:
             top = max(np.iinfo(a.dtype).max for a in [structure] + channels)
             if max(top * (w - 1), top * top) * w < 2**31:
                 kind = np.int32
-        planes = Planes(structure.astype(kind), [c.astype(kind) for c in channels])
+        self._planes: Planes | None = None
+        self._make_planes = lambda: Planes(structure.astype(kind), [c.astype(kind) for c in channels])
+        # one 8- or 16-bit plane: the kernels sum its spans pixel by pixel in int64, the
+        # integers its prefix table's differences give, so no table is made (12 bytes a
+        # pixel, faulted in and filled for every band)
+        self._plane = np.ascontiguousarray(structure) if not channels and structure.dtype in (np.uint8, np.uint16) else None
         self.channels = 0 if fit is None else max(1, len(channels))
         self._fit = [slice(10 + 3 * c, 13 + 3 * c) for c in range(len(channels))] or [slice(6, 9)]
         width = 10 + 3 * len(channels)
         self.width = width
         self.shape = (h, w)
-        self.planes = planes
         # the columns of the kernel's sums (codec._elements.triangle_sums) in the order of
         # __call__'s: the moments, b, xb, y b, bb, then per channel b_c, x b_c, y b_c
-        k = planes.table.shape[1]
+        k = 3 + 2 * len(channels)
         self._from_kernel = np.array(
             [0, 1, 2, 3, 4, 5, 6, 7, 6 + k, 8] + [i for c in range(len(channels)) for i in (9 + 2 * c, 10 + 2 * c, 6 + k + 3 + 2 * c)]
         )
@@ -208,8 +203,26 @@ class Statistics:
         cols = np.arange(w, dtype=np.float64)
         self._powers = [None] + [np.r_[0.0, np.cumsum(cols**k)] for k in (1, 2)]
 
+    @property
+    def planes(self) -> Planes:
+        """The planes' prefix sums (made on first use: one 8- or 16-bit plane needs none)."""
+        if self._planes is None:
+            self._planes = self._make_planes()
+        return self._planes
+
+    def _source(self) -> np.ndarray:
+        """What the kernels sum spans from: the one plane itself, or the prefix table."""
+        return self._plane if self._plane is not None else self.planes.table
+
     def __call__(self, raster: Raster) -> np.ndarray:
         """E x width: the statistics of every element of `raster`."""
+        if self._plane is not None:
+            # one compiled pass: the numbers of the columns below and their row sums
+            return native._elements.span_statistics(
+                self._plane, np.ascontiguousarray(raster.bounds, dtype=np.int64),
+                *(np.ascontiguousarray(a, dtype=np.int64) for a in (raster.span_y, raster.span_x, raster.span_n)),
+                np.ascontiguousarray(raster.origin, dtype=np.int64), self._powers[1], self._powers[2],
+                self._from_kernel, self._blocks)
         d = raster.span_sums(self.planes)
         y = raster.span_y.astype(np.float64)
         x0, x1 = raster.span_x, raster.span_x + raster.span_n
@@ -240,7 +253,7 @@ class Statistics:
         z = np.zeros(0) if vertex_values is None else np.ascontiguousarray(vertex_values, dtype=np.float64)
         return native._elements.triangle_statistics(
             np.ascontiguousarray(vertices, dtype=np.int64), np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
-            w, h, self.planes.table, self._powers[1], self._powers[2], self._from_kernel, self._blocks, z,
+            w, h, self._source(), self._powers[1], self._powers[2], self._from_kernel, self._blocks, z,
         )
 
     def _to_origin(self, out: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -335,39 +348,6 @@ def _triangle_spans(v: np.ndarray, t: np.ndarray):
     return tri, y, left.astype(np.int64), n, np.r_[0, np.cumsum(rows)]
 
 
-def _line_elements(v: np.ndarray, on_line: np.ndarray, axis: int, fixed: int, length: int):
-    """Elements for the pixels 0 .. length-1 of a border line (axis 0: a row, 1: a
-    column) between consecutive vertices on it; the last pixel is owned by its vertex."""
-    idx = np.flatnonzero(on_line)
-    idx = idx[np.argsort(v[idx, axis], kind="stable")]
-    pos = v[idx, axis]
-    a, b = idx[:-1], idx[1:]
-    la = pos[1:] - pos[:-1]
-    k = len(a)
-    corners = np.stack([a, b, b], axis=1)
-    coef = np.zeros((k + 1, 3, 3), dtype=np.int64)
-    # along the line the coordinate is u (a row) or v (a column)
-    coef[:k, 0, axis] = -1
-    coef[:k, 0, 2] = la
-    coef[:k, 1, axis] = 1
-    coef[k, 0, 2] = 1
-    corners = np.concatenate([corners, [[idx[-1]] * 3]]).astype(np.int64).reshape(-1, 3)
-    origin = v[np.concatenate([a, idx[-1:]])]
-    den = np.concatenate([la, [1]]).astype(np.int64)
-    starts = np.concatenate([pos[:-1], pos[-1:]])
-    counts = np.concatenate([la, [1]])
-    keep = starts < length
-    counts = np.minimum(counts, length - starts)
-    if axis == 0:
-        span_y, span_x, span_n = np.full(k + 1, fixed), starts, counts
-    else:
-        span_n = np.ones(int(counts[keep].sum()), dtype=np.int64)
-        elem = np.repeat(np.arange(k + 1)[keep], counts[keep])
-        return corners, origin, coef, den, elem, _segments(starts[keep], counts[keep]), np.full(len(elem), fixed), span_n
-    elem = np.arange(k + 1)
-    return corners, origin, coef, den, elem[keep], span_y[keep], span_x[keep], span_n[keep]
-
-
 def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, height: int,
                     *, spans: bool = True) -> Raster:
     """The triangles' elements alone (no border lines): what they own of the image.
@@ -415,11 +395,10 @@ def triangle_pixels(vertices: np.ndarray, triangles: np.ndarray, width: int,
 def line_raster(vertices: np.ndarray, width: int, height: int) -> Raster:
     """The elements of the bottom row and the right column, which need a vertex at
     each of their ends (the image corners)."""
-    v = np.asarray(vertices, dtype=np.int64)
-    parts = [_line_elements(v, v[:, 1] == height - 1, 0, height - 1, width)]
-    if height > 1:
-        parts.append(_line_elements(v, v[:, 0] == width - 1, 1, width - 1, height - 1))
-    return concat([Raster(width, height, *part) for part in parts])
+    # one compiled pass (the same integers as the numpy pieces it replaced, in their
+    # order: a fifth of a refinement round's orchestration)
+    return Raster(width, height, *native._elements.line_elements(np.ascontiguousarray(vertices, dtype=np.int64),
+                                                                 width, height))
 
 
 def concat(rasters: list[Raster]) -> Raster:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ATMError
 from ..native import _elements, _renumber
-from ..triangulate import Triangulation, split_at_vertices, triangulate
+from ..triangulate import Triangulation, triangulate
 from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
@@ -101,11 +101,7 @@ class _Cache:
         if len(self._parts) == 1:
             np.take(self._parts[0], rows, axis=0, out=head)  # a row gather: 3x quicker than store[rows]
         else:
-            first = 0
-            for part in self._parts:
-                mine = np.flatnonzero((rows >= first) & (rows < first + len(part)))
-                head[mine] = np.take(part, rows[mine] - first, axis=0)
-                first += len(part)
+            _elements.gather_rows(self._parts, np.ascontiguousarray(rows, dtype=np.int64), head)
         if tail:
             out[len(rows):] = after
         return out
@@ -151,8 +147,9 @@ def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_w
     order = np.argsort(vertices[:, 1] * width + vertices[:, 0], kind="stable")
     renumber = np.empty(len(order), np.int64)
     renumber[order] = np.arange(len(order))
-    vertices = vertices[order]
-    segments = split_at_vertices(vertices, renumber[segments], width)
+    vertices = np.ascontiguousarray(vertices[order], dtype=np.int64)
+    # split_at_vertices' pieces, found by a table of the vertices' pixels in one pass
+    segments = _renumber.split_in_raster_order(vertices, np.ascontiguousarray(renumber[segments].reshape(-1, 2)), width)
     if sort_walls and len(segments):
         firsts = np.r_[0, run_breaks(segments)]
         first_vertex = np.repeat(segments[firsts, 0], np.diff(np.r_[firsts, len(segments)]))
@@ -217,7 +214,7 @@ def refine_to_budget(
         if ordered:
             break
         lines = line_raster(vertices, width, height)
-        sse = np.r_[tri_sse, element_sse(lines, layout(lines), z)]
+        sse = np.concatenate([tri_sse, element_sse(lines, layout(lines), z)])
         measured = float(sse.sum()) / (width * height)
         if r == 0:
             quarter = min(len(sse), math.ceil(missing / 4))
@@ -229,7 +226,7 @@ def refine_to_budget(
             # the batch largest, ties to the lower index (as a stable sort would)
             cut = -np.partition(-sse, batch - 1)[batch - 1]
             above = np.flatnonzero(sse > cut)
-            cand = np.r_[above, np.flatnonzero(sse == cut)[: batch - len(above)]]
+            cand = np.concatenate([above, np.flatnonzero(sse == cut)[: batch - len(above)]])
         else:
             cand = np.arange(len(sse))
         cand = np.sort(cand[sse[cand] > 0])
@@ -237,7 +234,8 @@ def refine_to_budget(
         # each candidate triangle's worst pixel (candidates sorted: in triangle order)
         _, x, y, err = worst_pixels(gray, vertices, tris[on_tri], z, width, height)
         _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
-        x, y, err = np.r_[x, lx], np.r_[y, ly], np.r_[err, lerr]
+        # (np.concatenate: np.r_ parses its index each call, 10 us a time)
+        x, y, err = np.concatenate([x, lx]), np.concatenate([y, ly]), np.concatenate([err, lerr])
         big = err > 0.5
         if not big.any() and finish is not None:
             rounds = r + 1  # nothing worth a vertex, but the caller's still go in

@@ -1,0 +1,88 @@
+"""Triangulation.insert's checks (a position taken, outside the hull) made without
+locating each point first: on hulls of every shape, with points on the hull, just off
+it and at taken positions, a batch stops at exactly its first refused point and what
+went in is delaunay()'s triangulation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from codec.errors import ATMError
+from codec.triangulate import Triangulation, delaunay
+
+
+def _inside(hull: np.ndarray, q: np.ndarray) -> bool:
+    """q in the convex polygon `hull` (counterclockwise, y down as the kernel's
+    orientation has it) or on it."""
+    a, b = hull, np.roll(hull, -1, axis=0)
+    return bool(np.all((b[:, 0] - a[:, 0]) * (q[1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (q[0] - a[:, 0]) >= 0))
+
+
+def _start(rng: np.random.Generator, shape: str) -> tuple[np.ndarray, np.ndarray]:
+    """(first vertices, their hull's corners in the kernel's orientation)."""
+    if shape == "rectangle":
+        w, h = int(rng.integers(5, 60)), int(rng.integers(5, 60))
+        hull = np.array([[0, 0], [0, h], [w, h], [w, 0]])
+    elif shape == "triangle":
+        hull = np.array([[0, 0], [0, 40], [50, 20]])
+    else:  # a pentagon with slanted sides
+        hull = np.array([[10, 0], [0, 20], [15, 45], [45, 35], [40, 5]])
+    hull = hull + 3  # points just off it stay at non-negative coordinates
+    if not _inside(hull, hull.mean(axis=0)):
+        hull = hull[::-1]
+    lo, hi = hull.min(axis=0), hull.max(axis=0)
+    cand = np.stack([rng.integers(lo[0], hi[0] + 1, 300), rng.integers(lo[1], hi[1] + 1, 300)], 1)
+    inner = np.array([q for q in cand if _inside(hull, q)])[: int(rng.integers(0, 40))].reshape(-1, 2)
+    # vertices on the hull's sides (straight stretches of it, which the checks must
+    # not take for corners), where a side has lattice points
+    sides = []
+    for a, b in zip(hull, np.roll(hull, -1, axis=0)):
+        g = int(np.gcd(*(b - a)))
+        if g > 1:
+            sides.append(a + (b - a) // g * int(rng.integers(1, g)))
+    first = np.concatenate([hull, np.array(sides).reshape(-1, 2), inner]).astype(np.int64)
+    _, keep = np.unique(first[:, 1] * 1000 + first[:, 0], return_index=True)
+    return rng.permutation(first[np.sort(keep)]), hull
+
+
+@pytest.mark.parametrize("shape", ["rectangle", "triangle", "pentagon"])
+@pytest.mark.parametrize("seed", range(12))
+def test_a_batch_goes_in_up_to_its_first_refused_point(shape: str, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    first, hull = _start(rng, shape)
+    tri = Triangulation(first)
+    there = first
+    lo, hi = hull.min(axis=0) - 2, hull.max(axis=0) + 2
+    grid = np.stack(np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1)), -1).reshape(-1, 2)
+    inside = np.array([_inside(hull, q) for q in grid])
+    for _ in range(4):
+        # free positions inside the hull or on it, then maybe one refused point among them
+        taken = {tuple(q) for q in there.tolist()}
+        free = np.array([q for q in grid[inside].tolist() if tuple(q) not in taken])
+        batch = free[rng.permutation(len(free))[:40]]
+        at, kind = int(rng.integers(0, len(batch))), rng.integers(0, 4)
+        if kind == 1:  # a vertex already there
+            batch[at] = there[int(rng.integers(len(there)))]
+        elif kind == 2 and at > 0:  # a point of the batch again
+            batch[at] = batch[int(rng.integers(0, at))]
+        elif kind == 3:  # just off the hull
+            batch[at] = grid[~inside][int(rng.integers((~inside).sum()))]
+        # the expected stop: the first point at a taken position or outside the hull
+        seen = {tuple(q) for q in there.tolist()}
+        stop, why = len(batch), None
+        for j, q in enumerate(batch.tolist()):
+            if tuple(q) in seen:
+                stop, why = j, "share a position"
+                break
+            if not _inside(hull, np.array(q)):
+                stop, why = j, "outside"
+                break
+            seen.add(tuple(q))
+        if why is None:
+            np.testing.assert_array_equal(tri.insert(batch), len(there) + np.arange(len(batch)))
+        else:
+            with pytest.raises(ATMError, match=why):
+                tri.insert(batch)
+        there = np.concatenate([there, batch[:stop]])
+        np.testing.assert_array_equal(tri.triangles(), delaunay(there))
