@@ -41,6 +41,10 @@ def __getattr__(name: str):
         from . import stream
 
         return getattr(stream, name)
+    if name == "Decoder":
+        from .decoder import Decoder
+
+        return Decoder
     raise AttributeError(f"module 'codec' has no attribute {name!r}")
 
 __version__ = "0.1.0"
@@ -146,6 +150,7 @@ def decode(data: Buffer, *, out: np.ndarray | None = None, backend: str = "cpu")
     chunk, ATM.md §4.9), one encoded as (H, W) comes back (H, W).
     backend: "cpu" (exact integer scanline decoder) or "gl" (OpenGL through EGL; the
     same pixels, BackendError where no GL context can be made).
+    Decoding many files: codec.Decoder (one per thread) reuses its working memory.
     """
     from .stream import StreamDecoder
 
@@ -333,6 +338,7 @@ __all__ = [
     "ATMError",
     "BackendError",
     "CorruptError",
+    "Decoder",
     "FormatError",
     "LimitError",
     "Mesh",

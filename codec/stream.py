@@ -333,11 +333,13 @@ class StreamDecoder:
     """
 
     def __init__(self, fileobj: BinaryIO, *, backend: str = "cpu"):
-        if backend not in decoding.BACKENDS:
-            raise OptionError(
-                f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
-            )
-        self._reader = container.Reader(fileobj)
+        check_backend(backend)
+        self._start(container.Reader(fileobj), backend)
+
+    def _start(self, reader: container.Reader, backend: str) -> None:
+        """Take the header from a reader that has read it (codec.Decoder makes its own
+        reader, with the decompressor and triangulation it owns)."""
+        self._reader = reader
         self._backend = backend
         h = self._reader.header
         self.width, self.height, self.dtype, self.channels = h.width, h.height, h.dtype, h.channels
@@ -432,6 +434,14 @@ class StreamDecoder:
         # the last row is the next band's first: emit it once, from there (a residual
         # layer already leaves it out)
         return y0, rows if last or len(rows) < mesh.height else rows[:-1]
+
+
+def check_backend(backend: str) -> None:
+    """OptionError unless `backend` names a decoder backend."""
+    if backend not in decoding.BACKENDS:
+        raise OptionError(
+            f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
+        )
 
 
 #: The unsigned type of each sample width (index: bytes a sample): holes are filled with
