@@ -322,7 +322,11 @@ def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
             raise ATMError("out is read-only; pass a writeable array")
         # a view, whatever the strides: the gray image fills the one channel in place
         target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
+        if target.flags.c_contiguous:
+            dec._into = target  # a whole-image render may land there itself
     for y0, rows in groups:
+        if np.may_share_memory(rows, target):
+            continue  # rendered in place (StreamDecoder._into)
         target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
     return out if out is not None else image
 

@@ -396,13 +396,22 @@ class StreamDecoder:
         if group:
             yield self._rows(group)
 
+    #: codec.decode(out=)'s array when it is C-contiguous in the rendered image's shape
+    #: (H x W, or H x W x C): a group that is the whole image, its samples the image's
+    #: own (no scale, offset or holes), is rendered straight into it, not copied there
+    _into: np.ndarray | None = None
+
     def _rows(self, group: list[tuple[int, Mesh]]) -> tuple[int, np.ndarray]:
         """(y0, rows) of a group of consecutive bands: each row once, the group's last
         row only if it is the image's."""
         y0, mesh = group[0][0], stack_bands(group)
+        h = self._reader.header
+        into = self._into if (self._into is not None and y0 == 0 and mesh.height == self.height
+                              and mesh.holes is None and h.quant is None and not h.exact
+                              and self._backend == "cpu") else None
         # the Reader's bands passed mesh.validate, so each tiles its rows, and so does
         # their stack: the renderer need not count each row's spans
-        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend, tiles=True))
+        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend, tiles=True, out=into))
 
     def _layered_rows(self, layer: "residual.ResidualDecoder", y0: int, mesh: Mesh) -> tuple[int, np.ndarray]:
         """(y0, rows) of a band with a residual layer, which gives every row it emits."""
