@@ -268,5 +268,20 @@ def test_glue_benchmark_prints_its_table(tmp_path) -> None:
     assert [r[0] for r in rows][:4] == ["camera", "moon", "astronaut", "camera_bands32"]
     for row in rows:
         figures = dict(zip(head, row))
-        decode, glue = float(figures["this checkout: decode us"]), float(figures["glue us"])
+        decode, glue = float(figures["this checkout (codec.decode): decode us"]), float(figures["glue us"])
         assert 0 < glue < decode
+
+
+def test_glue_benchmark_times_a_decoder(tmp_path) -> None:
+    """glue.py --decoder: the worker decodes with one codec.Decoder, and says so."""
+    run = subprocess.run(
+        [sys.executable, "benchmarks/glue.py", "--rounds", "1", "--decodes", "1", "--files", str(tmp_path),
+         "--decoder"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, *rows = _table(run.stdout)
+    assert "this checkout (codec.Decoder): decode us" in head
+    for row in rows:
+        figures = dict(zip(head, row))
+        assert 0 < float(figures["glue us"]) < float(figures["this checkout (codec.Decoder): decode us"])
