@@ -317,7 +317,9 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int checks = MESH_OK
     if seq_order.shape[0] != n or channels < 1 or longest > 9 or n * channels < 0:
         raise ValueError("band_values: one place per vertex, at least one channel, at most 9 bytes a varint")
-    cdef int status = _varint_count(samples, n * channels, longest)
+    cdef int status
+    with nogil:  # a scan of the whole field: work, so without the GIL
+        status = _varint_count(samples, n * channels, longest)
     if status != VALUES_OK:
         return status, None, None, None
     areas = np.empty(m, dtype=np.int64) if want_areas else None
