@@ -8,7 +8,8 @@ import threading
 import numpy as np
 
 from . import container, frames
-from .stream import StreamDecoder, check_backend
+from .buffers import as_bytes
+from .stream import StreamDecoder, check_backend, decode_into
 from .triangulate import Delaunay
 
 
@@ -39,14 +40,12 @@ class Decoder:
 
     def decode(self, data, *, out: np.ndarray | None = None) -> np.ndarray:
         """codec.decode(data, out=out, backend=self.backend), in this decoder's memory."""
-        from . import _as_bytes, _decode_into
-
         if not self._busy.acquire(blocking=False):
             raise RuntimeError("codec.Decoder.decode: the decoder is in use by another thread (keep one per thread)")
         try:
-            reader = container.Reader(io.BytesIO(_as_bytes(data)), dctx=self._dctx, triangulator=self._triangulator)
+            reader = container.Reader(io.BytesIO(as_bytes(data)), dctx=self._dctx, triangulator=self._triangulator)
             dec = StreamDecoder.__new__(StreamDecoder)
             dec._start(reader, self.backend)
-            return _decode_into(dec, out)
+            return decode_into(dec, out)
         finally:
             self._busy.release()

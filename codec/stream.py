@@ -7,6 +7,7 @@ decoded rows as each band's chunk arrives.
 
 from __future__ import annotations
 
+import itertools
 from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
@@ -521,3 +522,48 @@ def merge_bands(bands: list[tuple[int, Mesh]]) -> Mesh:
     triangles = np.concatenate([inverse[m.triangles + o] for (_, m), o in zip(bands, offsets)])
     constraints = [inverse[c + o] for (_, m), o in zip(bands, offsets) for c in m.constraints]
     return Mesh(pos[first], vals[first], triangles, width, height, constraints)
+
+
+def decode_into(dec, out: np.ndarray | None) -> np.ndarray:
+    """Decode a StreamDecoder's bands into `out` (checked first) or a new array."""
+    shape, dtype = tuple(dec.shape), np.dtype(dec.dtype)
+    groups = dec.rows(GROUP_PIXELS)  # small bands rendered a group at a time
+    if out is None:
+        first = next(groups, None)
+        second = next(groups, None) if first is not None else None
+        if second is None and first is not None and first[0] == 0 and _whole(first[1], shape, dtype):
+            # one render gave the whole image (a file of one band): it is the result,
+            # without an image to allocate and copy it into
+            return first[1]
+        groups = itertools.chain([g for g in (first, second) if g is not None], groups)
+        image = np.empty(shape, dtype)
+        target = image[..., 0] if dec.channels == 1 and image.ndim == 3 else image
+    else:
+        if not isinstance(out, np.ndarray):
+            raise ATMError(f"out must be a numpy array, not {type(out).__name__}")
+        gray = shape[:2]
+        shapes = (gray, gray + (1,)) if dec.channels == 1 else (shape,)
+        if out.shape not in shapes or out.dtype != dtype:
+            want = " or ".join(str(s) for s in shapes)
+            raise ATMError(
+                f"out is a {out.shape} {out.dtype} array; this image needs shape {want}, dtype {dtype} "
+                f"(e.g. numpy.empty({shape}, numpy.{dtype}))"
+            )
+        if not out.flags.writeable:
+            raise ATMError("out is read-only; pass a writeable array")
+        # a view, whatever the strides: the gray image fills the one channel in place
+        target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
+        if target.flags.c_contiguous:
+            dec._into = target  # a whole-image render may land there itself
+    for y0, rows in groups:
+        if np.may_share_memory(rows, target):
+            continue  # rendered in place (StreamDecoder._into)
+        target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
+    return out if out is not None else image
+
+
+def _whole(rows: np.ndarray, shape: tuple, dtype: np.dtype) -> bool:
+    """Whether rows, as the decoder made them (no other reference to their memory),
+    can be the decoded image itself."""
+    flags = rows.flags
+    return rows.shape == shape and rows.dtype == dtype and flags.c_contiguous and flags.writeable and flags.owndata
