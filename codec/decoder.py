@@ -24,9 +24,11 @@ class Decoder:
             image = decoder.decode(data)
 
     A decode's memory that outlives it is what lets the next one skip the allocation
-    and the page faults of fresh memory (about 12 % of a 512² decode's CPU time,
-    benchmarks/speed.py); the price is that the decoder keeps the triangulation buffers
-    of the largest band it has decoded (about 140 bytes a vertex) until it is dropped.
+    and the page faults of fresh memory: 14 % of a 512² decode's CPU time in a process
+    that decodes only such files, 3-4 % in benchmarks/speed.py's, whose other codecs'
+    larger allocations keep glibc from handing the memory back between decodes. The
+    price: the decoder keeps the triangulation buffers of the largest band it has
+    decoded until it is dropped.
     One thread at a time: a call while another thread's is running raises RuntimeError.
     """
 
