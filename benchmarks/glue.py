@@ -12,7 +12,11 @@ machine), the kernels timed inside each decode by wrapping their entry points. E
 worker checks that each file decodes to the same pixels every time, and the table
 says whether the builds' pixels agree.
 
-    python benchmarks/glue.py [--rounds 7] [--decodes 20] [--against /path/to/other/checkout]
+    python benchmarks/glue.py [--rounds 7] [--decodes 20] [--against /path/to/other/checkout] [--decoder]
+
+--decoder: each worker decodes with one codec.Decoder kept from decode to decode (its
+decompressor and triangulation buffers reused) where its checkout has one, and with
+codec.decode where it has not (the table's head says which each build used).
 """
 
 from __future__ import annotations
@@ -60,9 +64,10 @@ def make_files(folder: Path) -> list[Path]:
     return [folder / f"{name}.atm" for name in wanted if (folder / f"{name}.atm").exists()]
 
 
-def worker(files: list[str]) -> None:
+def worker(files: list[str], reuse: bool = False) -> None:
     """A round per line on stdin (the number of decodes): prints, as JSON, each file's
-    [whole, triangulation, rasteriser] thread CPU ns per decode and its pixels' hash."""
+    [whole, triangulation, rasteriser] thread CPU ns per decode and its pixels' hash.
+    reuse: decode with one codec.Decoder where the checkout has it."""
     import numpy as np
 
     import codec
@@ -100,8 +105,10 @@ def worker(files: list[str]) -> None:
             self._kernel = front
 
         triangulation.Delaunay.__init__ = owned
+    decode = codec.Decoder().decode if reuse and hasattr(codec, "Decoder") else codec.decode
+    print(json.dumps("codec.Decoder" if decode is not codec.decode else "codec.decode"), flush=True)
     data = {f: Path(f).read_bytes() for f in files}
-    first = {f: codec.decode(d) for f, d in data.items()}
+    first = {f: decode(d) for f, d in data.items()}
     digest = {f: hashlib.sha256(str(img.dtype).encode() + img.tobytes()).hexdigest()[:12] for f, img in first.items()}
     for line in sys.stdin:
         n = int(line)
@@ -110,7 +117,7 @@ def worker(files: list[str]) -> None:
             spent.update(cdt=0, raster=0)
             t0 = clock()
             for _ in range(n):
-                image = codec.decode(d)
+                image = decode(d)
             whole = clock() - t0
             assert np.array_equal(image, first[f]), f"{f} decoded to other pixels"
             out[f] = [whole / n, spent["cdt"] / n, spent["raster"] / n, digest[f]]
@@ -123,13 +130,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--decodes", type=int, default=20, help="decodes of each file a round")
     parser.add_argument("--against", help="another checkout with its kernels built (e.g. a git worktree of main)")
     parser.add_argument("--files", default=str(ROOT / "benchmarks" / "out" / "glue"), help="where the files are made")
+    parser.add_argument("--decoder", action="store_true",
+                        help="decode with one codec.Decoder a worker, where the checkout has it")
     args = parser.parse_args(argv)
     files = [str(p) for p in make_files(Path(args.files))]
     builds = [str(ROOT)] + ([str(Path(args.against).resolve())] if args.against else [])
     # each worker imports its own checkout's codec (its folder first on the path)
-    procs = [subprocess.Popen([sys.executable, __file__, "--worker", b, *files],
+    procs = [subprocess.Popen([sys.executable, __file__, "--worker" + ("-decoder" if args.decoder else ""), b, *files],
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=b)
              for b in builds]
+    how = [json.loads(proc.stdout.readline()) for proc in procs]  # what each decodes with
     results: list[list[dict]] = [[] for _ in builds]
     for round_ in range(args.rounds + 1):  # the first round warms up
         for proc, got in zip(procs, results):
@@ -141,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     for proc in procs:
         proc.stdin.close()
         proc.wait()
-    names = ["this checkout"] + (["--against"] if args.against else [])
+    names = [f"this checkout ({how[0]})"] + ([f"--against ({how[1]})"] if args.against else [])
     head = ["file"]
     for name in names:
         head += [f"{name}: decode us", "triangulation us", "rasteriser us", "glue us"]
@@ -168,8 +178,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:2] == ["--worker"]:  # a build's worker: glue.py --worker CHECKOUT FILE...
+    if sys.argv[1:2] in (["--worker"], ["--worker-decoder"]):  # a build's worker: glue.py --worker CHECKOUT FILE...
         sys.path.insert(0, sys.argv[2])
-        worker(sys.argv[3:])
+        worker(sys.argv[3:], sys.argv[1] == "--worker-decoder")
     else:
         sys.exit(main())

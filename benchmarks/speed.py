@@ -14,9 +14,12 @@ the median over the rounds of each round's own ratio, a time the median time.
    Delaunay triangulation the format leaves implicit, which no decoder can skip: the
    compiled kernel codec.triangulate.delaunay the decoder uses, and against it
    Triangle followed by the canonical flip pass, the way it was built before).
+   "decoder" is a codec.Decoder's decode, the one object decoding the file round
+   after round in the memory it keeps (what a caller decoding many files does).
    --large 2048 adds each image resized to 2048 x 2048 (cubic).
 2. Threads: two threads decoding different files (the corpus files, each several
-   times) against one thread decoding them in turn: throughput ratio.
+   times) against one thread decoding them in turn: throughput ratio; a row with
+   codec.decode, a row with a codec.Decoder per thread.
 3. Encode at equal vertex count: codec.encode(image, points=N) against pydelatin's
    Delatin(image, max_points=N) (bench extra; left out without it), by wall time and
    by process CPU time (steadier where others load the machine).
@@ -36,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import threading
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -124,11 +128,11 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int, c
     files = {name: codec.encode(corpus[name], points=max(4, round(DENSITY * np.prod(corpus[name].shape[:2]))))
              for name in names}
     peers = list(peer_codecs(corpus[names[0]]))
-    parts = ["render", "decode", "triangulate", "triangle+canonical"] + (["gl render", "gl decode"] if gl else [])
+    parts = ["render", "decode", "decoder", "triangulate", "triangle+canonical"] + (["gl render", "gl decode"] if gl else [])
     cols = peers + parts
     unit = "CPU ms" if cpu else "ms"
     head = ["image", "size", "triangles"] + [f"{c} {unit}" for c in cols]
-    head += [f"decode / {p}" for p in peers] + ["render / jpeg", "triangulate / jpeg",
+    head += [f"decode / {p}" for p in peers] + ["decoder / jpeg", "decoder / png", "render / jpeg", "triangulate / jpeg",
                                                 "triangulate / triangle+canonical"]
     head += ["gl decode / jpeg"] if gl else []
     rows = []
@@ -144,6 +148,7 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int, c
         # as a decode renders it: a file's mesh is validated, so it tiles the image
         fns["render"] = lambda: decoder_cpu.render(mesh, tiles=True)
         fns["decode"] = lambda: codec.decode(data, backend="cpu")
+        fns["decoder"] = lambda reused=codec.Decoder(): reused.decode(data)
         fns["triangulate"] = lambda: [delaunay(v, s) for v, s in bands]
         fns["triangle+canonical"] = lambda: [canonical_triangles(by_triangle(v, s)) for v, s in bands]
         if gl:
@@ -153,6 +158,7 @@ def decode_table(corpus: dict[str, np.ndarray], names: list[str], repeat: int, c
         row = [name, f"{w}x{h}", f"{len(mesh.triangles):,}"]
         row += [f"{statistics.median(times[c]):.2f}" if c in times else "-" for c in cols]
         row += [f"{ratio(times, 'decode', p):.1f}" if p in times else "-" for p in peers]
+        row += [f"{ratio(times, 'decoder', p):.2f}" for p in ("jpeg", "png")]
         row += [f"{ratio(times, 'render', 'jpeg'):.1f}", f"{ratio(times, 'triangulate', 'jpeg'):.1f}",
                 f"{ratio(times, 'triangulate', 'triangle+canonical'):.2f}"]
         row += [f"{ratio(times, 'gl decode', 'jpeg'):.1f}"] if gl else []
@@ -170,15 +176,34 @@ def thread_table(files: dict[str, bytes], repeat: int, cpu: bool = False) -> Non
     CPU ratio whether they cost more CPU side by side. Load from other processes lowers
     both runs' use of the cores: read it beside the wall-time ratio, not instead."""
     work = list(files.values()) * max(1, -(-8 // len(files)))  # at least 8 decodes a run
+    print()
+    rows = [_thread_row(work, repeat, cpu, "codec.decode", lambda: codec.decode)]
+    # a Decoder per thread, kept from run to run (each pool thread makes its own)
+    mine = threading.local()
+
+    def own() -> Callable[[bytes], np.ndarray]:
+        if not hasattr(mine, "decoder"):
+            mine.decoder = codec.Decoder()
+        return mine.decoder.decode
+
+    rows.append(_thread_row(work, repeat, cpu, "a Decoder per thread", own))
+    print_table(rows[0][0], [r for _, r in rows])
+
+
+def _thread_row(work: list[bytes], repeat: int, cpu: bool, label: str,
+                decoder: Callable[[], Callable[[bytes], np.ndarray]]) -> tuple[list[str], list[str]]:
+    """thread_table's head and row for one way of decoding: decoder() gives the calling
+    thread's decode function."""
     pool = ThreadPoolExecutor(2)
     used: dict[str, list[float]] = {"one thread": [], "two threads": []}
 
     def one() -> None:
+        decode = decoder()
         for data in work:
-            codec.decode(data)
+            decode(data)
 
     def two() -> None:
-        list(pool.map(codec.decode, work))
+        list(pool.map(lambda data: decoder()(data), work))
 
     def timed(name: str, fn: Callable[[], None]) -> Callable[[], None]:
         def run() -> None:
@@ -191,8 +216,8 @@ def thread_table(files: dict[str, bytes], repeat: int, cpu: bool = False) -> Non
     pool.shutdown()
     for name in used:
         del used[name][0]  # interleaved's warm-up call
-    head = ["decodes", "one thread ms", "two threads ms", "two threads / one thread throughput"]
-    row = [str(len(work)), f"{statistics.median(times['one thread']):.1f}",
+    head = ["decoding by", "decodes", "one thread ms", "two threads ms", "two threads / one thread throughput"]
+    row = [label, str(len(work)), f"{statistics.median(times['one thread']):.1f}",
            f"{statistics.median(times['two threads']):.1f}", f"{ratio(times, 'one thread', 'two threads'):.2f}"]
     if cpu:
         use = {name: [c / w for c, w in zip(used[name], times[name])] for name in used}
@@ -201,8 +226,7 @@ def thread_table(files: dict[str, bytes], repeat: int, cpu: bool = False) -> Non
         row += [f"{statistics.median(used['one thread']):.1f}", f"{statistics.median(used['two threads']):.1f}",
                 f"{ratio(used, 'two threads', 'one thread'):.2f}", f"{statistics.median(use['one thread']):.2f}",
                 f"{statistics.median(use['two threads']):.2f}", f"{ratio(use, 'two threads', 'one thread'):.2f}"]
-    print()
-    print_table(head, [row])
+    return head, row
 
 
 def dem(size: int, seed: int = 1) -> np.ndarray:

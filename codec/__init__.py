@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import itertools
 import mmap
 import os
 from typing import BinaryIO, NoReturn, Union
@@ -29,6 +28,7 @@ from .errors import (
     TruncatedError,
     UnsupportedError,
 )
+from .buffers import as_bytes as _as_bytes
 from .mesh import Mesh
 
 #: What decode, check, info and decode_mesh take: any object with the buffer protocol.
@@ -41,6 +41,10 @@ def __getattr__(name: str):
         from . import stream
 
         return getattr(stream, name)
+    if name == "Decoder":
+        from .decoder import Decoder
+
+        return Decoder
     raise AttributeError(f"module 'codec' has no attribute {name!r}")
 
 __version__ = "0.1.0"
@@ -146,11 +150,12 @@ def decode(data: Buffer, *, out: np.ndarray | None = None, backend: str = "cpu")
     chunk, ATM.md §4.9), one encoded as (H, W) comes back (H, W).
     backend: "cpu" (exact integer scanline decoder) or "gl" (OpenGL through EGL; the
     same pixels, BackendError where no GL context can be made).
+    Decoding many files: codec.Decoder (one per thread) reuses its working memory.
     """
-    from .stream import StreamDecoder
+    from .stream import StreamDecoder, decode_into
 
     dec = StreamDecoder(io.BytesIO(_as_bytes(data)), backend=backend)
-    return _decode_into(dec, out)
+    return decode_into(dec, out)
 
 
 def check(data: Buffer) -> bool:
@@ -224,7 +229,7 @@ def _sample_mapping(header) -> dict:
 def read(source: str | os.PathLike | BinaryIO, *, out: np.ndarray | None = None, backend: str = "cpu", metadata: bool = False):
     """Read and decode an .atm file: a path, or a binary file object (read from where it
     is). out and backend as for `decode`; with metadata=True, return (image, metadata dict)."""
-    from .stream import StreamDecoder
+    from .stream import StreamDecoder, decode_into
 
     if isinstance(source, (bytes, bytearray, memoryview)) and check(source):
         raise ATMError("codec.read takes a path or a binary file object; for .atm bytes in memory use codec.decode(data)")
@@ -249,7 +254,7 @@ def read(source: str | os.PathLike | BinaryIO, *, out: np.ndarray | None = None,
     with f as fileobj:
         try:
             dec = StreamDecoder(fileobj, backend=backend)
-            image = _decode_into(dec, out)
+            image = decode_into(dec, out)
         except OSError as exc:
             if isinstance(exc, ATMError):
                 raise
@@ -268,71 +273,11 @@ def write(path: str | os.PathLike, image, *, force: bool = False, **options) -> 
     atomic_write(path, encode(image, **options))
 
 
-def _as_bytes(data: Buffer, limit: int | None = None) -> bytes:
-    """The bytes of any buffer (the first `limit` of them), or an ATMError saying what
-    is accepted."""
-    try:
-        view = memoryview(data)
-    except TypeError:
-        hint = "; to decode a file by name use codec.read(path)" if isinstance(data, (str, os.PathLike)) else ""
-        raise ATMError(
-            f"expected .atm data (bytes, bytearray, memoryview, a numpy uint8 array or an mmap), "
-            f"got {type(data).__name__}{hint}"
-        ) from None
-    with view:
-        if not view.contiguous:
-            raise ATMError("the .atm data buffer is not contiguous; pass a contiguous copy (e.g. bytes(data))")
-        flat = view.cast("B") if view.format != "B" or view.ndim != 1 else view
-        return flat[:limit].tobytes() if limit is not None else flat.tobytes()
-
-
-def _decode_into(dec, out: np.ndarray | None) -> np.ndarray:
-    """Decode a StreamDecoder's bands into `out` (checked first) or a new array."""
-    from .stream import GROUP_PIXELS
-
-    shape, dtype = tuple(dec.shape), np.dtype(dec.dtype)
-    groups = dec.rows(GROUP_PIXELS)  # small bands rendered a group at a time
-    if out is None:
-        first = next(groups, None)
-        second = next(groups, None) if first is not None else None
-        if second is None and first is not None and first[0] == 0 and _whole(first[1], shape, dtype):
-            # one render gave the whole image (a file of one band): it is the result,
-            # without an image to allocate and copy it into
-            return first[1]
-        groups = itertools.chain([g for g in (first, second) if g is not None], groups)
-        image = np.empty(shape, dtype)
-        target = image[..., 0] if dec.channels == 1 and image.ndim == 3 else image
-    else:
-        if not isinstance(out, np.ndarray):
-            raise ATMError(f"out must be a numpy array, not {type(out).__name__}")
-        gray = shape[:2]
-        shapes = (gray, gray + (1,)) if dec.channels == 1 else (shape,)
-        if out.shape not in shapes or out.dtype != dtype:
-            want = " or ".join(str(s) for s in shapes)
-            raise ATMError(
-                f"out is a {out.shape} {out.dtype} array; this image needs shape {want}, dtype {dtype} "
-                f"(e.g. numpy.empty({shape}, numpy.{dtype}))"
-            )
-        if not out.flags.writeable:
-            raise ATMError("out is read-only; pass a writeable array")
-        # a view, whatever the strides: the gray image fills the one channel in place
-        target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
-    for y0, rows in groups:
-        target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
-    return out if out is not None else image
-
-
-def _whole(rows: np.ndarray, shape: tuple, dtype: np.dtype) -> bool:
-    """Whether rows, as the decoder made them (no other reference to their memory),
-    can be the decoded image itself."""
-    flags = rows.flags
-    return rows.shape == shape and rows.dtype == dtype and flags.c_contiguous and flags.writeable and flags.owndata
-
-
 __all__ = [
     "ATMError",
     "BackendError",
     "CorruptError",
+    "Decoder",
     "FormatError",
     "LimitError",
     "Mesh",

@@ -252,7 +252,7 @@ cdef int _triangle_pass(const int64_t* V, int64_t n, const int64_t* T, int64_t m
                         int64_t* ar, int64_t* fan, int64_t* p, int* checks, int64_t* total,
                         int64_t* crossed) noexcept nogil:
     """band_values' one pass over the triangles: their corners checked (VALUES_CORNER
-    at the first beyond the n vertices), doubled areas (ar), the vertices' fan areas
+    at the first beyond the n vertices), doubled areas (ar, unless NULL), the vertices' fan areas
     (fan, zeroed), the samples' parents (_parent_of: p, all -1, from pos) and
     mesh_checks' sums (checks: MESH_DEGENERATE at a triangle of area <= 0; total
     area; rows crossed plus the count). _doubled_areas, _vertex_steps' sums and
@@ -268,7 +268,8 @@ cdef int _triangle_pass(const int64_t* V, int64_t n, const int64_t* T, int64_t m
         xb = V[2 * b]; yb = V[2 * b + 1]
         xc = V[2 * c]; yc = V[2 * c + 1]
         area = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya)
-        ar[k] = area
+        if ar != NULL:
+            ar[k] = area
         fan[a] += area
         fan[b] += area
         fan[c] += area
@@ -289,7 +290,8 @@ cdef int _triangle_pass(const int64_t* V, int64_t n, const int64_t* T, int64_t m
 
 def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
                 const uint8_t[::1] samples, int64_t channels, const int64_t[::1] seq_order, int64_t step,
-                double bound, bint top_pinned, int64_t top, int64_t longest, int64_t width, int64_t rows):
+                double bound, bint top_pinned, int64_t top, int64_t longest, int64_t width, int64_t rows,
+                bint want_areas=True):
     """(status, values, areas, checks): a band's samples from its samples field (ATM.md
     §4.2.4), in one call: the field's n * channels LEB128 varints (refused as
     coding.unvarints refuses them, none longer than `longest` <= 9 bytes; nothing is
@@ -301,7 +303,11 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     else int64; areas the triangles' doubled areas; checks what mesh_checks(vertices,
     triangles, areas, width, rows) returns, from the same pass over the triangles (so
     that mesh.validate need not read them again). Every index is checked before it is
-    used; values, areas and checks are None on an error."""
+    used; values, areas and checks are None on an error. want_areas=False: areas is None
+    (a decoder's mesh.validate takes the checks, not the areas; an M-long array fewer to
+    fault in). The varints are read into the array that then holds the samples, and the
+    fan areas become the steps in place (each sample's parent comes before it in the
+    sequence, so the running sums read only finished entries): two n-long arrays fewer."""
     cdef int64_t n = vertices.shape[0], m = triangles.shape[0], j, k, i, ch, q
     cdef int64_t total = 0, crossed = 0
     cdef bint residual_bad = False, order_bad = False
@@ -311,18 +317,26 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
     cdef int checks = MESH_OK
     if seq_order.shape[0] != n or channels < 1 or longest > 9 or n * channels < 0:
         raise ValueError("band_values: one place per vertex, at least one channel, at most 9 bytes a varint")
-    cdef int status = _varint_count(samples, n * channels, longest)
+    cdef int status
+    with nogil:  # a scan of the whole field: work, so without the GIL
+        status = _varint_count(samples, n * channels, longest)
     if status != VALUES_OK:
         return status, None, None, None
-    areas = np.empty(m, dtype=np.int64)
-    zig_arr = np.empty(n * channels, dtype=np.int64)
+    areas = np.empty(m, dtype=np.int64) if want_areas else None
     scratch = np.empty(n, dtype=np.int64)
-    steps_arr = np.empty(n, dtype=np.int64)
     parent_arr = np.empty(n, dtype=np.int64)
     seq_arr = np.empty((n, channels), dtype=np.int64)
     fan_arr = np.empty(n, dtype=np.int64)
-    cdef int64_t[::1] ar = areas, pos = scratch, steps = steps_arr, p = parent_arr, fan = fan_arr, zigzags = zig_arr
+    cdef int64_t[::1] pos = scratch, p = parent_arr, fan = fan_arr
+    cdef int64_t[::1] steps = fan_arr  # the fan areas, then (in place) the steps
     cdef int64_t[:, ::1] seq = seq_arr
+    cdef int64_t[::1] ar
+    cdef int64_t* ar_ptr = NULL
+    if want_areas and m:
+        ar = areas
+        ar_ptr = &ar[0]
+    # the zigzag residuals first, then (in place) the samples
+    cdef int64_t* zigzags = &seq[0, 0] if n * channels else NULL
     with nogil:
         for j in range(n):
             pos[j] = -1
@@ -330,7 +344,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
             p[j] = -1
         # the varints (their count and lengths known good)
         if n * channels:
-            _leb128_into(&samples[0], samples.shape[0], &zigzags[0])
+            _leb128_into(&samples[0], samples.shape[0], zigzags)
         for j in range(n * channels):
             # zigzag(r) <= 2 top iff |r| <= top (unsigned: a 9-byte varint may wrap)
             residual_bad |= <uint64_t>zigzags[j] > <uint64_t>(2 * top)
@@ -348,7 +362,7 @@ def band_values(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles,
             checks = _vertices_inside(vertices, width, rows, &increasing)  # mesh_checks' vertex pass
             # one pass over the triangles (_triangle_pass)
             if m:
-                status = _triangle_pass(&vertices[0, 0], n, &triangles[0, 0], m, &pos[0], &ar[0], &fan[0], &p[0],
+                status = _triangle_pass(&vertices[0, 0], n, &triangles[0, 0], m, &pos[0], ar_ptr, &fan[0], &p[0],
                                         &checks, &total, &crossed)
         if status == VALUES_OK:
             _steps_of_fans(fan, step, bound, m, steps)

@@ -72,7 +72,7 @@ pixel uncovered or covered twice."""
 
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint64_t
 from libc.stdlib cimport calloc, free, malloc
-from libc.string cimport memcpy
+from libc.string cimport memcpy, memset
 
 ctypedef fused sample_t:
     uint8_t
@@ -991,7 +991,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
 
 def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
               const index_t[:, ::1] triangles, sample_t[:, ::1] out,
-              int64_t width, int64_t height, int check=CHECK_SPANS, bint portable=False):
+              int64_t width, int64_t height, int check=CHECK_SPANS, bint portable=False, bint zero=False):
     """Rasterise the triangles (corner indices int64 or int32) into `out` (H*W x C,
     C <= 4; the samples' type),
     checking that every pixel is written exactly once (`check`: CHECK_SPANS for any
@@ -1000,7 +1000,9 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     Releases the GIL; nothing else may write `out` during the call (short spans are
     merged into it word by word, the samples around them written back as read).
     portable=True: the portable walk even where the processor has AVX-512 (which
-    gives the same pixels; for tests)."""
+    gives the same pixels; for tests). zero=True: `out` is set to 0 first, in the same
+    release of the GIL (a new image's zeroing and first-touch page faults are work
+    that another thread's Python need not wait for)."""
     cdef int64_t detail = 0, nv = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
     cdef int status
     if c > 4 or c < 1 or values.shape[0] != nv or vertices.shape[1] != 2:
@@ -1019,6 +1021,8 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     cdef const sample_t* vals = &values[0, 0] if nv else NULL
     cdef const void* tris = &triangles[0, 0] if m else NULL
     with nogil:
+        if zero:
+            memset(&out[0, 0], 0, <size_t>(width * height * c) * sizeof(sample_t))
         status = _render(v, nv, vals, c, tris, index_t is int32_t, m, &out[0, 0], width, height, check,
                          _AVX512 and not portable, &detail)
     if status == NO_MEMORY:

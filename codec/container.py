@@ -315,15 +315,18 @@ class Reader:
     read; a damaged or truncated file raises an ATMError after the intact bands.
     """
 
-    def __init__(self, stream: BinaryIO, metadata: bool = True):
+    def __init__(self, stream: BinaryIO, metadata: bool = True, *,
+                 dctx: "frames.zstandard.ZstdDecompressor | None" = None, triangulator: Delaunay | None = None):
         """metadata=False skips the meta chunks before the first band unparsed (what
-        Pillow's Image.open wants: the size, and nothing that costs)."""
+        Pillow's Image.open wants: the size, and nothing that costs). dctx and
+        triangulator: a decompressor and a triangulation's buffers to use instead of
+        new ones (a codec.Decoder's, which outlive the reader: one thread at a time)."""
         self._stream = _Counted(stream)
         #: metadata bytes (decompressed) still allowed in this file
         self._meta_budget = limits.MAX_METADATA_BYTES
-        self._dctx = frames.decompressor()  # this reader's own
-        #: the triangulation's buffers, this reader's own: reused band after band
-        self._triangulator = Delaunay()
+        self._dctx = frames.decompressor() if dctx is None else dctx  # this reader's own, or its owner's
+        #: the triangulation's buffers, this reader's own (or its owner's): reused band after band
+        self._triangulator = Delaunay() if triangulator is None else triangulator
         self.version = self._read_signature()
         ctype, payload, offset = self._next_chunk()
         if ctype != schema.HEADER:
@@ -608,11 +611,11 @@ class Reader:
         # (_check_frame refused a band not from y0_expected or not within the image)
         _, raw = self._check_frame(payload, where, y0_expected)
         m = _MeshFields(raw, where)
-        mesh, areas, checked = meshcode.decode_band(m, h.width, h.storage, h.channels, where, self._triangulator)
+        mesh, checked = meshcode.decode_band(m, h.width, h.storage, h.channels, where, self._triangulator)
         # a rebuilt triangulation tiles the band and has the walls as edges (decode_band
         # checked them), whose polylines decode_band made and checked
         rebuilt = m.connectivity == schema.DELAUNAY
-        validate(mesh, walls_are_edges=rebuilt, tiles=rebuilt, areas=areas, checked=checked, lines_checked=True)
+        validate(mesh, walls_are_edges=rebuilt, tiles=rebuilt, checked=checked, lines_checked=True)
         return int(m.y0), mesh
 
     def __iter__(self) -> Iterator[tuple[int, Mesh]]:

@@ -134,12 +134,14 @@ def render(mesh: Mesh, *, tiles: bool = False, out: np.ndarray | None = None) ->
     # the kernel reads int32 corners as they are (half the memory of int64)
     index = mesh.triangles.dtype if mesh.triangles.dtype in _INDICES else np.dtype(np.int64)
     triangles = np.ascontiguousarray(mesh.triangles, dtype=index)
-    # zeroed, not empty: with tiles=True only the count of written pixels is checked, so
-    # should a broken mesh ever pass validation, no stale memory reaches the caller
-    # (the image's own shape, so that the result owns its memory: a decode may return it)
-    image = np.zeros(image_shape(mesh), dtype=mesh.dtype) if out is None else out
+    # zeroed (by the kernel, without the GIL), not left as allocated: with tiles=True
+    # only the count of written pixels is checked, so should a broken mesh ever pass
+    # validation, no stale memory reaches the caller (the image's own shape, so that
+    # the result owns its memory: a decode may return it)
+    image = np.empty(image_shape(mesh), dtype=mesh.dtype) if out is None else out
     check = _TOTAL if tiles else _SPANS
-    status, detail = _rasterise.rasterise(vertices, values, triangles, image.reshape(h * w, c), w, h, check)
+    status, detail = _rasterise.rasterise(vertices, values, triangles, image.reshape(h * w, c), w, h, check,
+                                          zero=out is None)
     if status:
         _refuse(status, detail, w, h, len(vertices))
     # no clipping needed: in a triangle every value is a convex combination of values of

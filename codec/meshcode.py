@@ -494,9 +494,9 @@ def _largest(dtype: np.dtype) -> int:
 
 
 def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str,
-                triangulator: Delaunay | None = None) -> tuple[Mesh, np.ndarray, tuple]:
-    """The Mesh of a parsed MeshPayload, its triangles' doubled areas and the element
-    checks of _fields.mesh_checks (both for mesh.validate); CorruptError if any field
+                triangulator: Delaunay | None = None) -> tuple[Mesh, tuple]:
+    """The Mesh of a parsed MeshPayload and the element checks of _fields.mesh_checks
+    (for mesh.validate, which then needs no areas); CorruptError if any field
     is inconsistent. Structural checks of the result are left to mesh.validate. A
     Delaunay band is triangulated in `triangulator`'s buffers when one is given (its
     owner's, reused band after band)."""
@@ -554,9 +554,9 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str,
     # the samples' varints, steps, parents and running sums in one compiled pass
     # (unvarints, vertex_steps, sample_parents and tree_sums' arithmetic), every index
     # checked there; with mesh.validate's element checks from its pass over the triangles
-    status, values, areas, checks = _fields.band_values(
+    status, values, _, checks = _fields.band_values(
         vertices, np.ascontiguousarray(triangles, dtype=np.int64), np.frombuffer(m.samples, np.uint8), channels,
-        seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top, MAX_VARINT_BYTES, width, rows,
+        seq_order, int(m.sample_step), STEP_RANGE, m.y0 > 0, top, MAX_VARINT_BYTES, width, rows, False,
     )
     if status == _fields.Values.VALUES_COUNT or status == _fields.Values.VALUES_LONG:
         unvarints(m.samples, n * channels, f"{where} samples")  # raises its error
@@ -571,4 +571,4 @@ def decode_band(m, width: int, dtype: np.dtype, channels: int, where: str,
     if values.dtype != dtype:  # storage is uint8 or uint16: the kernel's own types
         values = values.astype(dtype)
 
-    return Mesh(vertices, values, triangles, width, rows, lines), areas, checks
+    return Mesh(vertices, values, triangles, width, rows, lines), checks

@@ -7,6 +7,7 @@ decoded rows as each band's chunk arrives.
 
 from __future__ import annotations
 
+import itertools
 from typing import BinaryIO, Callable, Iterator
 
 import numpy as np
@@ -333,11 +334,13 @@ class StreamDecoder:
     """
 
     def __init__(self, fileobj: BinaryIO, *, backend: str = "cpu"):
-        if backend not in decoding.BACKENDS:
-            raise OptionError(
-                f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
-            )
-        self._reader = container.Reader(fileobj)
+        check_backend(backend)
+        self._start(container.Reader(fileobj), backend)
+
+    def _start(self, reader: container.Reader, backend: str) -> None:
+        """Take the header from a reader that has read it (codec.Decoder makes its own
+        reader, with the decompressor and triangulation it owns)."""
+        self._reader = reader
         self._backend = backend
         h = self._reader.header
         self.width, self.height, self.dtype, self.channels = h.width, h.height, h.dtype, h.channels
@@ -394,13 +397,22 @@ class StreamDecoder:
         if group:
             yield self._rows(group)
 
+    #: codec.decode(out=)'s array when it is C-contiguous in the rendered image's shape
+    #: (H x W, or H x W x C): a group that is the whole image, its samples the image's
+    #: own (no scale, offset or holes), is rendered straight into it, not copied there
+    _into: np.ndarray | None = None
+
     def _rows(self, group: list[tuple[int, Mesh]]) -> tuple[int, np.ndarray]:
         """(y0, rows) of a group of consecutive bands: each row once, the group's last
         row only if it is the image's."""
         y0, mesh = group[0][0], stack_bands(group)
+        h = self._reader.header
+        into = self._into if (self._into is not None and y0 == 0 and mesh.height == self.height
+                              and mesh.holes is None and h.quant is None and not h.exact
+                              and self._backend == "cpu") else None
         # the Reader's bands passed mesh.validate, so each tiles its rows, and so does
         # their stack: the renderer need not count each row's spans
-        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend, tiles=True))
+        return self._finish(y0, mesh, decoding.render(mesh, backend=self._backend, tiles=True, out=into))
 
     def _layered_rows(self, layer: "residual.ResidualDecoder", y0: int, mesh: Mesh) -> tuple[int, np.ndarray]:
         """(y0, rows) of a band with a residual layer, which gives every row it emits."""
@@ -432,6 +444,14 @@ class StreamDecoder:
         # the last row is the next band's first: emit it once, from there (a residual
         # layer already leaves it out)
         return y0, rows if last or len(rows) < mesh.height else rows[:-1]
+
+
+def check_backend(backend: str) -> None:
+    """OptionError unless `backend` names a decoder backend."""
+    if backend not in decoding.BACKENDS:
+        raise OptionError(
+            f"unknown decoder backend {backend!r}; choose one of {', '.join(decoding.BACKENDS)}"
+        )
 
 
 #: The unsigned type of each sample width (index: bytes a sample): holes are filled with
@@ -502,3 +522,48 @@ def merge_bands(bands: list[tuple[int, Mesh]]) -> Mesh:
     triangles = np.concatenate([inverse[m.triangles + o] for (_, m), o in zip(bands, offsets)])
     constraints = [inverse[c + o] for (_, m), o in zip(bands, offsets) for c in m.constraints]
     return Mesh(pos[first], vals[first], triangles, width, height, constraints)
+
+
+def decode_into(dec, out: np.ndarray | None) -> np.ndarray:
+    """Decode a StreamDecoder's bands into `out` (checked first) or a new array."""
+    shape, dtype = tuple(dec.shape), np.dtype(dec.dtype)
+    groups = dec.rows(GROUP_PIXELS)  # small bands rendered a group at a time
+    if out is None:
+        first = next(groups, None)
+        second = next(groups, None) if first is not None else None
+        if second is None and first is not None and first[0] == 0 and _whole(first[1], shape, dtype):
+            # one render gave the whole image (a file of one band): it is the result,
+            # without an image to allocate and copy it into
+            return first[1]
+        groups = itertools.chain([g for g in (first, second) if g is not None], groups)
+        image = np.empty(shape, dtype)
+        target = image[..., 0] if dec.channels == 1 and image.ndim == 3 else image
+    else:
+        if not isinstance(out, np.ndarray):
+            raise ATMError(f"out must be a numpy array, not {type(out).__name__}")
+        gray = shape[:2]
+        shapes = (gray, gray + (1,)) if dec.channels == 1 else (shape,)
+        if out.shape not in shapes or out.dtype != dtype:
+            want = " or ".join(str(s) for s in shapes)
+            raise ATMError(
+                f"out is a {out.shape} {out.dtype} array; this image needs shape {want}, dtype {dtype} "
+                f"(e.g. numpy.empty({shape}, numpy.{dtype}))"
+            )
+        if not out.flags.writeable:
+            raise ATMError("out is read-only; pass a writeable array")
+        # a view, whatever the strides: the gray image fills the one channel in place
+        target = out[..., 0] if dec.channels == 1 and out.ndim == 3 else out
+        if target.flags.c_contiguous:
+            dec._into = target  # a whole-image render may land there itself
+    for y0, rows in groups:
+        if np.may_share_memory(rows, target):
+            continue  # rendered in place (StreamDecoder._into)
+        target[y0 : y0 + len(rows)] = rows[..., 0] if rows.ndim > target.ndim else rows
+    return out if out is not None else image
+
+
+def _whole(rows: np.ndarray, shape: tuple, dtype: np.dtype) -> bool:
+    """Whether rows, as the decoder made them (no other reference to their memory),
+    can be the decoded image itself."""
+    flags = rows.flags
+    return rows.shape == shape and rows.dtype == dtype and flags.c_contiguous and flags.writeable and flags.owndata

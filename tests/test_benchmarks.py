@@ -34,11 +34,12 @@ def test_speed_benchmark_prints_its_table() -> None:
     assert row[1] == "448x172"
     figures = dict(zip(head[3:], map(float, row[3:])))
     assert {"jpeg ms", "render ms", "decode ms", "triangulate ms", "render / jpeg"} <= figures.keys()
-    assert {"png ms", "decode / jpeg", "decode / png"} <= figures.keys()
+    assert {"png ms", "decode / jpeg", "decode / png", "decoder ms", "decoder / jpeg", "decoder / png"} <= figures.keys()
     assert all(f > 0 for f in figures.values())
     # the thread scaling: one row, a positive throughput ratio
-    head, rule, row = _table(tables[1])
-    assert head[-1] == "two threads / one thread throughput" and float(row[-1]) > 0
+    head, rule, *rows = _table(tables[1])
+    assert [r[0] for r in rows] == ["codec.decode", "a Decoder per thread"]
+    assert head[-1] == "two threads / one thread throughput" and all(float(r[-1]) > 0 for r in rows)
 
 
 def test_canonical_benchmark_prints_its_tables() -> None:
@@ -245,12 +246,14 @@ def test_speed_benchmark_in_cpu_time() -> None:
     figures = dict(zip(head[3:], map(float, row[3:])))
     assert {"jpeg CPU ms", "decode CPU ms", "decode / jpeg", "decode / png"} <= figures.keys()
     assert all(f > 0 for f in figures.values())
-    head, _, row = _table(tables[1])
-    figures = dict(zip(head, row))
-    assert 0 < float(figures["one thread CPU ms"]) and 0 < float(figures["two threads CPU ms"])
-    assert 0 < float(figures["cores used by one thread"]) <= 1.05
-    assert 0 < float(figures["cores used by two threads"]) <= 2.1
-    assert float(figures["cores used two / one"]) > 0
+    head, _, *rows = _table(tables[1])
+    assert len(rows) == 2  # codec.decode, and a Decoder per thread
+    for row in rows:
+        figures = dict(zip(head, row))
+        assert 0 < float(figures["one thread CPU ms"]) and 0 < float(figures["two threads CPU ms"])
+        assert 0 < float(figures["cores used by one thread"]) <= 1.05
+        assert 0 < float(figures["cores used by two threads"]) <= 2.1
+        assert float(figures["cores used two / one"]) > 0
 
 
 def test_glue_benchmark_prints_its_table(tmp_path) -> None:
@@ -265,5 +268,20 @@ def test_glue_benchmark_prints_its_table(tmp_path) -> None:
     assert [r[0] for r in rows][:4] == ["camera", "moon", "astronaut", "camera_bands32"]
     for row in rows:
         figures = dict(zip(head, row))
-        decode, glue = float(figures["this checkout: decode us"]), float(figures["glue us"])
+        decode, glue = float(figures["this checkout (codec.decode): decode us"]), float(figures["glue us"])
         assert 0 < glue < decode
+
+
+def test_glue_benchmark_times_a_decoder(tmp_path) -> None:
+    """glue.py --decoder: the worker decodes with one codec.Decoder, and says so."""
+    run = subprocess.run(
+        [sys.executable, "benchmarks/glue.py", "--rounds", "1", "--decodes", "1", "--files", str(tmp_path),
+         "--decoder"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, *rows = _table(run.stdout)
+    assert "this checkout (codec.Decoder): decode us" in head
+    for row in rows:
+        figures = dict(zip(head, row))
+        assert 0 < float(figures["glue us"]) < float(figures["this checkout (codec.Decoder): decode us"])

@@ -694,3 +694,25 @@ def test_render_writes_into_the_callers_array(backend: str) -> None:
         for bad, what in zip(wrong + [ro], ["shape", "dtype", "shape", "C-contiguous", "numpy array", "read-only"]):
             with pytest.raises(OptionError, match=what):
                 decoding.render(mesh, backend, tiles=True, out=bad)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_rasterise_zero_clears_the_image_the_triangles_leave(dtype, channels) -> None:
+    """rasterise(zero=True) (a decode's new image, zeroed without the GIL) sets every
+    pixel to 0 before the triangles are drawn: a pixel no triangle writes is 0, not
+    what the memory held."""
+    from codec.native import _rasterise
+
+    w, h = 6, 5
+    vertices = np.array([[0, 0], [5, 0], [0, 4]], np.int64)  # half the image
+    values = np.full((3, channels), 200, dtype)
+    triangles = np.array([[0, 1, 2]], np.int64)
+    for check in (_rasterise.Check.CHECK_SPANS, _rasterise.Check.CHECK_TOTAL):
+        out = np.full((w * h, channels), 7, dtype)
+        status, _ = _rasterise.rasterise(vertices, values, triangles, out, w, h, check, zero=True)
+        assert status == _rasterise.Status.UNCOVERED
+        assert set(np.unique(out).tolist()) == {0, 200}
+        kept = np.full((w * h, channels), 7, dtype)  # without zero, the caller's pixels stay
+        _rasterise.rasterise(vertices, values, triangles, kept, w, h, check)
+        assert set(np.unique(kept).tolist()) == {7, 200}

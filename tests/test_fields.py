@@ -597,3 +597,28 @@ def test_stack_bands_moves_and_renumbers_as_numpy() -> None:
         meshcode._fields.stack_bands([np.arange(8).reshape(8, 1)], [np.arange(6).reshape(6, 1)], down[:1])
     with pytest.raises(ValueError):
         meshcode._fields.stack_bands([vs[0]], [np.zeros((4, 2), np.int64)], down[:1])
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 40), st.booleans(), st.sampled_from([1, 3]))
+def test_band_values_without_areas_gives_the_same_samples_and_checks(seed: int, step: int, pinned: bool,
+                                                                      channels: int) -> None:
+    """want_areas=False (the decoder's call: mesh.validate takes the checks) leaves the
+    areas out and changes nothing else: samples, checks and refusals as with them."""
+    from codec.native import _fields
+
+    vertices, triangles = _band(seed)
+    n = len(vertices)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)
+    residuals = rng.integers(-3, 100, (n, channels))
+    residuals[0] = 10**6
+    samples = np.frombuffer(coding.varints(coding.zigzag(residuals).ravel()), np.uint8)
+    w, h = int(vertices[:, 0].max()) + 1, int(vertices[:, 1].max()) + 1
+    for top in (2**40, 255):  # accepted, and refused (VALUES_RESIDUAL / VALUES_SAMPLE)
+        args = (vertices, triangles, samples, channels, order, step, meshcode.STEP_RANGE, pinned, top, 9, w, h)
+        with_areas, without = _fields.band_values(*args), _fields.band_values(*args, False)
+        assert without[2] is None and without[0] == with_areas[0] and without[3] == with_areas[3]
+        assert (without[1] is None) == (with_areas[1] is None)
+        if with_areas[1] is not None:
+            assert np.array_equal(without[1], with_areas[1])
