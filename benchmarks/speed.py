@@ -309,9 +309,9 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
                              "delatin": _cpu_timed(cpu["delatin"], lambda: Delatin(heights, max_points=n))}, repeat)
         h, w = img.shape
         rows.append([name, f"{w}x{h}", f"{n:,}", f"{statistics.median(times['atm']):.0f}",
-                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}",
+                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.2f}",
                      f"{statistics.median(cpu['atm']):.0f}", f"{statistics.median(cpu['delatin']):.0f}",
-                     f"{ratio(cpu, 'atm', 'delatin'):.1f}"])
+                     f"{ratio(cpu, 'atm', 'delatin'):.2f}"])
     print()
     print_table(["image", "size", "vertices", "atm encode ms", "delatin ms", "atm / delatin",
                  "atm CPU ms", "delatin CPU ms", "CPU atm / delatin"], rows)
@@ -330,9 +330,9 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
         h, w = terrain.shape
         rows.append([f"{w}x{h}", f"{e:g}", f"{len(data):,}", f"{codec.info(data)['vertices']:,}",
                      f"{len(Delatin(terrain, max_error=e).vertices):,}", f"{statistics.median(times['atm']):.0f}",
-                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.1f}",
+                     f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, 'atm', 'delatin'):.2f}",
                      f"{statistics.median(cpu['atm']):.0f}", f"{statistics.median(cpu['delatin']):.0f}",
-                     f"{ratio(cpu, 'atm', 'delatin'):.1f}"])
+                     f"{ratio(cpu, 'atm', 'delatin'):.2f}"])
     print()
     print_table(["float DEM", "max error (m)", "atm bytes", "atm vertices", "delatin vertices",
                  "atm encode ms", "delatin ms", "atm / delatin", "atm CPU ms", "delatin CPU ms",

@@ -248,7 +248,10 @@ def canny(const int16_t[:, ::1] ix, const int16_t[:, ::1] iy, double low, double
     few hundred thousand pixels): the squared magnitude ix^2 + iy^2 (int32), thinned to
     its maxima across the gradient direction (the same Q15 sector test, ties and zero
     border as OpenCV's), then the pixels above floor(low^2) joined 8-connected to those
-    above floor(high^2). The same edges, bit for bit (tests/test_encode_front.py)."""
+    above floor(high^2). The same edges, bit for bit, for derivatives up to 20,000 in
+    magnitude (tests/test_encode_front.py; from about 24,000 a few edges differ: the
+    scalar code this follows is OpenCV's, so most likely its vector code); the encoder's are at most
+    16 x 255 (edges.gradient: a Sobel step of an 8-bit scale, fixed point _SCALE)."""
     cdef Py_ssize_t h = ix.shape[0], w = ix.shape[1]
     if iy.shape[0] != h or iy.shape[1] != w:
         raise ValueError("canny: dx and dy differ in size")
