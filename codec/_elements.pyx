@@ -861,7 +861,8 @@ def line_elements(const int64_t[:, ::1] vertices, int64_t width, int64_t height)
     vertex a at position p to b at q has corners (a, b, b), origin a, weight
     numerators (q - p - s, s) along the line (s = x - p on the row, y - p on the
     column) and denominator q - p; the row's pieces are one span each, the column's
-    one span a pixel. ValueError on a vertex outside the image or a line with none."""
+    one span a pixel. ValueError on a vertex outside the image, two at one border
+    pixel, or a line with none."""
     cdef int64_t n = vertices.shape[0], lines = 2 if height > 1 else 1, i, line, axis, fixed, length, p
     cdef int64_t k, e, s, a, b, la, start, count, elements = 0, spans = 0, last
     if vertices.shape[1] != 2:
@@ -875,15 +876,21 @@ def line_elements(const int64_t[:, ::1] vertices, int64_t width, int64_t height)
     at_arr = np.full((2, max(width, height)), -1, dtype=np.int64)
     cdef int64_t[:, ::1] at = at_arr
     cdef int64_t on[2]
+    cdef bint twice = False
     on[0] = on[1] = 0
     with nogil:
         for i in range(n):
             if vertices[i, 1] == height - 1:
+                twice = twice or at[0, vertices[i, 0]] >= 0
                 at[0, vertices[i, 0]] = i
                 on[0] += 1
             if lines == 2 and vertices[i, 0] == width - 1:
+                twice = twice or at[1, vertices[i, 1]] >= 0
                 at[1, vertices[i, 1]] = i
                 on[1] += 1
+    if twice:
+        # each would count an element the table cannot hold: rows left unwritten
+        raise ValueError("line_elements: two vertices at one border pixel")
     for line in range(lines):
         if on[line] == 0:
             raise ValueError("line_elements: a border line without a vertex (the image corners are vertices)")

@@ -534,7 +534,10 @@ def chain_walks(const int64_t[::1] flat, const int64_t[::1] chain, const uint8_t
         # every index is checked before it is read: the pixels lie inside the border
         for i in range(n):
             p = flat[i]
-            if p < stride + 1 or p >= size - stride - 1 or chain[i] < 0 or chain[i] >= chains \
+            # (inside the border: not in its rows, nor in its columns, which the row
+            # bounds alone let through and whose magnitude would be another pixel's)
+            if p < stride + 1 or p >= size - stride - 1 or p % stride == 0 or p % stride == stride - 1 \
+                    or chain[i] < 0 or chain[i] >= chains \
                     or (i and chain[i] != chain[i - 1] and chain[i] != chain[i - 1] + 1) or (i == 0 and chain[0] != 0):
                 bad = True
                 break

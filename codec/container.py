@@ -577,7 +577,7 @@ class Reader:
             raise CorruptError(f"{where} has bytes after its zstd frame (ATM.md §4: one frame)")
         # (the frame's length checked just above: decompress need not walk its blocks again)
         raw = frames.decompress(payload, size, where, self._dctx, one_frame=True, size=size) if size <= _WHOLE_FRAME else b""
-        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where, self._dctx)
+        fixed = raw[: _MESH_FIXED.size] if size <= _WHOLE_FRAME else frames.head(payload, _MESH_FIXED.size, where)
         if len(fixed) < _MESH_FIXED.size:
             raise CorruptError(f"{where} is malformed: it ends inside its fixed fields")
         y0, rows, n, nt, lines, points, connectivity, _, _, _ = _MESH_FIXED.unpack(fixed)

@@ -184,11 +184,13 @@ def declared_size(frame: bytes, what: str) -> int:
     return size
 
 
-def head(frame: bytes, n: int, what: str, dctx: zstandard.ZstdDecompressor | None = None) -> bytes:
+def head(frame: bytes, n: int, what: str) -> bytes:
     """The first n bytes of a frame's data (or all, if fewer), decompressing no more
-    than the blocks that hold them; dctx: the caller's own decompressor to reuse."""
+    than the blocks that hold them. In a decompressor of its own: a stream read left
+    unfinished changes what a reused one says of a later damaged frame (a
+    codec.Decoder's error would then depend on the files before)."""
     try:
-        with (dctx or zstandard.ZstdDecompressor()).stream_reader(frame) as reader:
+        with zstandard.ZstdDecompressor().stream_reader(frame) as reader:
             return reader.read(n)
     except zstandard.ZstdError as exc:
         raise CorruptError(f"{what} does not decompress: {exc}") from None

@@ -368,3 +368,17 @@ def test_profile_encode_prints_a_cpu_budget_per_stage_and_puts_the_stages_back()
     with profile_encode.StageTimer():
         assert P.trace is not before[0]
     assert (P.trace, container.Writer.write_band, container.frames.compress_parts) == before
+
+
+def test_chain_walks_refuses_pixels_in_the_border_columns():
+    # the row bounds let the padded border's columns through: their magnitude would be
+    # another pixel's, and with a width of 0 there is none (the read crashed)
+    offsets = np.array([-6, -5, -4, 1, 6, 5, 4, -1], np.int64)
+    for p in (9, 10):  # row 1's right and row 2's left border pixels of a 3 x 3 image (stride 5)
+        with pytest.raises(ValueError, match="outside the mask"):
+            native._polylines.chain_walks(np.array([p], np.int64), np.array([0], np.int64), np.zeros(1, np.uint8),
+                                          np.zeros(25, np.uint8), offsets, np.zeros((3, 3), np.float32), 5)
+    with pytest.raises(ValueError, match="outside the mask"):
+        native._polylines.chain_walks(np.array([3], np.int64), np.array([0], np.int64), np.ones(1, np.uint8),
+                                      np.zeros(10, np.uint8), np.array([-3, -2, -1, 1, 3, 2, 1, -1], np.int64),
+                                      np.zeros((3, 0), np.float32), 2)

@@ -447,3 +447,13 @@ def test_span_statistics_are_the_numpy_columns_summed(seed: int) -> None:
     late[0] = 1
     with pytest.raises(ValueError, match="from 0 to the number of spans"):
         native._elements.span_statistics(plane, late, raster.span_y, raster.span_x, raster.span_n, raster.origin, *args)
+
+
+def test_the_border_lines_refuse_two_vertices_at_one_pixel() -> None:
+    # each would count an element while the line's table keeps one: rows of the result
+    # were left unwritten
+    v = np.array([[0, 0], [4, 0], [0, 3], [4, 3], [2, 3], [2, 3]], np.int64)
+    with pytest.raises(ValueError, match="two vertices at one border pixel"):
+        native._elements.line_elements(v, 5, 4)
+    with pytest.raises(ValueError, match="two vertices at one border pixel"):
+        native._elements.line_elements(np.r_[v[:4], [[4, 1], [4, 1]]], 5, 4)
