@@ -175,7 +175,10 @@ def thread_table(files: dict[str, bytes], repeat: int, cpu: bool = False) -> Non
     run's cores used over the one-thread run's shows how far decodes overlap, and the
     CPU ratio whether they cost more CPU side by side. Load from other processes lowers
     both runs' use of the cores: read it beside the wall-time ratio, not instead."""
-    work = list(files.values()) * max(1, -(-8 // len(files)))  # at least 8 decodes a run
+    # at least 48 decodes a run, an even number: the steady throughput, not the run's
+    # tail (with 9 equal decodes two threads can at best finish 9 in the time of 5, 1.8x)
+    reps = max(1, -(-48 // len(files)))
+    work = list(files.values()) * (reps + (len(files) * reps) % 2)
     print()
     rows = [_thread_row(work, repeat, cpu, "codec.decode", lambda: codec.decode)]
     # a Decoder per thread, kept from run to run (each pool thread makes its own)
