@@ -190,7 +190,7 @@ class Statistics:
         width = 10 + 3 * len(channels)
         self.width = width
         self.shape = (h, w)
-        # the columns of the kernel's sums (codec._elements.triangle_sums) in the order of
+        # the columns of the kernel's sums (codec._elements.triangle_statistics and span_statistics) in the order of
         # __call__'s: the moments, b, xb, y b, bb, then per channel b_c, x b_c, y b_c
         k = 3 + 2 * len(channels)
         self._from_kernel = np.array(
