@@ -16,6 +16,7 @@ cimport cython
 from libc.math cimport ceil, fabs
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint16_t, uint64_t
 
+from codec.offsets cimport OFFSETS_DECREASE, OFFSETS_ENDS, offsets_fault
 from codec.planefit cimport plane_sse
 
 import numpy as np
@@ -439,11 +440,11 @@ def span_statistics(const source_t[:, ::1] table, const int64_t[::1] bounds, con
     for c in range(nb):
         if not 6 <= blocks[c] < nc - 2:
             raise ValueError("span_statistics: a column out of range")
-    if bounds[0] != 0 or bounds[e_count] != s:
+    fault = offsets_fault(bounds, e_count, s)
+    if fault == OFFSETS_ENDS:
         raise ValueError("span_statistics: bounds must run from 0 to the number of spans")
-    for e in range(e_count):
-        if bounds[e + 1] < bounds[e]:
-            raise ValueError("span_statistics: bounds must not decrease")
+    if fault == OFFSETS_DECREASE:
+        raise ValueError("span_statistics: bounds must not decrease")
     for j in range(s):
         if span_n[j] > 0 and not (0 <= span_y[j] < height and 0 <= span_x[j] and span_x[j] + span_n[j] <= width):
             raise ValueError("span_statistics: a span outside the image")
@@ -626,11 +627,11 @@ def span_totals(const double[:, ::1] per_span, const int64_t[::1] bounds):
     per_span (K x S), taken column after column from 0.0 (as a sparse row-sum of ones
     takes it). ValueError unless bounds run from 0 to S without decreasing."""
     cdef int64_t kk = per_span.shape[0], s = per_span.shape[1], e = bounds.shape[0] - 1, i, j, k
-    if e < 0 or bounds[0] != 0 or bounds[e] != s:
+    fault = OFFSETS_ENDS if e < 0 else offsets_fault(bounds, e, s)
+    if fault == OFFSETS_ENDS:
         raise ValueError("span_totals: bounds must run from 0 to the number of spans")
-    for i in range(e):
-        if bounds[i + 1] < bounds[i]:
-            raise ValueError("span_totals: bounds must not decrease")
+    if fault == OFFSETS_DECREASE:
+        raise ValueError("span_totals: bounds must not decrease")
     out = np.zeros((e, kk), dtype=np.float64)
     cdef double[:, ::1] o = out
     with nogil:

@@ -10,6 +10,8 @@ from libc.stdint cimport int64_t, uint8_t, uint64_t
 from libc.math cimport rint
 from libc.string cimport memcpy
 
+from codec.offsets cimport OFFSETS_OK, offsets_fault
+
 import numpy as np
 
 
@@ -506,8 +508,8 @@ def opposite_feet(const int64_t[:, ::1] points, const double[:, ::1] normal, con
 def chain_walks(const int64_t[::1] flat, const int64_t[::1] chain, const uint8_t[::1] closed,
                 const uint8_t[::1] junction, const int64_t[::1] offsets, const float[:, ::1] magnitude,
                 int64_t stride):
-    """polylines._attach and the chains' sums of squared gradient in one pass over
-    order_chains' output (flat padded indices in chain order, the chain of each, closed
+    """Each chain's ends attached to the junction pixels beside them (as the paper
+    does) and the chains' sums of squared gradient in one pass over order_chains' output (flat padded indices in chain order, the chain of each, closed
     per chain): each chain's pixels with, unless it is closed, the first junction pixel
     (in offset order) next to its first pixel before them and the one next to its last
     after them; a closed chain ends at its first pixel again. Returns (pixels, starts:
@@ -609,11 +611,8 @@ def wall_segments(const int64_t[:, ::1] left, const int64_t[:, ::1] right, const
     cdef int64_t key, lo, hi, x, y
     if right.shape[0] != n or (n and (left.shape[1] != 2 or right.shape[1] != 2)) or lines < 0:
         raise ValueError("wall_segments: the feet and the polylines do not fit together")
-    if starts[0] != 0 or starts[lines] != n:
+    if offsets_fault(starts, lines, n) != OFFSETS_OK:
         raise ValueError("wall_segments: the polylines do not cover the control points")
-    for k in range(lines):
-        if starts[k + 1] < starts[k]:
-            raise ValueError("wall_segments: the polylines do not cover the control points")
     size = 16
     while size < 4 * n:  # at most 2n keys in each table: at most half full
         size *= 2
