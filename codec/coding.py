@@ -46,6 +46,13 @@ def unzigzag(u: np.ndarray) -> np.ndarray:
     return (u >> 1) ^ -(u & 1)
 
 
+def _frozen(table: np.ndarray) -> np.ndarray:
+    """`table` made read-only: the cached tables are handed to every caller, so one
+    caller's write would change every later encode and decode."""
+    table.setflags(write=False)
+    return table
+
+
 # The Hilbert mapping of ATM.md §4.2.2 as a state machine: the reflections and swaps
 # the reference loop applies to the lower bits form the group {identity, swap,
 # complement, both}, so one small table per level replaces its per-level np.where's.
@@ -70,7 +77,7 @@ def _hilbert_tables() -> tuple[np.ndarray, np.ndarray]:
     return digit, nxt
 
 
-_HILBERT_DIGIT, _HILBERT_NEXT = _hilbert_tables()
+_HILBERT_DIGIT, _HILBERT_NEXT = (_frozen(t) for t in _hilbert_tables())
 
 #: Bits of x and of y that one lookup of hilbert_keys consumes.
 _HILBERT_GROUP = 5
@@ -90,7 +97,7 @@ def _hilbert_group_tables() -> tuple[np.ndarray, np.ndarray]:
         j = state * np.uint8(4) + (((gx >> k) & 1) * 2 + ((gy >> k) & 1)).astype(np.uint8)
         digit = (digit << 2) | _HILBERT_DIGIT[j]
         state = _HILBERT_NEXT[j]
-    return digit, state.astype(np.int64) << (2 * g)
+    return _frozen(digit), _frozen(state.astype(np.int64) << (2 * g))
 
 
 @functools.cache
@@ -108,7 +115,7 @@ def _hilbert_inverse_tables() -> tuple[np.ndarray, np.ndarray]:
     at = (state << (2 * g)) | digit
     xy[at] = i & ((1 << (2 * g)) - 1)
     back[at] = nxt
-    return xy, back
+    return _frozen(xy), _frozen(back)
 
 
 def _hilbert_start(levels: int) -> tuple[int, int]:
