@@ -256,7 +256,7 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
         for worker in workers:
             worker.wait()
 
-    others: list[float] = []  # cores busy outside this process, each run
+    others: dict[str, list[float]] = {"one thread": [], "two threads": []}  # cores busy elsewhere, each run
 
     def timed(name: str, fn: Callable[[], None]) -> Callable[[], None]:
         def run() -> None:
@@ -265,7 +265,7 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
             busy1, t1, w1 = _machine_busy(), time.process_time(), time.perf_counter()
             used[name].append(1e3 * (t1 - t0))
             if busy0 is not None and busy1 is not None:
-                others.append(max(0.0, (busy1 - busy0) - (t1 - t0)) / (w1 - w0))
+                others[name].append(max(0.0, (busy1 - busy0) - (t1 - t0)) / (w1 - w0))
         return run
 
     workers[1].run(decode_all(lists[1][:1]))  # each worker's first decode before the rounds
@@ -285,10 +285,24 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
         row += [f"{statistics.median(used['one thread']):.1f}", f"{statistics.median(used['two threads']):.1f}",
                 f"{ratio(used, 'two threads', 'one thread'):.2f}", f"{statistics.median(use['one thread']):.2f}",
                 f"{statistics.median(use['two threads']):.2f}", f"{ratio(use, 'two threads', 'one thread'):.2f}"]
-        if others:
-            head += ["other processes' cores, median (max)"]
-            row += [f"{statistics.median(others):.2f} ({max(others):.2f})"]
+        if all(len(others[name]) == len(times[name]) + 1 for name in others):
+            for name in others:
+                del others[name][0]  # interleaved's warm-up call
+            every = others["one thread"] + others["two threads"]
+            # the rounds in which no other process kept as much as a fifth of a core
+            # busy in either run: on a shared machine, the ratio the codec itself gives
+            quiet = [k for k, (a, b) in enumerate(zip(others["one thread"], others["two threads"]))
+                     if max(a, b) < QUIET_CORES]
+            head += ["other processes' cores, median (max)", "quiet rounds", "throughput in quiet rounds"]
+            row += [f"{statistics.median(every):.2f} ({max(every):.2f})", f"{len(quiet)} of {len(times['one thread'])}",
+                    f"{statistics.median(times['one thread'][k] / times['two threads'][k] for k in quiet):.2f}"
+                    if quiet else "-"]
     return head, row
+
+
+#: Cores other processes may keep busy during a round of the threads table for it to
+#: count as quiet (their load takes cores from the two threads).
+QUIET_CORES = 0.2
 
 
 def _machine_busy() -> float | None:

@@ -317,3 +317,6 @@ def test_speed_thread_table_gives_each_thread_its_own_files() -> None:
             by_thread.setdefault(t, []).append(d)
         assert sorted(by_thread.values()) == lists
     assert len(seen) == 41
+    if Path("/proc/stat").exists():  # other processes' load, and the rounds free of it
+        assert head[-3:] == ["other processes' cores, median (max)", "quiet rounds", "throughput in quiet rounds"]
+        assert row[-2] in ("0 of 1", "1 of 1") and (row[-1] == "-") == (row[-2] == "0 of 1")
