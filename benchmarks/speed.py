@@ -239,22 +239,38 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
     workers = [_Worker(), _Worker()]
     used: dict[str, list[float]] = {"one thread": [], "two threads": []}
 
+    #: each run's time less the longest run-queue wait of its threads (ns): what the
+    #: run would take had other processes left the cores free
+    unloaded: dict[str, list[float]] = {"one thread": [], "two threads": []}
+    waits: list[tuple[int, int]] = []  # (wall, run-queue wait) of each job of a run
+
     def decode_all(files: list[bytes]) -> Callable[[], None]:
         def job() -> None:
             decode = decoder()
+            q0, t0 = _run_queue_wait(), time.perf_counter_ns()
             for data in files:
                 decode(data)
+            q1, t1 = _run_queue_wait(), time.perf_counter_ns()
+            if q0 is not None and q1 is not None:
+                waits.append((t1 - t0, q1 - q0))
         return job
+
+    def note(name: str, jobs: int) -> None:
+        if len(waits) == jobs:
+            unloaded[name].append(max(wall - wait for wall, wait in waits) / 1e6)
+        waits.clear()
 
     def one() -> None:
         workers[0].run(decode_all(lists[0] + lists[1]))
         workers[0].wait()
+        note("one thread", 1)
 
     def two() -> None:
         for worker, files in zip(workers, lists):
             worker.run(decode_all(files))
         for worker in workers:
             worker.wait()
+        note("two threads", 2)
 
     others: dict[str, list[float]] = {"one thread": [], "two threads": []}  # cores busy elsewhere, each run
 
@@ -270,6 +286,7 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
 
     workers[1].run(decode_all(lists[1][:1]))  # each worker's first decode before the rounds
     workers[1].wait()
+    waits.clear()
     times = interleaved({"one thread": timed("one thread", one), "two threads": timed("two threads", two)}, repeat)
     for worker in workers:
         worker.stop()
@@ -297,7 +314,25 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
             row += [f"{statistics.median(every):.2f} ({max(every):.2f})", f"{len(quiet)} of {len(times['one thread'])}",
                     f"{statistics.median(times['one thread'][k] / times['two threads'][k] for k in quiet):.2f}"
                     if quiet else "-"]
+        if all(len(unloaded[name]) == len(times[name]) + 1 for name in unloaded):
+            for name in unloaded:
+                del unloaded[name][0]  # interleaved's warm-up call
+            # the threads' own time: only what the codec spends or waits for (the GIL,
+            # memory), not other processes' hold on the cores (Linux's schedstat)
+            head += ["throughput less run-queue waits"]
+            row += [f"{ratio(unloaded, 'one thread', 'two threads'):.2f}"]
     return head, row
+
+
+def _run_queue_wait() -> int | None:
+    """Nanoseconds the calling thread has waited, runnable, for a core (Linux's
+    /proc/thread-self/schedstat; None elsewhere): time other processes' load took
+    from it. Time it spent asleep (waiting for the GIL, say) is not counted."""
+    try:
+        with open("/proc/thread-self/schedstat") as f:
+            return int(f.read().split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 #: Cores other processes may keep busy during a round of the threads table for it to
