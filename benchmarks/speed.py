@@ -318,7 +318,10 @@ def _thread_row(lists: list[list[bytes]], repeat: int, cpu: bool, label: str,
             for name in unloaded:
                 del unloaded[name][0]  # interleaved's warm-up call
             # the threads' own time: only what the codec spends or waits for (the GIL,
-            # memory), not other processes' hold on the cores (Linux's schedstat)
+            # memory), not other processes' hold on the cores (Linux's schedstat). An
+            # estimate for a loaded machine, optimistic by up to the cost of running side
+            # by side (CPU two / one) where load made the two threads take turns on one
+            # core (seen: 1.97-2.00 loaded, against 1.86-1.89 in quiet rounds)
             head += ["throughput less run-queue waits"]
             row += [f"{ratio(unloaded, 'one thread', 'two threads'):.2f}"]
     return head, row
