@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -285,3 +286,40 @@ def test_glue_benchmark_times_a_decoder(tmp_path) -> None:
     for row in rows:
         figures = dict(zip(head, row))
         assert 0 < float(figures["glue us"]) < float(figures["this checkout (codec.Decoder): decode us"])
+
+
+def test_speed_thread_table_gives_each_thread_its_own_files() -> None:
+    """The threads criterion as stated: in the two-thread run each worker decodes its
+    own list, whole and alone; in the one-thread run one thread decodes both lists."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import speed
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    lists = [[b"a%d" % i for i in range(5)], [b"b%d" % i for i in range(5)]]
+    seen: list[tuple[int, bytes]] = []
+    lock = threading.Lock()
+
+    def decoder():
+        def decode(data: bytes) -> None:
+            with lock:
+                seen.append((threading.get_ident(), data))
+        return decode
+
+    head, row = speed._thread_row(lists, 1, True, "probe", decoder)
+    assert row[:2] == ["probe", "10"]
+    # a warm-up decode by the second worker, then warm-up and one round of each run
+    runs = [seen[1 + 10 * k: 11 + 10 * k] for k in range(4)]
+    for one, two in (runs[0:2], runs[2:4]):
+        assert len({t for t, _ in one}) == 1 and [d for _, d in one] == lists[0] + lists[1]
+        by_thread: dict[int, list[bytes]] = {}
+        for t, d in two:
+            by_thread.setdefault(t, []).append(d)
+        assert sorted(by_thread.values()) == lists
+    assert len(seen) == 41
+    figures = dict(zip(head, row))
+    if Path("/proc/stat").exists():  # other processes' load, and the rounds free of it
+        assert figures["quiet rounds"] in ("0 of 1", "1 of 1")
+        assert (figures["throughput in quiet rounds"] == "-") == (figures["quiet rounds"] == "0 of 1")
+    if Path("/proc/thread-self/schedstat").exists():  # each thread's own time, from the kernel
+        assert float(figures["throughput less run-queue waits"]) > 0
