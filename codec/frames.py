@@ -134,6 +134,20 @@ TRIED = (1, 2)
 # bytes) one moved: camera at 2048² in 256-row bands, +12 bytes (0.015 %).
 
 
+# `own` False (codec.meshcode.own_parameters_pay: a mesh with walls) leaves that frame
+# out, half the level-19 work of such a payload (a 512² encode's 1.2-2.3 ms): on 28
+# payloads of 5-55 kB with walls (the gray corpus at 1/2.8 %, the disparity map and
+# camera at 6 %, RGB photos at 1/2.8 %, Kinect, TUM and SRTM at 1/2.8 %, 256² camera at
+# quality 40-80 and coffee at 40) it won once, TUM depth at 2.8 % by 30 bytes (0.23 %);
+# without walls (RGB at quality 40/60) it won all 5.
+# Nor do such payloads get quick frames of TRIED's second parameters (btopt, matches of
+# 4 bytes): on the 39 payloads of 4-64 kB with walls in 45 encodes (corpus at 1/2.8/6 %,
+# Kinect, TUM, SRTM and float disparity at 1/2.8 %, RGB at 1/2.8 % and 256² q40/60,
+# bands, 2048², max_error) the quick frames never ranked them first (0 bytes moved),
+# and they were half the quick frames' time (0.4 ms of the disparity map's encode).
+TRIED_WITHOUT_OWN = (1,)
+
+
 def compress_parts(parts: list[bytes], own: bool = True) -> bytes:
     """One zstd frame holding the parts one after another: the smallest, over the
     parameter sets of PARAMETERS, of a plain frame, one that ends a block after each
@@ -246,14 +260,3 @@ def decompress(frame: bytes, limit: int, what: str, dctx: zstandard.ZstdDecompre
     if end != len(frame):
         raise CorruptError(f"{what} has {len(frame) - end:,} bytes after its zstd frame (ATM.md §4: one frame)")
     return data
-# `own` False (codec.meshcode.own_parameters_pay: a mesh with walls) leaves that frame
-# out, half the level-19 work of such a payload (a 512² encode's 1.2-2.3 ms): on 22
-# payloads of 5-55 kB with walls (the gray corpus and RGB photos at 1/2.8/6 % vertices,
-# Kinect, TUM and SRTM at 1/2.8 %, 256² gray at quality 40-80) it won once, TUM depth
-# at 2.8 % by 30 bytes (0.23 %); without walls (RGB at quality 40/60) it won 5 of 6.
-# Nor do such payloads get quick frames of TRIED's second parameters (btopt, matches of
-# 4 bytes): on the 39 payloads of 4-64 kB with walls in 45 encodes (corpus at 1/2.8/6 %,
-# Kinect, TUM, SRTM and float disparity at 1/2.8 %, RGB at 1/2.8 % and 256² q40/60,
-# bands, 2048², max_error) the quick frames never ranked them first (0 bytes moved),
-# and they were half the quick frames' time (0.4 ms of the disparity map's encode).
-TRIED_WITHOUT_OWN = (1,)
