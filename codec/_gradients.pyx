@@ -7,7 +7,7 @@ fixed-point derivatives (codec.mesher.edges), the norm of the Hessian
 operations in the same order, without contraction). The GIL is released while they
 work."""
 
-from libc.math cimport rintf, sqrtf
+from libc.math cimport rintf, sqrt, sqrtf
 from libc.stdint cimport int16_t, int64_t, uint8_t
 
 import numpy as np
@@ -414,3 +414,54 @@ def otsu_level(const float[:, ::1] magnitude, float scale):
                 max_sigma = sigma
                 level = i
     return level
+
+
+def density_roots(const float[:, ::1] curvature, const uint8_t[:, ::1] excluded):
+    """(d, free): d = sqrt(curvature) in float64 (H x W; numpy's square root of the
+    float64 value, so the same numbers), and the d of the pixels not excluded, in raster
+    order (as d[~excluded] lists them), for sampling.density's mean."""
+    cdef Py_ssize_t h = curvature.shape[0], w = curvature.shape[1]
+    if excluded.shape[0] != h or excluded.shape[1] != w:
+        raise ValueError("density_roots: the curvature and the exclusion mask differ in size")
+    d_out = np.empty((h, w), dtype=np.float64)
+    free_out = np.empty(h * w, dtype=np.float64)
+    if h == 0 or w == 0:
+        return d_out, free_out
+    cdef double[:, ::1] d_v = d_out
+    cdef double[::1] free_v = free_out
+    cdef const float* c = &curvature[0, 0]
+    cdef const uint8_t* x = &excluded[0, 0]
+    cdef double* d = &d_v[0, 0]
+    cdef double* free = &free_v[0]
+    cdef Py_ssize_t i, n = h * w, nf = 0
+    cdef double v
+    with nogil:
+        for i in range(n):
+            v = sqrt(<double>c[i])
+            d[i] = v
+            if not x[i]:
+                free[nf] = v
+                nf += 1
+    return d_out, free_out[:nf]
+
+
+def density_scale(double[:, ::1] d, const uint8_t[:, ::1] excluded, double mean, double floor):
+    """In place: d / mean (0 where mean is not above 0) plus floor, and 0 on excluded
+    pixels: sampling.density's numpy steps, operation for operation."""
+    cdef Py_ssize_t h = d.shape[0], w = d.shape[1]
+    if excluded.shape[0] != h or excluded.shape[1] != w:
+        raise ValueError("density_scale: the density and the exclusion mask differ in size")
+    if h == 0 or w == 0:
+        return
+    cdef double* p = &d[0, 0]
+    cdef const uint8_t* x = &excluded[0, 0]
+    cdef Py_ssize_t i, n = h * w
+    cdef bint scale = mean > 0
+    with nogil:
+        for i in range(n):
+            if x[i]:
+                p[i] = 0.0
+            elif scale:
+                p[i] = p[i] / mean + floor
+            else:
+                p[i] = 0.0 + floor

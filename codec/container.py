@@ -230,12 +230,12 @@ class Writer:
             self._stream.write(_chunk(RESIDUAL, residual))
         fields = meshcode.encode_band(y0, mesh, step, delaunay, layout)
         raw = schema.MeshPayload.build(fields, **h._fields())
-        frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
+        frame = frames.compress_parts(meshcode.payload_parts(raw, fields), meshcode.own_parameters_pay(fields))
         if fields["connectivity"] == schema.DELAUNAY and len(mesh.vertices) > limits.max_rebuilt_vertices(len(frame)):
             # too cheap to store for a decoder to rebuild: list the triangles
             fields = meshcode.encode_band(y0, mesh, step, rebuild=False)
             raw = schema.MeshPayload.build(fields, **h._fields())
-            frame = frames.compress_parts(meshcode.payload_parts(raw, fields))
+            frame = frames.compress_parts(meshcode.payload_parts(raw, fields), meshcode.own_parameters_pay(fields))
         if len(raw) > limits.max_payload(len(frame)):
             raise LimitError(
                 f"the band from row {y0} compresses {len(raw):,} bytes into {len(frame):,}, more "

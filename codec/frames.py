@@ -134,16 +134,31 @@ TRIED = (1, 2)
 # bytes) one moved: camera at 2048² in 256-row bands, +12 bytes (0.015 %).
 
 
-def compress_parts(parts: list[bytes]) -> bytes:
+# `own` False (codec.meshcode.own_parameters_pay: a mesh with walls) leaves that frame
+# out, half the level-19 work of such a payload (a 512² encode's 1.2-2.3 ms): on 28
+# payloads of 5-55 kB with walls (the gray corpus at 1/2.8 %, the disparity map and
+# camera at 6 %, RGB photos at 1/2.8 %, Kinect, TUM and SRTM at 1/2.8 %, 256² camera at
+# quality 40-80 and coffee at 40) it won once, TUM depth at 2.8 % by 30 bytes (0.23 %);
+# without walls (RGB at quality 40/60) it won all 5.
+# Nor do such payloads get quick frames of TRIED's second parameters (btopt, matches of
+# 4 bytes): on the 39 payloads of 4-64 kB with walls in 45 encodes (corpus at 1/2.8/6 %,
+# Kinect, TUM, SRTM and float disparity at 1/2.8 %, RGB at 1/2.8 % and 256² q40/60,
+# bands, 2048², max_error) the quick frames never ranked them first (0 bytes moved),
+# and they were half the quick frames' time (0.4 ms of the disparity map's encode).
+TRIED_WITHOUT_OWN = (1,)
+
+
+def compress_parts(parts: list[bytes], own: bool = True) -> bytes:
     """One zstd frame holding the parts one after another: the smallest, over the
     parameter sets of PARAMETERS, of a plain frame, one that ends a block after each
     part, and one that does so except after (or, for the last, before) parts of fewer
     than SMALL_PART bytes (from TRIAL_FROM bytes on, level 19's own parameters in the
-    block-a-part layout and of the others only the one a quick trial ranks first; from
+    block-a-part layout, unless `own` is False, and of the others only the one a quick
+    trial ranks first; from
     SEARCH_BELOW bytes on, only the last layout, with LARGE's parameters). Each block has its own entropy tables, which suits parts
     whose numbers have different statistics (5-7 % smaller for a large mesh); a small
     mesh does better with shared tables. Ties go to the earlier candidate, so the
-    choice, like each frame, depends on the parts alone."""
+    choice, like each frame, depends on the parts (and `own`) alone."""
     whole = b"".join(parts)
     every = set(range(len(parts) - 1))
     merged = every - {i for i, p in enumerate(parts[:-1]) if len(p) < SMALL_PART}
@@ -158,12 +173,14 @@ def compress_parts(parts: list[bytes]) -> bytes:
         # level 19's own parameters in its block layouts, and of the others the one
         # whose quick frame is smallest (ties to the earlier); the smallest of these
         quick = _compressors(len(whole), TRIAL_STRATEGY)
-        tried = [(k, cuts) for k in TRIED for cuts in layouts]
+        tried = [(k, cuts) for k in (TRIED if own else TRIED_WITHOUT_OWN) for cuts in layouts]
         sizes = [len(_frame(quick[k], whole, parts, cuts)) for k, cuts in tried]
         k, cuts = tried[sizes.index(min(sizes))]
+        ranked = _frame(full[k], whole, parts, cuts)
+        if not own:
+            return ranked
         # level 19's own parameters in the layout of a block a part (ONE_LAYOUT)
-        own = _frame(full[0], whole, parts, layouts[1] if len(layouts) > 1 else None)
-        return min([own, _frame(full[k], whole, parts, cuts)], key=len)
+        return min([_frame(full[0], whole, parts, layouts[1] if len(layouts) > 1 else None), ranked], key=len)
     return min((_frame(zc, whole, parts, cuts) for zc in full for cuts in layouts), key=len)
 
 

@@ -382,3 +382,30 @@ def test_chain_walks_refuses_pixels_in_the_border_columns():
         native._polylines.chain_walks(np.array([3], np.int64), np.array([0], np.int64), np.ones(1, np.uint8),
                                       np.zeros(10, np.uint8), np.array([-3, -2, -1, 1, 3, 2, 1, -1], np.int64),
                                       np.zeros((3, 0), np.float32), 2)
+
+
+def test_density_gives_numpys_numbers_from_two_compiled_passes(corpus):
+    """#20: sampling.density's numpy steps (a square root, a masked gather, a divide,
+    an add and a masked store over float64 planes) were 1.5 ms of the disparity map's
+    encode; _gradients.density_roots and density_scale give the same numbers (numpy
+    still takes the mean, of the same values in the same order) as the numpy steps,
+    which float64 curvatures still take."""
+    import cv2
+
+    from codec.mesher import edges, sampling
+
+    rng = np.random.default_rng(8)
+    for name, image in corpus.items():
+        gray = structure(image if image.ndim == 2 else image[..., 0])
+        found, _, _ = edges.detect(gray, 255.0)
+        near = cv2.dilate(found.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        curv = sampling.curvature(gray)
+        for excluded in (near, np.zeros_like(near), np.ones_like(near), rng.random(near.shape) < 0.5):
+            numpy_steps = sampling.density(curv.astype(np.float64), excluded)
+            assert np.array_equal(sampling.density(curv, excluded), numpy_steps), name
+    zero = np.zeros((5, 9), np.float32)  # no curvature: the floor alone
+    assert np.array_equal(sampling.density(zero, zero > 0), np.full((5, 9), 0.25))
+    with pytest.raises(ValueError, match="differ in size"):
+        native._gradients.density_roots(zero, np.zeros((5, 8), np.uint8))
+    with pytest.raises(ValueError, match="differ in size"):
+        native._gradients.density_scale(np.zeros((5, 9)), np.zeros((4, 9), np.uint8), 1.0, 0.25)

@@ -162,8 +162,8 @@ def test_rgb_meshes_keep_level_19s_own_parameters(monkeypatch):
     whole_search = []
     real = frames.compress_parts
 
-    def searched(parts):
-        frame = real(parts)
+    def searched(parts, own=True):
+        frame = real(parts, own)
         old, frames.TRIAL_FROM = frames.TRIAL_FROM, 1 << 30
         try:
             whole_search.append((len(frame), len(real(parts))))
@@ -174,3 +174,75 @@ def test_rgb_meshes_keep_level_19s_own_parameters(monkeypatch):
     monkeypatch.setattr(frames, "compress_parts", searched)
     assert codec.encode(image, quality=40) == data
     assert whole_search and all(got <= best * 1.002 for got, best in whole_search), whole_search
+
+
+def test_a_mesh_with_walls_makes_one_level_19_frame(monkeypatch, corpus):
+    """#20: from frames.TRIAL_FROM bytes on, level 19's own parameters were tried on every
+    MESH payload, half of its level-19 work (2.3 ms of the disparity map's 47 ms
+    encode at 2.8 % vertices), and with walls they won on 1 mesh of 22 (30 bytes). A
+    mesh with walls now makes only the frame its quick trial ranks first; one without
+    walls (RGB at a quality, where they win) still tries both."""
+    made = []
+    real = frames._compressors
+    monkeypatch.setattr(frames, "_compressors", lambda size, strategy=None: [
+        _Counting(zc, made) if strategy is None else zc for zc in real(size, strategy)])
+    image = corpus["motorcycle_disp"]
+    data = codec.encode(image, points=round(0.028 * image.size))
+    assert codec.info(data)["vertices"] > 0
+    assert len(made) == 1 and frames.TRIAL_FROM <= made[0] < frames.SEARCH_BELOW, made
+    # the frame is the quick-ranked one, whatever level 19's own would have made
+    rng = np.random.default_rng(3)
+    parts = [bytes(rng.integers(0, 256, 24, dtype=np.uint8))] + [
+        bytes(rng.geometric(p, n).clip(0, 255).astype(np.uint8)) for p, n in ((0.5, 5000), (0.05, 3000), (0.2, 9000))
+    ] + [b"\1\2\3"]
+    whole = b"".join(parts)
+    made.clear()
+    frame = frames.compress_parts(parts, own=False)
+    assert made == [len(whole)]
+    assert frames.decompress(frame, len(whole), "test") == whole
+    every = set(range(len(parts) - 1))
+    layouts = [None, every, every - {0, len(parts) - 2}]
+    quick = real(len(whole), frames.TRIAL_STRATEGY)
+    tried = [(k, cuts) for k in frames.TRIED for cuts in layouts]
+    sizes = [len(frames._frame(quick[k], whole, parts, cuts)) for k, cuts in tried]
+    k, cuts = tried[sizes.index(min(sizes))]
+    assert frame == frames._frame(real(len(whole))[k], whole, parts, cuts)
+    # without walls both frames are made
+    fields = dict(polyline_lengths=b"")
+    assert codec.meshcode.own_parameters_pay(fields) and not codec.meshcode.own_parameters_pay(dict(polyline_lengths=b"\1"))
+    made.clear()
+    frames.compress_parts(parts, own=codec.meshcode.own_parameters_pay(fields))
+    assert made == [len(whole)] * 2
+
+
+def test_a_mesh_with_walls_gets_quick_frames_of_one_parameter_set(monkeypatch):
+    """#20: with walls (own=False) only TRIED_WITHOUT_OWN's parameters get quick frames:
+    TRIED's others never ranked first on such payloads and were half the quick frames'
+    time; without walls every one of TRIED still does."""
+    quick = []
+    real = frames._compressors
+
+    class Noted(_Counting):
+        def __init__(self, zc, k):
+            super().__init__(zc, [])
+            self.k = k
+
+        def compress(self, data):
+            quick.append(self.k)
+            return self.zc.compress(data)
+
+        def compressobj(self, size):
+            quick.append(self.k)
+            return self.zc.compressobj(size=size)
+
+    monkeypatch.setattr(frames, "_compressors", lambda size, strategy=None: [
+        zc if strategy is None else Noted(zc, k) for k, zc in enumerate(real(size, strategy))])
+    rng = np.random.default_rng(4)
+    parts = [bytes(rng.integers(0, 256, 24, dtype=np.uint8))] + [
+        bytes(rng.geometric(p, n).clip(0, 255).astype(np.uint8)) for p, n in ((0.5, 5000), (0.05, 3000), (0.2, 9000))
+    ] + [b"\1\2\3"]
+    frames.compress_parts(parts, own=False)
+    assert quick and set(quick) == set(frames.TRIED_WITHOUT_OWN)
+    quick.clear()
+    frames.compress_parts(parts)
+    assert set(quick) == set(frames.TRIED)

@@ -41,6 +41,13 @@ def curvature(gray: np.ndarray) -> np.ndarray:
 def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor: float = FLOOR) -> np.ndarray:
     """Sample density (float64): curvature ** power scaled to mean 1, plus a floor,
     and zero on excluded pixels."""
+    if power == 0.5 and curv.dtype == np.float32:
+        # two compiled passes, the numbers of the numpy steps below (x ** 0.5 is numpy's
+        # square root; the mean is numpy's, of the same values in the same order)
+        mask = np.ascontiguousarray(excluded, dtype=bool).view(np.uint8)
+        d, free = native._gradients.density_roots(np.ascontiguousarray(curv), mask)
+        native._gradients.density_scale(d, mask, free.mean() if len(free) else 0.0, floor)
+        return d
     # in place where numpy made a temporary per step (the same operations: x ** 0.5 is
     # numpy's square root)
     d = np.sqrt(curv, dtype=np.float64) if power == 0.5 else curv.astype(np.float64) ** power
