@@ -142,13 +142,17 @@ cdef inline void _edge_next(Edge* e) noexcept nogil:
     e.q += carry
 
 
-cdef inline void _sort3(int64_t* i, const int64_t* v, int64_t w) noexcept nogil:
+cdef inline void _sort3(int64_t* i, const int64_t* v, int64_t w, bint ordered) noexcept nogil:
     """Order three vertex indices by raster position (row, then column): a sorting
     network of conditional moves on their pixel keys, as the order is different from
-    triangle to triangle."""
-    cdef int64_t a = i[0], b = i[1], c = i[2], t, kt
-    cdef int64_t ka = v[2 * a + 1] * w + v[2 * a], kb = v[2 * b + 1] * w + v[2 * b], kc = v[2 * c + 1] * w + v[2 * c]
+    triangle to triangle; on the indices themselves where the keys increase with them
+    (`ordered`)."""
+    cdef int64_t a = i[0], b = i[1], c = i[2], t, kt, ka, kb, kc
     cdef bint s
+    if ordered:
+        ka = a; kb = b; kc = c
+    else:
+        ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c]
     s = kb < ka
     t = b if s else a; b = a if s else b; a = t
     kt = kb if s else ka; kb = ka if s else kb; ka = kt
@@ -862,7 +866,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris
         corner[0] = _corner(tris, 3 * j, idx32)
         corner[1] = _corner(tris, 3 * j + 1, idx32)
         corner[2] = _corner(tris, 3 * j + 2, idx32)
-        _sort3(corner, v, w)  # T, M, B
+        _sort3(corner, v, w, ordered)  # T, M, B
         tx = v[2 * corner[0]]; ty = v[2 * corner[0] + 1]
         mx = v[2 * corner[1]]; my = v[2 * corner[1] + 1]
         bx = v[2 * corner[2]]; by = v[2 * corner[2] + 1]
