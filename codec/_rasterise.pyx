@@ -142,13 +142,17 @@ cdef inline void _edge_next(Edge* e) noexcept nogil:
     e.q += carry
 
 
-cdef inline void _sort3(int64_t* i, const int64_t* v, int64_t w) noexcept nogil:
+cdef inline void _sort3(int64_t* i, const int64_t* v, int64_t w, bint ordered) noexcept nogil:
     """Order three vertex indices by raster position (row, then column): a sorting
     network of conditional moves on their pixel keys, as the order is different from
-    triangle to triangle."""
-    cdef int64_t a = i[0], b = i[1], c = i[2], t, kt
-    cdef int64_t ka = v[2 * a + 1] * w + v[2 * a], kb = v[2 * b + 1] * w + v[2 * b], kc = v[2 * c + 1] * w + v[2 * c]
+    triangle to triangle; on the indices themselves where the keys increase with them
+    (`ordered`)."""
+    cdef int64_t a = i[0], b = i[1], c = i[2], t, kt, ka, kb, kc
     cdef bint s
+    if ordered:
+        ka = a; kb = b; kc = c
+    else:
+        ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c]
     s = kb < ka
     t = b if s else a; b = a if s else b; a = t
     kt = kb if s else ka; kb = ka if s else kb; ka = kt
@@ -370,7 +374,7 @@ cdef extern from *:
                                              int64_t k, int64_t m, void* pixels, const uint64_t* recip,
                                              int64_t edge_lim, const uint64_t* table, int64_t w, int64_t h,
                                              uint16_t* counts, int64_t* spans, int64_t* written,
-                                             int wide, int idx32) {
+                                             int wide, int idx32, int ordered) {
         int64_t a, b, c, t, ka, kb, kc, kt, tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl;
         int64_t d, half, vt, vm, vb, ga, gb, last, turn, xmin, xmax, total = 0;
         uint64_t mult, arow, adx, ady, ea, sa, eb, sb, ec, sc;
@@ -381,7 +385,13 @@ cdef extern from *:
             } else {
                 a = ((const int64_t*)tris)[3 * k]; b = ((const int64_t*)tris)[3 * k + 1]; c = ((const int64_t*)tris)[3 * k + 2];
             }
-            ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c];
+            /* raster order: by the pixel keys, or by index where the keys increase
+               with it (a decoder's vertices: no key to make) */
+            if (ordered) {
+                ka = a; kb = b; kc = c;
+            } else {
+                ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c];
+            }
             s = kb < ka;
             t = s ? b : a; b = s ? a : b; a = t;
             kt = s ? kb : ka; kb = s ? ka : kb; ka = kt;
@@ -408,8 +418,10 @@ cdef extern from *:
             } else {
                 vt = ((const uint8_t*)values)[a]; vm = ((const uint8_t*)values)[b]; vb = ((const uint8_t*)values)[c];
             }
-            ga = 2 * (dyb * vm - dyl * vt - dym * vb);
-            gb = 2 * (dxl * vt - dxb * vm + dxm * vb);
+            /* _triangles' ga and gb with dyl = dyb - dym and dxl = dxb - dxm put in
+               (the same integers, two products fewer) */
+            ga = 2 * (dyb * (vm - vt) - dym * (vb - vt));
+            gb = 2 * (dxm * (vb - vt) - dxb * (vm - vt));
             if (d < 0) {
                 ga = -ga;
                 gb = -gb;
@@ -448,13 +460,15 @@ cdef extern from *:
                                              int64_t k, int64_t m, void* pixels, int wide,
                                              const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
                                              int64_t w, int64_t h, uint16_t* counts, int64_t* spans,
-                                             int64_t* written) {
-        /* a loop for each sample size and index width */
-    #define ATM_RUN(wide, idx32) atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, counts, spans, \
-                                         written, wide, idx32)
+                                             int64_t* written, int ordered) {
+        /* a loop for each sample size, index width and corner order */
+    #define ATM_RUN(wide, idx32, ordered) atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, \
+                                                  counts, spans, written, wide, idx32, ordered)
+    #define ATM_RUNS(wide, idx32) (ordered ? ATM_RUN(wide, idx32, 1) : ATM_RUN(wide, idx32, 0))
         if (idx32)
-            return wide ? ATM_RUN(1, 1) : ATM_RUN(0, 1);
-        return wide ? ATM_RUN(1, 0) : ATM_RUN(0, 0);
+            return wide ? ATM_RUNS(1, 1) : ATM_RUNS(0, 1);
+        return wide ? ATM_RUNS(1, 0) : ATM_RUNS(0, 0);
+    #undef ATM_RUNS
     #undef ATM_RUN
     }
     #else
@@ -468,13 +482,14 @@ cdef extern from *:
     static int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k,
                                   int64_t m, void* pixels, int wide, const uint64_t* recip, int64_t edge_lim,
                                   const uint64_t* table, int64_t w, int64_t h, uint16_t* counts,
-                                  int64_t* spans, int64_t* written) { return k; }
+                                  int64_t* spans, int64_t* written, int ordered) { return k; }
     #endif
     """
     int atm_has_avx512() noexcept nogil
     int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k, int64_t m,
                            void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
-                           int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written) noexcept nogil
+                           int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written,
+                           int ordered) noexcept nogil
     int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last, int64_t turn,
                             uint64_t arow, uint64_t adx, uint64_t ady, uint64_t ea, uint64_t sa, uint64_t eb,
                             uint64_t sb, uint64_t ec, uint64_t sc, int long_left, int64_t w, uint16_t* counts,
@@ -796,12 +811,13 @@ cdef inline int64_t _corner(const void* tris, int64_t i, bint idx32) noexcept no
 
 cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris, bint idx32, int64_t m, int64_t c,
                         sample_t* pixels, int mode, uint16_t* counts, int64_t* spans, uint8_t* cover,
-                        int64_t w, int64_t h, bint simd) noexcept nogil:
+                        int64_t w, int64_t h, bint simd, bint ordered) noexcept nogil:
     """Write every triangle's pixels into `pixels` and account for them as `mode`
     says: MODE_COUNTS in `counts` (a row of W + 1 counters per image row, see the
     module's docstring) and `spans` (non-empty spans per row, or NULL), MODE_COVER by
     counting each pixel's writes in `cover` (capped at 2). Returns the number of pixels
-    written. Vertices and corners are checked by the caller."""
+    written. Vertices and corners are checked by the caller; `ordered`: the vertices'
+    raster keys increase with their index."""
     cdef int64_t j, k, ch, d, half, d2, last, y, stop, written = 0, ga, gb, lim
     cdef int64_t tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl, vt, vm, vb, mult
     cdef int64_t corner[3]
@@ -842,7 +858,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris
     while k < m:
         if run:
             k = atm_run_avx512(v, vals, tris, idx32, k, m, pixels, sample_t is uint16_t, recip, edge_lim, _RECIPROCAL, w,
-                               h, counts if mode == MODE_COUNTS else NULL, spans, &written)
+                               h, counts if mode == MODE_COUNTS else NULL, spans, &written, ordered)
             if k >= m:
                 break
         j = k
@@ -850,7 +866,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris
         corner[0] = _corner(tris, 3 * j, idx32)
         corner[1] = _corner(tris, 3 * j + 1, idx32)
         corner[2] = _corner(tris, 3 * j + 2, idx32)
-        _sort3(corner, v, w)  # T, M, B
+        _sort3(corner, v, w, ordered)  # T, M, B
         tx = v[2 * corner[0]]; ty = v[2 * corner[0] + 1]
         mx = v[2 * corner[1]]; my = v[2 * corner[1] + 1]
         bx = v[2 * corner[2]]; by = v[2 * corner[2] + 1]
@@ -946,10 +962,17 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
     cdef int64_t* spans = NULL
     cdef uint8_t* cover
     cdef int status = OK
+    cdef int64_t key, previous = -1
+    cdef bint ordered = True
     for k in range(nv):
         if not (0 <= v[2 * k] < w and 0 <= v[2 * k + 1] < h):
             detail[0] = k
             return BAD_VERTEX
+        # whether raster order is index order (a decoder's vertices are in raster
+        # order: the walk then orders a triangle's corners by index, no key to make)
+        key = v[2 * k + 1] * w + v[2 * k]
+        ordered &= key > previous
+        previous = key
     for k in range(m):
         # unsigned: a negative index is beyond too
         if ((<uint64_t>_corner(tris, 3 * k, idx32) >= <uint64_t>nv) | (<uint64_t>_corner(tris, 3 * k + 1, idx32) >= <uint64_t>nv)
@@ -957,7 +980,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             detail[0] = k
             return BAD_INDEX
     if check == CHECK_TOTAL:
-        if _triangles(v, vals, tris, idx32, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, simd) == npix:
+        if _triangles(v, vals, tris, idx32, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, simd, ordered) == npix:
             return OK
     else:
         counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
@@ -968,7 +991,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             free(counts)
             free(spans)
             return NO_MEMORY
-        _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, simd)
+        _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, simd, ordered)
         status = _check_counts(counts, spans, w, h)
         free(counts)
         free(spans)
@@ -978,7 +1001,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
     cover = <uint8_t*>calloc(<size_t>npix, 1)
     if cover == NULL:
         return NO_MEMORY
-    _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, simd)
+    _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, simd, ordered)
     status = OK
     for p in range(npix):
         if cover[p] != 1:

@@ -59,4 +59,4 @@ done
 cd /
 LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
   --rootdir="$src" -c "$src/pyproject.toml" \
-  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual,refit,lossless_float,holes,holemask,mesher_elements,mesher_polylines,stages,bound,encode_front,cdt_insert_checks,raster_order_split,decoder_object,decode_out}.py "$@"
+  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual,refit,lossless_float,holes,holemask,mesher_elements,mesher_polylines,stages,bound,encode_front,cdt_insert_checks,raster_order_split,decoder_object,decode_out,rasterise_order,vertex_steps_pairs}.py "$@"
