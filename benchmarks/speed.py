@@ -178,12 +178,7 @@ def thread_table(files: dict[str, bytes], repeat: int, cpu: bool = False) -> Non
     the one-thread run's shows how far decodes overlap, and the CPU ratio whether they
     cost more CPU side by side. Load from other processes lowers both runs' use of the
     cores: read it beside the wall-time ratio, not instead."""
-    # each thread's own list: at least 48 decodes, so that the steady throughput, not
-    # the run's tail, is measured; the second list is the first rotated, so that the two
-    # threads decode different files at any moment
-    names = list(files.values())
-    reps = max(1, -(-48 // len(names)))
-    lists = [[names[(i + k) % len(names)] for i in range(reps * len(names))] for k in (0, 1)]
+    lists = thread_lists(list(files.values()))
     print()
     rows = [_thread_row(lists, repeat, cpu, "codec.decode", lambda: codec.decode)]
     # a Decoder per thread, kept from run to run (each worker thread makes its own)
@@ -196,6 +191,16 @@ def thread_table(files: dict[str, bytes], repeat: int, cpu: bool = False) -> Non
 
     rows.append(_thread_row(lists, repeat, cpu, "a Decoder per thread", own))
     print_table(rows[0][0], [r for _, r in rows])
+
+
+def thread_lists(files: list[bytes], least: int = 48) -> list[list[bytes]]:
+    """The threads table's two lists: each at least `least` decodes, so that the steady
+    throughput, not the run's tail, is measured. Every entry is a file of its own (its
+    own copy of the bytes: no two decodes read one buffer, as no two requests to a
+    server do); the second list starts one file on, so that the two threads mostly
+    decode different images, although unequal decode times let them drift together."""
+    reps = max(1, -(-least // len(files)))
+    return [[bytes(bytearray(files[(i + k) % len(files)])) for i in range(reps * len(files))] for k in (0, 1)]
 
 
 class _Worker:

@@ -323,3 +323,21 @@ def test_speed_thread_table_gives_each_thread_its_own_files() -> None:
         assert (figures["throughput in quiet rounds"] == "-") == (figures["quiet rounds"] == "0 of 1")
     if Path("/proc/thread-self/schedstat").exists():  # each thread's own time, from the kernel
         assert float(figures["throughput less run-queue waits"]) > 0
+
+
+def test_speed_thread_lists_are_files_of_their_own() -> None:
+    """Each decode of the threads table reads a buffer no other decode reads: two
+    threads never decode the same file object, as no two requests to a server do."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import speed
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    files = [b"camera", b"moon", b"astronaut"]
+    lists = speed.thread_lists(files, least=10)
+    assert [len(k) for k in lists] == [12, 12]
+    assert lists[0][:4] == [b"camera", b"moon", b"astronaut", b"camera"]
+    assert lists[1][:4] == [b"moon", b"astronaut", b"camera", b"moon"]
+    every = lists[0] + lists[1]
+    assert len({id(data) for data in every}) == len(every)
+    assert not any(data is f for data in every for f in files)
