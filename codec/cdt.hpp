@@ -717,9 +717,8 @@ class CDT {
   // one keeps walks short), each as a key whose low INDEX_BITS are its index: round r
   // holds about half the points of round r + 1 (a biased randomised insertion order),
   // each round along a Hilbert curve over a grid of about two cells per point (points
-  // sharing a cell go in index order); radix sorted. rounds false: one round, the
-  // Hilbert curve alone (for points going into a triangulation already made).
-  std::vector<uint64_t> insertion_order(const std::vector<i32>& which, bool rounds = true) const {
+  // sharing a cell go in index order); radix sorted.
+  std::vector<uint64_t> insertion_order(const std::vector<i32>& which) const {
     i64 span = 1, n = (i64)which.size();
     for (i32 i : which) span = std::max(span, (i64)std::max(pt[i].x, pt[i].y) + 1);
     int order = 1, grid = 1;
@@ -734,7 +733,7 @@ class CDT {
       uint64_t h = (uint64_t)i * 0x9E3779B97F4A7C15ull;  // a fixed hash: same order every run
       h ^= h >> 31; h *= 0xBF58476D1CE4E5B9ull; h ^= h >> 29;
       uint64_t round = 0;
-      while (rounds && round < 12 && (h & 1)) { ++round; h >>= 1; }
+      while (round < 12 && (h & 1)) { ++round; h >>= 1; }
       uint64_t key = (12 - round) << (2 * grid) | hilbert(grid, pt[i].x >> shift, pt[i].y >> shift);
       keys.push_back(key << INDEX_BITS | (uint64_t)i);
     }
@@ -1088,11 +1087,8 @@ class CDT {
   // ... in their order, with Lawson flips (no segment is flipped): the constrained
   // triangulation of §4.2.5 of all the points. All are checked first (coordinates,
   // inside the hull, no position twice), so that *done counts those before the first
-  // refused one (whose status is returned), and only those go in; they go along
-  // insertion_order's Hilbert curve, so that the walks are short whatever order they
-  // come in, without its randomised rounds: those guard a build from nothing, while
-  // here each walk starts beside the last point in a triangulation already made
-  // (rounds made the disparity map's six inserts 4.1 ms, the curve alone 2.9). After
+  // refused one (whose status is returned), and only those go in; they go in the order
+  // of insertion_order, so that the walks are short whatever order they come in. After
   // CDT_INTERNAL (a bug), *done counts the points that went in, those with vinc set.
   Status insert(const i64* xy, i64 k, i64* done) {
     *done = 0;
@@ -1130,7 +1126,7 @@ class CDT {
     }
     std::vector<i32> batch((size_t)limit);
     for (i64 j = 0; j < limit; ++j) batch[j] = (i32)(first + j);
-    std::vector<uint64_t> keys = insertion_order(batch, false);
+    std::vector<uint64_t> keys = insertion_order(batch);
     Status st = insert_in_order(keys, first + limit);
     if (st != CDT_OK) {
       // a bug: the points that went in (vinc set) are no prefix of the batch, and the
