@@ -350,10 +350,13 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
         raise ValueError("triangle_statistics: z needs a value per vertex")
     out = np.empty((m, nc), dtype=np.float64)
     sse_out = np.empty(m if errors else 0, dtype=np.float64)
-    sums_buf = np.empty(raw, dtype=np.float64)
+    if kk > MAX_PLANES:
+        raise ValueError("triangle_statistics: more planes than MAX_PLANES")
     cdef double[:, ::1] o = out
     cdef double[::1] e = sse_out
-    cdef double[::1] sums = sums_buf
+    # a local array, not a numpy buffer: nothing the walk reads (the plane, the power
+    # tables) can alias it, so the compiler keeps the sums in registers along a triangle
+    cdef double sums[6 + 2 * MAX_PLANES]
     cdef int64_t t, dy, x0, n, k, up, c, ox, oy
     cdef _Rows rows
     cdef int64_t ys[3]
@@ -374,7 +377,7 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
                 _rows_next(&rows, &x0, &n)
                 if n <= 0:
                     continue  # an empty span adds nothing to any sum
-                _add_span(&sums[0], &table[0, 0], width, kk, ys[0] + dy, x0, n, &power1[0], &power2[0])
+                _add_span(sums, &table[0, 0], width, kk, ys[0] + dy, x0, n, &power1[0], &power2[0])
             for c in range(nc):
                 o[t, c] = sums[columns[c]]
             _origin(px, py, width, &ox, &oy)
