@@ -21,7 +21,9 @@ OPTIMISE = ["/O2", "/fp:precise"] if sys.platform == "win32" else ["-O2", "-ffp-
 #: per-triangle helpers (_elements' row walk, corner sort, plane) are `inline` but -O2's
 #: inlining limits leave them as calls. -O3 keeps IEEE semantics (no reassociation
 #: without -ffast-math; contraction stays off), so the numbers and bytes are the same.
-PER_KERNEL = {} if sys.platform == "win32" else {"codec._elements": ["-O3"], "codec._lsq": ["-O3"], "codec._gradients": ["-O3"]}
+#: _gradients' square roots (sqrtf, sqrt) vectorise only without errno, which nothing
+#: reads: -fno-math-errno keeps their correctly rounded results.
+PER_KERNEL = {} if sys.platform == "win32" else {"codec._elements": ["-O3"], "codec._lsq": ["-O3"], "codec._gradients": ["-O3", "-fno-math-errno"]}
 
 extensions = [
     # depends: C++ headers beside a kernel (codec/cdt.hpp), rebuilt on change, in the sdist
