@@ -308,6 +308,29 @@ cdef inline void _moved(double* row, double fx, double fy, const int64_t* blocks
         row[first + 2] = row[first + 2] - fy * sb
 
 
+cdef void _triangle_sums(double* out, int64_t raw, const source_t* table, int64_t width, int64_t kk,
+                         const int64_t* ys, const int64_t* xs, int64_t up, const double* power1,
+                         const double* power2) noexcept nogil:
+    """triangle_statistics' raw sums (out[0 .. raw)) of one triangle (corners sorted by row,
+    _start_listed), span by span in row order. A function of its own, small enough that
+    the compiler inlines the row walk into it (inside triangle_statistics it did not), and
+    summing into a local array that the plane (char-sized: it may alias anything) and the
+    power tables cannot alias, so the sums stay in registers."""
+    cdef double sums[6 + 2 * MAX_PLANES]
+    cdef _Rows rows
+    cdef int64_t dy, x0, n, k
+    for k in range(raw):
+        sums[k] = 0.0
+    _rows_start(&rows, ys, xs, up)
+    for dy in range(ys[2] - ys[0]):
+        _rows_next(&rows, &x0, &n)
+        if n <= 0:
+            continue  # an empty span adds nothing to any sum
+        _add_span(sums, table, width, kk, ys[0] + dy, x0, n, power1, power2)
+    for k in range(raw):
+        out[k] = sums[k]
+
+
 @cython.cdivision(True)
 def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
                         int64_t height, const source_t[:, ::1] table, const double[::1] power1,
@@ -354,8 +377,6 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
         raise ValueError("triangle_statistics: more planes than MAX_PLANES")
     cdef double[:, ::1] o = out
     cdef double[::1] e = sse_out
-    # a local array, not a numpy buffer: nothing the walk reads (the plane, the power
-    # tables) can alias it, so the compiler keeps the sums in registers along a triangle
     cdef double sums[6 + 2 * MAX_PLANES]
     cdef int64_t t, dy, x0, n, k, up, c, ox, oy
     cdef _Rows rows
@@ -370,14 +391,7 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
             if not _start_listed(&geometry, t, py, px, ys, xs, &up):
                 bad = True
                 break
-            for k in range(raw):
-                sums[k] = 0.0
-            _rows_start(&rows, ys, xs, up)
-            for dy in range(ys[2] - ys[0]):
-                _rows_next(&rows, &x0, &n)
-                if n <= 0:
-                    continue  # an empty span adds nothing to any sum
-                _add_span(sums, &table[0, 0], width, kk, ys[0] + dy, x0, n, &power1[0], &power2[0])
+            _triangle_sums(sums, raw, &table[0, 0], width, kk, ys, xs, up, &power1[0], &power2[0])
             for c in range(nc):
                 o[t, c] = sums[columns[c]]
             _origin(px, py, width, &ox, &oy)
