@@ -23,12 +23,8 @@ OPTIMISE = ["/O2", "/fp:precise"] if sys.platform == "win32" else ["-O2", "-ffp-
 #: without -ffast-math; contraction stays off), so the numbers and bytes are the same.
 #: _gradients' square roots (sqrtf, sqrt) vectorise only without errno, which nothing
 #: reads: -fno-math-errno keeps their correctly rounded results.
-#: _elements' `cdef inline` helpers (the row walk, _rows_start and _rows_next, most of all)
-#: are forced inline: the module is so large that gcc's unit-growth limit refuses them
-#: even at -O3, and the calls cost a fifth of triangle_statistics.
-FORCE_INLINE = "-DCYTHON_INLINE=__inline__ __attribute__((always_inline, unused))"
 PER_KERNEL = {} if sys.platform == "win32" else {
-    "codec._elements": ["-O3", FORCE_INLINE], "codec._lsq": ["-O3"], "codec._gradients": ["-O3", "-fno-math-errno"],
+    "codec._elements": ["-O3"], "codec._lsq": ["-O3"], "codec._gradients": ["-O3", "-fno-math-errno"],
 }
 
 extensions = [
