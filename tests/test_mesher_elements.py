@@ -159,6 +159,11 @@ def test_the_kernels_refuse_what_is_out_of_range() -> None:
     for columns, blocks in ((np.r_[layout._from_kernel[:-1], 99], layout._blocks), (layout._from_kernel, np.array([8]))):
         with pytest.raises(ValueError, match="column out of range"):
             native._elements.triangle_statistics(v, t, 20, 10, *args[:3], columns, blocks, z)
+    # the walk sums into a fixed array of 6 + 2 * 32 numbers: a wider table is refused,
+    # not written past that array's end
+    wide = np.zeros((10 * 21, 33), np.int64)
+    with pytest.raises(ValueError, match="more planes"):
+        native._elements.triangle_statistics(v, t, 20, 10, wide, *args[1:], z)
     plane = np.zeros((10, 20), np.float32)
     f, origin = np.zeros((len(t), 3)), np.zeros((len(t), 2), np.int64)
     with pytest.raises(ValueError, match="out of range"):
