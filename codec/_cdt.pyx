@@ -33,7 +33,7 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         vector[int] dirty, old
         vector[unsigned char] dirty_mark
         Status build() except + nogil
-        Status insert(const int64_t* xy, int64_t k, int64_t* done) except + nogil
+        Status insert(const int64_t* xy, int64_t k, int64_t* done, const int64_t* near) except + nogil
         Status constrain(int a, int b) except + nogil
         bint legalise() nogil
     uint32_t cdt_canonical "atmcdt::canonical" (CDT& cdt, const int64_t* order,
@@ -144,9 +144,9 @@ cdef class Triangulation:
         """Triangulate vertices (N x 2) afresh; track=True records changes() after it."""
         return self._one_thread("start", self._start, vertices, track)
 
-    def insert(self, points):
+    def insert(self, points, near=None):
         """As _insert (below), one thread at a time."""
-        return self._one_thread("insert", self._insert, points)
+        return self._one_thread("insert", self._insert, points, near)
 
     def constrain(self, segments):
         """As _constrain (below), one thread at a time."""
@@ -193,17 +193,24 @@ cdef class Triangulation:
         self.cdt.dirty_mark.assign(self.cdt.V.size() // 3, 0)
         return status
 
-    def _insert(self, const int64_t[:, ::1] points):
+    def _insert(self, const int64_t[:, ::1] points, const int64_t[::1] near=None):
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
         indices continue the vertices' numbering in the points' order. All are checked
-        first: if one is refused, only those before it go in (status: its refusal)."""
+        first: if one is refused, only those before it go in (status: its refusal).
+        near (K vertex indices, -1 for none): where each point's location walk starts,
+        a hint that changes no triangle (one naming no vertex in place is ignored)."""
         cdef int64_t k = points.shape[0], done = 0, first = self.cdt.pt.size()
         cdef const int64_t* xy = &points[0, 0] if k else NULL
+        cdef const int64_t* hint = NULL
         cdef Status status
         if points.shape[1] != 2:
             raise ValueError("points are K x 2")
+        if near is not None:
+            if near.shape[0] != k:
+                raise ValueError("near has one vertex index per point")
+            hint = &near[0] if k else NULL
         with nogil:  # every point checked in the kernel, then inserted in a spatial order
-            status = self.cdt.insert(xy, k, &done)
+            status = self.cdt.insert(xy, k, &done, hint)
         if status == CDT_INTERNAL:  # a bug: those that went in are no prefix
             went_in = [j for j in range(first, self.cdt.pt.size()) if self.cdt.vinc[j] >= 0]
             return int(status), np.array(went_in, dtype=np.int64)

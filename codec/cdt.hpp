@@ -693,12 +693,20 @@ class CDT {
   static const i64 SWEEP_FLIPS = 16;
 
   // Insert the vertices of `keys` (insertion_order's) below `end`, one by one with
-  // Lawson flips, each walk starting from the last one's triangle.
-  Status insert_in_order(const std::vector<uint64_t>& keys, i64 end) {
+  // Lawson flips, each walk starting from the last one's triangle, or from a vertex
+  // near the point where `near` (indexed by vertex - first) names one already in: a
+  // hint only, since any start finds the same triangle (locate scans if a walk fails).
+  Status insert_in_order(const std::vector<uint64_t>& keys, i64 end,
+                         const i64* near = nullptr, i64 first = 0) {
     for (uint64_t key : keys) {
       i32 p = (i32)(key & INDEX_MASK), on = -1;
       if (p >= end) continue;
-      i32 t = locate(vinc[last], p, &on);
+      i32 from = vinc[last];
+      if (near) {
+        i64 h = near[p - first];
+        if (h >= 0 && h < (i64)vinc.size() && vinc[h] >= 0) from = vinc[h];
+      }
+      i32 t = locate(from, p, &on);
       if (t < 0) return CDT_INTERNAL;
       if (on >= 0) split_edge(on, p);
       else split_triangle(t, p);
@@ -1090,7 +1098,10 @@ class CDT {
   // refused one (whose status is returned), and only those go in; they go in the order
   // of insertion_order, so that the walks are short whatever order they come in. After
   // CDT_INTERNAL (a bug), *done counts the points that went in, those with vinc set.
-  Status insert(const i64* xy, i64 k, i64* done) {
+  // near (k entries, or null): for each point a vertex near it to start its point
+  // location from (refinement knows the triangle each new point falls in), -1 for
+  // none; any value is safe (one naming no vertex in the triangulation is ignored).
+  Status insert(const i64* xy, i64 k, i64* done, const i64* near = nullptr) {
     *done = 0;
     if (broken) return CDT_INTERNAL;
     if (V.empty()) return k ? CDT_OUTSIDE : CDT_OK;
@@ -1127,7 +1138,7 @@ class CDT {
     std::vector<i32> batch((size_t)limit);
     for (i64 j = 0; j < limit; ++j) batch[j] = (i32)(first + j);
     std::vector<uint64_t> keys = insertion_order(batch);
-    Status st = insert_in_order(keys, first + limit);
+    Status st = insert_in_order(keys, first + limit, near, first);
     if (st != CDT_OK) {
       // a bug: the points that went in (vinc set) are no prefix of the batch, and the
       // others are vertices of no triangle; nothing more is done with this one

@@ -109,9 +109,14 @@ class Triangulation:
             _refuse(status, len(v))
         self._count = len(v)
 
-    def insert(self, points: np.ndarray) -> np.ndarray:
-        """Insert points (K x 2); returns their vertex indices (the next numbers)."""
-        status, indices = self._kernel.insert(np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2))
+    def insert(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """Insert points (K x 2); returns their vertex indices (the next numbers).
+        near: for each point a vertex index near it (-1: none), where its point
+        location starts instead of at the last vertex inserted; a hint only, the
+        triangles are the same whatever it holds."""
+        if near is not None:
+            near = np.ascontiguousarray(near, dtype=np.int64).reshape(-1)
+        status, indices = self._kernel.insert(np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2), near)
         self._count += len(indices)
         if status != _cdt.OK:
             _refuse(status, self._count)

@@ -138,3 +138,47 @@ def test_a_batch_that_flips_one_fan_again_and_again_stays_near_a_fresh_build() -
         batch.append(time.process_time() - start)
     np.testing.assert_array_equal(tri.triangles(), delaunay(np.concatenate([corners, middle, low])))
     assert min(batch) < 5 * min(fresh) + 0.005, (min(batch), min(fresh))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_start_vertex_per_point_is_a_hint_only(seed: int) -> None:
+    """#20: insert's `near` (a vertex to start each point's location from, which
+    refinement knows) changes no triangle, whatever it names: a good hint (a corner of
+    the triangle the point falls in), a far one, a point of the same batch not yet in,
+    none (-1), or numbers naming no vertex at all; walls stay walls."""
+    from codec.triangulate import triangulate
+
+    rng = np.random.default_rng(100 + seed)
+    side = 60
+    corners = np.array([[0, 0], [side, 0], [0, side], [side, side]], np.int64)
+    wall = np.array([[5, 7], [30, 9], [50, 44]], np.int64)
+    start = np.concatenate([corners, wall])
+    segments = np.array([[4, 5], [5, 6]], np.int64)
+    cells = rng.permutation((side + 1) ** 2)[:900]
+    points = np.stack([cells % (side + 1), cells // (side + 1)], axis=1).astype(np.int64)
+    points = points[~(points[:, None] == start[None]).all(-1).any(1)]
+    tri = Triangulation(start)
+    tri.constrain(segments)
+    vertices = start
+    for batch in np.array_split(points, 4):
+        n = len(vertices)
+        now = triangulate(vertices, segments)
+        # the corner of the triangle holding each point (any holding it, on an edge)
+        a, b, c = (vertices[now[:, k]] for k in range(3))
+
+        def side_of(p, q, r):
+            return (q[:, None, 0] - p[:, None, 0]) * (r[None, :, 1] - p[:, None, 1]) - \
+                (q[:, None, 1] - p[:, None, 1]) * (r[None, :, 0] - p[:, None, 0])
+
+        inside = (side_of(a, b, batch) >= 0) & (side_of(b, c, batch) >= 0) & (side_of(c, a, batch) >= 0)
+        good = now[inside.argmax(axis=0), 0]
+        kinds = rng.integers(0, 5, len(batch))
+        near = np.where(kinds == 0, good, -1)
+        near = np.where(kinds == 1, rng.integers(0, n, len(batch)), near)  # anywhere
+        near = np.where(kinds == 2, n + rng.integers(0, len(batch), len(batch)), near)  # the batch's own
+        near = np.where(kinds == 3, rng.choice([-7, 10**6, 2**40], len(batch)), near)  # no vertex
+        tri.insert(batch, near)
+        vertices = np.concatenate([vertices, batch])
+        np.testing.assert_array_equal(tri.triangles(), triangulate(vertices, segments))
+    with pytest.raises(ValueError, match="one vertex index per point"):
+        tri.insert(np.array([[1, 2], [2, 2]]), np.array([0]))

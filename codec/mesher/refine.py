@@ -34,7 +34,20 @@ def merge(width: int, *groups: np.ndarray) -> np.ndarray:
     """Concatenate point groups keeping the first of any points on the same pixel and
     the order of the groups (the first group's indices stay valid)."""
     pts = np.concatenate(groups)
-    return pts[_elements.first_of_each(np.ascontiguousarray(pts[:, 1] * width + pts[:, 0], dtype=np.int64))]
+    return pts[_first_of_each(pts, width)]
+
+
+def _first_of_each(pts: np.ndarray, width: int) -> np.ndarray:
+    """A mask of the points that are the first on their pixel."""
+    return _elements.first_of_each(np.ascontiguousarray(pts[:, 1] * width + pts[:, 0], dtype=np.int64))
+
+
+def merge_new(width: int, vertices: np.ndarray, points: np.ndarray, near: np.ndarray):
+    """merge(width, vertices, points), and `near` (a vertex index per point) for the
+    points it kept, in their order."""
+    pts = np.concatenate([vertices, points])
+    keep = _first_of_each(pts, width)
+    return pts[keep], near[keep[len(vertices):]]
 
 
 def run_breaks(segments: np.ndarray) -> np.ndarray:
@@ -120,7 +133,11 @@ class _Growing:
         self._count = 0
         self._failed = False
 
-    def __call__(self, vertices: np.ndarray, segments: np.ndarray) -> np.ndarray | None:
+    def __call__(self, vertices: np.ndarray, segments: np.ndarray,
+                 near: np.ndarray | None = None) -> np.ndarray | None:
+        """The triangles of `vertices` (those since the last call appended) and the
+        walls; near: for each appended vertex one near it, where its point location
+        starts (a hint: ignored unless it has one entry per vertex appended)."""
         if self._failed:
             return None
         try:
@@ -128,7 +145,9 @@ class _Growing:
                 self._tri = Triangulation(vertices)
                 self._tri.constrain(segments)
             elif len(vertices) > self._count:
-                self._tri.insert(vertices[self._count:])
+                if near is not None and len(near) != len(vertices) - self._count:
+                    near = None
+                self._tri.insert(vertices[self._count:], near)
         except ATMError:
             self._failed = True
             return None
@@ -190,6 +209,7 @@ def refine_to_budget(
     growing = _Growing()
     ordered = False
     measured = None
+    near = None  # for each vertex the last round added, a corner of the triangle it fell in
     for r in itertools.count():
         tris = None
         if r == rounds or target <= len(vertices):
@@ -197,7 +217,7 @@ def refine_to_budget(
                 vertices, segments = finish(vertices, segments, measured)
                 growing = None  # the caller changed the mesh: it is triangulated anew
             else:
-                tris = growing(vertices, segments)
+                tris = growing(vertices, segments, near)
             # the last triangulation: made as the MESH chunk's check will make it
             vertices, segments, renumber = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
@@ -205,7 +225,7 @@ def refine_to_budget(
                 # the same triangles numbered as the vertices now are, in canonical order
                 tris = _renumber.canonical_renumbered(tris, renumber)
         elif growing is not None:
-            tris = growing(vertices, segments)
+            tris = growing(vertices, segments, near)
         z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         if tris is None:
             tris = triangulate(vertices, segments)
@@ -232,10 +252,14 @@ def refine_to_budget(
         cand = np.sort(cand[sse[cand] > 0])
         on_tri = cand[cand < len(tris)]
         # each candidate triangle's worst pixel (candidates sorted: in triangle order)
-        _, x, y, err = worst_pixels(gray, vertices, tris[on_tri], z, width, height)
+        owns, x, y, err = worst_pixels(gray, vertices, tris[on_tri], z, width, height)
+        # a corner of the triangle each worst pixel lies in: where its insertion's point
+        # location starts (the border lines' have none)
+        near = tris[on_tri[owns], 0]
         _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
         # (np.concatenate: np.r_ parses its index each call, 10 us a time)
         x, y, err = np.concatenate([x, lx]), np.concatenate([y, ly]), np.concatenate([err, lerr])
+        near = np.concatenate([near, np.full(len(lx), -1, np.int64)])
         big = err > 0.5
         if not big.any() and finish is not None:
             rounds = r + 1  # nothing worth a vertex, but the caller's still go in
@@ -245,7 +269,7 @@ def refine_to_budget(
             vertices, segments, renumber = _raster_order(vertices, segments, width)
             tris = renumber[tris]
             break
-        vertices = merge(width, vertices, np.stack([x[big], y[big]], axis=1))
+        vertices, near = merge_new(width, vertices, np.stack([x[big], y[big]], axis=1), near[big])
     lines = line_raster(vertices, width, height)
     elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
     return vertices, segments, tris, elements, cache.statistics(layout(lines)), ordered
