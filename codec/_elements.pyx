@@ -64,13 +64,7 @@ cdef extern from *:
     /* The row walk in C, so that its helpers can be forced inline (Cython has no way to
        say so: its `inline` is a hint, which gcc's unit-growth limit overrides in this
        large module, leaving the calls a fifth of triangle_statistics' time). */
-    #if defined(__GNUC__) || defined(__clang__)
-    #define ATM_ALWAYS_INLINE static inline __attribute__((always_inline))
-    #elif defined(_MSC_VER)
-    #define ATM_ALWAYS_INLINE static __forceinline
-    #else
-    #define ATM_ALWAYS_INLINE static inline
-    #endif
+    #include "inline.hpp"
     /* ceil((n0 + s dy) / d) for dy = 0, 1, ..., d > 0: the quotient q and the
        remainder r = q d - n (0 <= r < d), stepped by s = sq d + sr (0 <= sr < d) */
     typedef struct { int64_t q, r, sq, sr, d; } atm_edge;
@@ -80,13 +74,13 @@ cdef extern from *:
        function proves its float64 quotients' ceilings exact) */
     typedef struct { atm_edge long_edge, short_edge; int64_t dy, up, lower_n0, lower_s, lower_d; } atm_rows;
 
-    ATM_ALWAYS_INLINE int64_t atm_floor_div(int64_t a, int64_t b) {
+    static ATM_INLINE int64_t atm_floor_div(int64_t a, int64_t b) {
         /* a // b rounded toward minus infinity, b > 0 (C division truncates) */
         int64_t q = a / b;
         if (a % b != 0 && a < 0) q -= 1;
         return q;
     }
-    ATM_ALWAYS_INLINE void atm_edge_start(atm_edge* e, int64_t n0, int64_t s, int64_t d, int64_t dy) {
+    static ATM_INLINE void atm_edge_start(atm_edge* e, int64_t n0, int64_t s, int64_t d, int64_t dy) {
         int64_t n = n0 + s * dy;
         e->d = d;
         e->q = -atm_floor_div(-n, d);
@@ -94,7 +88,7 @@ cdef extern from *:
         e->sq = atm_floor_div(s, d);
         e->sr = s - e->sq * d;
     }
-    ATM_ALWAYS_INLINE void atm_edge_step(atm_edge* e) {
+    static ATM_INLINE void atm_edge_step(atm_edge* e) {
         /* r - sr < 0 wraps the remainder and carries one into q, without a branch
            (which an edge's slope makes hard to predict) */
         int64_t r = e->r - e->sr;
@@ -102,7 +96,7 @@ cdef extern from *:
         e->r = r + (e->d & wrap);
         e->q += e->sq - wrap;
     }
-    ATM_ALWAYS_INLINE void atm_rows_start(atm_rows* w, const int64_t* ys, const int64_t* xs, int64_t up) {
+    static ATM_INLINE void atm_rows_start(atm_rows* w, const int64_t* ys, const int64_t* xs, int64_t up) {
         int64_t tall = ys[2] - ys[0], upper = ys[1] - ys[0], lower = ys[2] - ys[1];
         w->dy = 0;
         w->up = up;
@@ -118,7 +112,7 @@ cdef extern from *:
         /* the lower short edge takes over (kept out of atm_rows_next: once a triangle) */
         atm_edge_start(&w->short_edge, w->lower_n0, w->lower_s, w->lower_d, w->dy);
     }
-    ATM_ALWAYS_INLINE void atm_rows_next(atm_rows* w, int64_t* left, int64_t* count) {
+    static ATM_INLINE void atm_rows_next(atm_rows* w, int64_t* left, int64_t* count) {
         /* columns [left, left + count) of the next row (row ya + dy, dy from 0) */
         int64_t a, b;
         if (w->dy == w->up) atm_rows_lower(w);

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "crc32.hpp"
+#include "inline.hpp"
 
 namespace atmcdt {
 // Internal linkage (one translation unit, the Cython wrapper's): the compiler sees every
@@ -29,15 +30,6 @@ namespace {
 typedef int64_t i64;
 typedef int32_t i32;
 
-// GCC -O2 kept incircle() and illegal() out of line, a call for each test of the
-// Lawson loop: inlined, a decode's triangulation takes ~2 % less time.
-#if defined(__GNUC__)
-#define ATM_INLINE __attribute__((always_inline)) inline
-#elif defined(_MSC_VER)
-#define ATM_INLINE __forceinline
-#else
-#define ATM_INLINE inline
-#endif
 
 enum Status {
   CDT_OK = 0,
@@ -215,6 +207,8 @@ class CDT {
   }
 
   // The exact sign of incircle(a, b, c, d) (ATM.md §4.2.5).
+  // GCC -O2 kept incircle() and illegal() out of line, a call for each test of the
+  // Lawson loop: inlined, a decode's triangulation takes ~2 % less time.
   ATM_INLINE int incircle(i32 a, i32 b, i32 c, i32 d) const {
     const Pt &A = pt[a], &B = pt[b], &C_ = pt[c], &D = pt[d];
     i64 adx = A.x - D.x, ady = A.y - D.y;
