@@ -276,7 +276,7 @@ cdef extern from *:
                && __builtin_cpu_supports("avx512vl");
     }
     /* the 8 samples (a + k*adx) >> shift, k = 0..7, as bytes (u8) or words (u16) */
-    static inline ATM_TARGET __m128i atm_eight(uint64_t a, __m256i k0, __m256i k4, int wide) {
+    static inline ATM_TARGET __m128i atm_eight_avx512(uint64_t a, __m256i k0, __m256i k4, int wide) {
         __m256i v = _mm256_set1_epi64x((long long)a);
         __m256i x0 = _mm256_add_epi64(v, k0), x1 = _mm256_add_epi64(v, k4);
         if (wide) {
@@ -291,215 +291,143 @@ cdef extern from *:
     /* the masks of the first n = 0 .. 8 elements */
     static const uint16_t atm_first[9] = {0, 1, 3, 7, 15, 31, 63, 127, 255};
     /* samples 0 .. n - 1 (n <= 8) of a span at p (bytes or words) */
-    static inline ATM_TARGET void atm_store8(void* p, __m128i s, int64_t n, int wide) {
+    static inline ATM_TARGET void atm_store8_avx512(void* p, __m128i s, int64_t n, int wide, const char* end) {
+        (void)end;  /* a masked store needs no room */
         if (wide)
             _mm_mask_storeu_epi16(p, (__mmask8)atm_first[n], s);
         else
             _mm_mask_storeu_epi8(p, (__mmask16)atm_first[n], s);
     }
-    static inline ATM_TARGET int64_t atm_walk(void* pixels, int64_t y, int64_t last, int64_t turn,
-                                              uint64_t arow, uint64_t adx, uint64_t ady,
-                                              uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
-                                              uint64_t ec, uint64_t sc, int long_left, int64_t w,
-                                              uint16_t* counts, int64_t* spans, int wide, int narrow,
-                                              int counting) {
-        /* the left edge's ceiling and the right one's: the long edge's is the left one
-           when long_left (a walk for each: no select a row) */
-        uint64_t el = long_left ? ea : eb, sl = long_left ? sa : sb, er = long_left ? eb : ea;
-        uint64_t sr = long_left ? sb : sa;
-        __m256i k0 = _mm256_set_epi64x((long long)(3 * adx), (long long)(2 * adx), (long long)adx, 0);
-        __m256i k4 = _mm256_add_epi64(k0, _mm256_set1_epi64x((long long)(4 * adx)));
-        int64_t written = 0, lo, hi, n, size = wide ? 2 : 1;
-        char* row = (char*)pixels + y * w * size;
-        char* p;
-        uint64_t a;
-        for (; y <= last; y++) {
-            if (long_left) {
-                lo = (int64_t)(el >> 40);
-                hi = (int64_t)((y < turn ? er : ec) >> 40);
-            } else {
-                lo = (int64_t)((y < turn ? el : ec) >> 40);
-                hi = (int64_t)(er >> 40);
-            }
-            n = hi - lo;
-            a = arow + adx * (uint64_t)lo;
-            p = row + lo * size;
-            if (!narrow) {
-                for (; n > 8; n -= 8, p += 8 * size, a += 8 * adx)
-                    atm_store8(p, atm_eight(a, k0, k4, wide), 8, wide);
-            }
-            atm_store8(p, atm_eight(a, k0, k4, wide), n, wide);
-            written += hi - lo;
-            if (counting && lo < hi) {  /* MODE_COUNTS' bookkeeping (_account's) */
-                counts[y * (w + 1) + lo] += 1;
-                counts[y * (w + 1) + hi] -= 1;
-                if (spans)
-                    spans[y] += 1;
-            }
-            el += sl;
-            er += sr;
-            ec += sc;
-            arow += ady;
-            row += w * size;
+    static inline ATM_TARGET void atm_steps_avx512(uint64_t adx, __m256i* k0, __m256i* k4) {
+        *k0 = _mm256_set_epi64x((long long)(3 * adx), (long long)(2 * adx), (long long)adx, 0);
+        *k4 = _mm256_add_epi64(*k0, _mm256_set1_epi64x((long long)(4 * adx)));
+    }
+    #define ATM_NAME(x) x##_avx512
+    #include "raster_walk.hpp"
+    #undef ATM_NAME
+    #undef ATM_TARGET
+    /* The same walk with AVX2 (most x86-64 processors without AVX-512 have it), chosen
+       at run time where there is no AVX-512. The 8 samples are computed as above, the
+       even ones in one register and the odd ones in the other, so that one shift and
+       an or put them in order as 32-bit lanes (each below 2**18), packed with
+       saturation (a sample beyond the span may exceed the type; it is not stored).
+       AVX2 has no store under a byte mask: the span's 8 (or 16) bytes are loaded,
+       merged under a mask and stored back, the bytes beyond the span as they were
+       (no other writer of the image during the call, as for the portable walk); where
+       that word would reach past the image's end, the samples are copied one by one. */
+    #define ATM_TARGET __attribute__((target("avx2")))
+    static int atm_has_avx2(void) {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx2");
+    }
+    static inline ATM_TARGET void atm_steps_avx2(uint64_t adx, __m256i* k0, __m256i* k4) {
+        *k0 = _mm256_set_epi64x((long long)(6 * adx), (long long)(4 * adx), (long long)(2 * adx), 0);
+        *k4 = _mm256_add_epi64(*k0, _mm256_set1_epi64x((long long)adx));
+    }
+    static inline ATM_TARGET __m128i atm_eight_avx2(uint64_t a, __m256i k0, __m256i k4, int wide) {
+        __m256i v = _mm256_set1_epi64x((long long)a);
+        __m256i x0 = _mm256_add_epi64(v, k0), x1 = _mm256_add_epi64(v, k4);
+        __m128i s;
+        if (wide) {
+            x0 = _mm256_srli_epi64(x0, 46);
+            x1 = _mm256_srli_epi64(x1, 46);
+        } else {
+            x0 = _mm256_srli_epi64(x0, 54);
+            x1 = _mm256_srli_epi64(x1, 54);
         }
-        return written;
+        /* 32-bit lanes s0 .. s7; packed to words per 128-bit half (s0-s3 twice, s4-s7
+           twice), whose first quarters are joined */
+        x0 = _mm256_or_si256(x0, _mm256_slli_epi64(x1, 32));
+        x0 = _mm256_permute4x64_epi64(_mm256_packus_epi32(x0, x0), 0x08);
+        s = _mm256_castsi256_si128(x0);
+        return wide ? s : _mm_packus_epi16(s, s);
     }
-    static ATM_TARGET int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last,
-                                              int64_t turn, uint64_t arow, uint64_t adx, uint64_t ady,
-                                              uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
-                                              uint64_t ec, uint64_t sc, int long_left, int64_t w,
-                                              uint16_t* counts, int64_t* spans) {
-        /* eight walks, each with its sample size, span test and bookkeeping known to
-           the compiler */
-    #define ATM_WALK(ll, wide, narrow, counting) atm_walk(pixels, y, last, turn, arow, adx, ady, ea, sa, eb, \
-                                                          sb, ec, sc, ll, w, counts, spans, wide, narrow, counting)
-    #define ATM_WALKS(wide, narrow, counting) (long_left ? ATM_WALK(1, wide, narrow, counting) \
-                                                         : ATM_WALK(0, wide, narrow, counting))
-        if (counts)
-            return wide ? (narrow ? ATM_WALKS(1, 1, 1) : ATM_WALKS(1, 0, 1))
-                        : (narrow ? ATM_WALKS(0, 1, 1) : ATM_WALKS(0, 0, 1));
-        return wide ? (narrow ? ATM_WALKS(1, 1, 0) : ATM_WALKS(1, 0, 0))
-                    : (narrow ? ATM_WALKS(0, 1, 0) : ATM_WALKS(0, 0, 0));
-    #undef ATM_WALKS
-    #undef ATM_WALK
-    }
-    /* _triangles' loop over one-channel triangles k, k + 1, ... with the walk above:
-       the same set-up as its own (_sort3's order, the plane with the table's
-       multiplier, _fixed_edges' edges), here so that the compiler sees the set-up
-       and the walk together. Stops at the first triangle the fast walk does not take
-       (|D| over the table's 2048, a corner in the last column, an edge over
-       edge_lim rows), which the caller renders its own way: the index where it
-       stopped (m at the end); the pixels written are added to *written. */
-    static inline ATM_TARGET int64_t atm_run(const int64_t* v, const void* values, const void* tris,
-                                             int64_t k, int64_t m, void* pixels, const uint64_t* recip,
-                                             int64_t edge_lim, const uint64_t* table, int64_t w, int64_t h,
-                                             uint16_t* counts, int64_t* spans, int64_t* written,
-                                             int wide, int idx32, int ordered) {
-        int64_t a, b, c, t, ka, kb, kc, kt, tx, ty, mx, my, bx, by, dxm, dym, dxb, dyb, dxl, dyl;
-        int64_t d, half, vt, vm, vb, ga, gb, last, turn, xmin, xmax, total = 0;
-        uint64_t mult, arow, adx, ady, ea, sa, eb, sb, ec, sc;
-        int s, border;
-        for (; k < m; k++) {
-            if (idx32) {
-                a = ((const int32_t*)tris)[3 * k]; b = ((const int32_t*)tris)[3 * k + 1]; c = ((const int32_t*)tris)[3 * k + 2];
+    /* the low n bytes of a word, n = 0 .. 8 */
+    static const uint64_t atm_bytes[9] = {0, 0xFF, 0xFFFF, 0xFFFFFF, 0xFFFFFFFFull, 0xFFFFFFFFFFull,
+                                          0xFFFFFFFFFFFFull, 0xFFFFFFFFFFFFFFull, 0xFFFFFFFFFFFFFFFFull};
+    static inline ATM_TARGET void atm_store8_avx2(void* p, __m128i s, int64_t n, int wide, const char* end) {
+        uint64_t old, word;
+        __m128i m;
+        if (wide) {
+            if ((const char*)p + 16 <= end) {
+                m = _mm_cmpgt_epi16(_mm_set1_epi16((short)n), _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7));
+                _mm_storeu_si128((__m128i*)p, _mm_blendv_epi8(_mm_loadu_si128((const __m128i*)p), s, m));
             } else {
-                a = ((const int64_t*)tris)[3 * k]; b = ((const int64_t*)tris)[3 * k + 1]; c = ((const int64_t*)tris)[3 * k + 2];
+                uint16_t t[8];
+                _mm_storeu_si128((__m128i*)t, s);
+                memcpy(p, t, (size_t)n * 2);
             }
-            /* raster order: by the pixel keys, or by index where the keys increase
-               with it (a decoder's vertices: no key to make) */
-            if (ordered) {
-                ka = a; kb = b; kc = c;
-            } else {
-                ka = v[2 * a + 1] * w + v[2 * a]; kb = v[2 * b + 1] * w + v[2 * b]; kc = v[2 * c + 1] * w + v[2 * c];
-            }
-            s = kb < ka;
-            t = s ? b : a; b = s ? a : b; a = t;
-            kt = s ? kb : ka; kb = s ? ka : kb; ka = kt;
-            s = kc < kb;
-            t = s ? c : b; c = s ? b : c; b = t;
-            kt = s ? kc : kb; kc = s ? kb : kc; kb = kt;
-            s = kb < ka;
-            t = s ? b : a; b = s ? a : b; a = t;
-            tx = v[2 * a]; ty = v[2 * a + 1];
-            mx = v[2 * b]; my = v[2 * b + 1];
-            bx = v[2 * c]; by = v[2 * c + 1];
-            dxm = mx - tx; dym = my - ty; dxb = bx - tx; dyb = by - ty;
-            dxl = bx - mx; dyl = by - my;
-            d = dxm * dyb - dxb * dym;
-            if (d == 0)
-                continue;
-            half = d > 0 ? d : -d;
-            border = (tx == w - 1) | (mx == w - 1) | (bx == w - 1);
-            if (half > 2048 || border || dyb > edge_lim)
-                break;
-            mult = wide ? (table[half] + 255) >> 8 : table[half];
-            if (wide) {
-                vt = ((const uint16_t*)values)[a]; vm = ((const uint16_t*)values)[b]; vb = ((const uint16_t*)values)[c];
-            } else {
-                vt = ((const uint8_t*)values)[a]; vm = ((const uint8_t*)values)[b]; vb = ((const uint8_t*)values)[c];
-            }
-            /* _triangles' ga and gb with dyl = dyb - dym and dxl = dxb - dxm put in
-               (the same integers, two products fewer) */
-            ga = 2 * (dyb * (vm - vt) - dym * (vb - vt));
-            gb = 2 * (dxm * (vb - vt) - dxb * (vm - vt));
-            if (d < 0) {
-                ga = -ga;
-                gb = -gb;
-            }
-            arow = (uint64_t)((2 * vt + 1) * half - ga * tx) * mult;
-            adx = (uint64_t)ga * mult;
-            ady = (uint64_t)gb * mult;
-            last = by == h - 1 ? by : by - 1;
-            ea = (uint64_t)(tx * dyb + dyb - 1) * recip[dyb];
-            sa = (uint64_t)dxb * recip[dyb];
-            if (dym > 0) {
-                eb = (uint64_t)(tx * dym + dym - 1) * recip[dym];
-                sb = (uint64_t)dxm * recip[dym];
-                ec = (uint64_t)(mx * dyl + dyl - 1) * recip[dyl];
-                sc = (uint64_t)dxl * recip[dyl];
-                ec -= (uint64_t)dym * sc;
-                turn = by > my ? my : last + 1;
-            } else {
-                eb = (uint64_t)(mx * dyl + dyl - 1) * recip[dyl];
-                sb = (uint64_t)dxl * recip[dyl];
-                ec = eb;
-                sc = sb;
-                turn = last + 1;
-            }
-            xmin = tx < mx ? tx : mx; xmin = xmin < bx ? xmin : bx;
-            xmax = tx > mx ? tx : mx; xmax = xmax > bx ? xmax : bx;
-            /* the walk a call of its own: inlined here, its eight forms made the loop
-               slower than the call */
-            total += atm_walk_avx512(pixels, wide, xmax - xmin <= 8, ty, last, turn, arow, adx, ady, ea, sa,
-                                     eb, sb, ec, sc, d > 0, w, counts, spans);
+        } else if ((const char*)p + 8 <= end) {
+            memcpy(&old, p, 8);
+            word = (uint64_t)_mm_cvtsi128_si64(s);
+            old = (old & ~atm_bytes[n]) | (word & atm_bytes[n]);
+            memcpy(p, &old, 8);
+        } else {
+            uint8_t t[16];
+            _mm_storeu_si128((__m128i*)t, s);
+            memcpy(p, t, (size_t)n);
         }
-        *written += total;
-        return k;
     }
-    static ATM_TARGET int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32,
-                                             int64_t k, int64_t m, void* pixels, int wide,
-                                             const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
-                                             int64_t w, int64_t h, uint16_t* counts, int64_t* spans,
-                                             int64_t* written, int ordered) {
-        /* a loop for each sample size, index width and corner order */
-    #define ATM_RUN(wide, idx32, ordered) atm_run(v, values, tris, k, m, pixels, recip, edge_lim, table, w, h, \
-                                                  counts, spans, written, wide, idx32, ordered)
-    #define ATM_RUNS(wide, idx32) (ordered ? ATM_RUN(wide, idx32, 1) : ATM_RUN(wide, idx32, 0))
-        if (idx32)
-            return wide ? ATM_RUNS(1, 1) : ATM_RUNS(0, 1);
-        return wide ? ATM_RUNS(1, 0) : ATM_RUNS(0, 0);
-    #undef ATM_RUNS
-    #undef ATM_RUN
-    }
+    #define ATM_NAME(x) x##_avx2
+    #include "raster_walk.hpp"
+    #undef ATM_NAME
     #else
     #define ATM_AVX512 0
     static int atm_has_avx512(void) { return 0; }
-    static int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last,
-                                   int64_t turn, uint64_t arow, uint64_t adx, uint64_t ady,
-                                   uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb,
-                                   uint64_t ec, uint64_t sc, int long_left, int64_t w,
-                                   uint16_t* counts, int64_t* spans) { return -1; }
-    static int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k,
-                                  int64_t m, void* pixels, int wide, const uint64_t* recip, int64_t edge_lim,
-                                  const uint64_t* table, int64_t w, int64_t h, uint16_t* counts,
-                                  int64_t* spans, int64_t* written, int ordered) { return k; }
+    static int atm_has_avx2(void) { return 0; }
+    #define ATM_STUBS(isa) \
+    static int64_t atm_walk_##isa(void* pixels, int wide, int narrow, int64_t y, int64_t last, \
+                                  int64_t turn, uint64_t arow, uint64_t adx, uint64_t ady, \
+                                  uint64_t ea, uint64_t sa, uint64_t eb, uint64_t sb, \
+                                  uint64_t ec, uint64_t sc, int long_left, int64_t w, int64_t h, \
+                                  uint16_t* counts, int64_t* spans) { return -1; } \
+    static int64_t atm_run_##isa(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k, \
+                                 int64_t m, void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, \
+                                 const uint64_t* table, int64_t w, int64_t h, uint16_t* counts, \
+                                 int64_t* spans, int64_t* written, int ordered) { return k; }
+    ATM_STUBS(avx512)
+    ATM_STUBS(avx2)
+    #undef ATM_STUBS
     #endif
     """
     int atm_has_avx512() noexcept nogil
+    int atm_has_avx2() noexcept nogil
     int64_t atm_run_avx512(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k, int64_t m,
                            void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
                            int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written,
                            int ordered) noexcept nogil
     int64_t atm_walk_avx512(void* pixels, int wide, int narrow, int64_t y, int64_t last, int64_t turn,
                             uint64_t arow, uint64_t adx, uint64_t ady, uint64_t ea, uint64_t sa, uint64_t eb,
-                            uint64_t sb, uint64_t ec, uint64_t sc, int long_left, int64_t w, uint16_t* counts,
-                            int64_t* spans) noexcept nogil
+                            uint64_t sb, uint64_t ec, uint64_t sc, int long_left, int64_t w, int64_t h,
+                            uint16_t* counts, int64_t* spans) noexcept nogil
+    int64_t atm_run_avx2(const int64_t* v, const void* values, const void* tris, int idx32, int64_t k, int64_t m,
+                         void* pixels, int wide, const uint64_t* recip, int64_t edge_lim, const uint64_t* table,
+                         int64_t w, int64_t h, uint16_t* counts, int64_t* spans, int64_t* written,
+                         int ordered) noexcept nogil
+    int64_t atm_walk_avx2(void* pixels, int wide, int narrow, int64_t y, int64_t last, int64_t turn,
+                          uint64_t arow, uint64_t adx, uint64_t ady, uint64_t ea, uint64_t sa, uint64_t eb,
+                          uint64_t sb, uint64_t ec, uint64_t sc, int long_left, int64_t w, int64_t h,
+                          uint16_t* counts, int64_t* spans) noexcept nogil
 
 
 # whether this processor runs the AVX-512 walk (found once, at import; read only)
 cdef bint _AVX512 = atm_has_avx512()
 #: Whether rasterise() takes the AVX-512 walk on this processor.
 AVX512 = bool(_AVX512)
+# and the AVX2 walk, where there is no AVX-512 (found once, at import; read only)
+cdef bint _AVX2 = atm_has_avx2()
+#: Whether this processor can take the AVX2 walk (rasterise() takes it without AVX-512).
+AVX2 = bool(_AVX2)
+
+# the walks, by the `isa` that _render and _triangles take
+cdef enum Isa:
+    ISA_PORTABLE = 0
+    ISA_AVX2 = 1
+    ISA_AVX512 = 2
+
+#: The walks rasterise(walk=) can take on this processor, the one it takes by default first.
+WALKS = (("avx512",) if _AVX512 else ()) + (("avx2",) if _AVX2 else ()) + ("portable",)
+_ISAS = {"avx512": ISA_AVX512, "avx2": ISA_AVX2, "portable": ISA_PORTABLE}
 
 
 # _MASK[n]: the low n bytes of a word
@@ -728,7 +656,7 @@ cdef inline int64_t _walk1(sample_t* pixels, sample_t* row, uint64_t arow, uint6
 cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, uint64_t ady, int64_t tx,
                                int64_t ty, int64_t mx, int64_t my, int64_t bx, int64_t by, int64_t last,
                                bint long_left, const uint64_t* recip, int64_t w, int64_t h, int mode,
-                               uint16_t* counts, int64_t* spans, uint8_t* cover, bint simd) noexcept nogil:
+                               uint16_t* counts, int64_t* spans, uint8_t* cover, int isa) noexcept nogil:
     """A triangle of one channel in fixed point, its edges too (most triangles of a
     gray image; none with a corner in the last column, nor a plane too large for the
     fixed point), its rows walked in locals: the long edge T -> B and the short one,
@@ -737,18 +665,22 @@ cdef inline int64_t _triangle1(sample_t* pixels, uint64_t arow, uint64_t adx, ui
     rows). An edge from column x0 moving dx columns over dy rows has ceil(x) =
     floor(n / dy) on its k-th row, n = x0*dy + dx*k + dy - 1, with 0 <= n < W*dy, read
     as (n * E) >> 40 with E = ceil(2**40 / dy) (exact when W*dy*dy <= 2**40, as for
-    the planes: see the module's docstring). Short spans take _put8 (with AVX-512
-    and no per-pixel count, `simd`, atm_walk_avx512 takes the rows). The pixels
-    written."""
+    the planes: see the module's docstring). Short spans take _put8 (with AVX-512 or
+    AVX2, `isa`, and no per-pixel count, atm_walk_avx512 or atm_walk_avx2 takes the
+    rows). The pixels written."""
     cdef int64_t turn, xmin = min(tx, mx, bx), xmax = max(tx, mx, bx)
     cdef uint64_t ea, sa, eb, sb, ec, sc
     cdef sample_t* row = pixels + ty * w
     turn = _fixed_edges(tx, ty, mx, my, bx, by, last, recip, &ea, &sa, &eb, &sb, &ec, &sc)
     # a narrow triangle (most of them): every span is [lo, hi) within [xmin, xmax], so
     # at most 8 samples, and the last row's word from xmax lies in the image
-    if simd and mode != MODE_COVER:
+    if isa == ISA_AVX512 and mode != MODE_COVER:
         return atm_walk_avx512(pixels, sample_t is uint16_t, xmax - xmin <= 8, ty, last, turn, arow, adx, ady,
-                               ea, sa, eb, sb, ec, sc, long_left, w, counts if mode == MODE_COUNTS else NULL, spans)
+                               ea, sa, eb, sb, ec, sc, long_left, w, h, counts if mode == MODE_COUNTS else NULL,
+                               spans)
+    if isa == ISA_AVX2 and mode != MODE_COVER:
+        return atm_walk_avx2(pixels, sample_t is uint16_t, xmax - xmin <= 8, ty, last, turn, arow, adx, ady,
+                             ea, sa, eb, sb, ec, sc, long_left, w, h, counts if mode == MODE_COUNTS else NULL, spans)
     if xmax - xmin <= 8 and last * w + xmax + 8 <= w * h:
         return _walk1(pixels, row, arow, adx, ady, ty, last, turn, ea, sa, eb, sb, ec, sc, long_left, True, w, h,
                       mode, counts, spans, cover)
@@ -811,7 +743,7 @@ cdef inline int64_t _corner(const void* tris, int64_t i, bint idx32) noexcept no
 
 cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris, bint idx32, int64_t m, int64_t c,
                         sample_t* pixels, int mode, uint16_t* counts, int64_t* spans, uint8_t* cover,
-                        int64_t w, int64_t h, bint simd, bint ordered) noexcept nogil:
+                        int64_t w, int64_t h, int isa, bint ordered) noexcept nogil:
     """Write every triangle's pixels into `pixels` and account for them as `mode`
     says: MODE_COUNTS in `counts` (a row of W + 1 counters per image row, see the
     module's docstring) and `spans` (non-empty spans per row, or NULL), MODE_COVER by
@@ -853,12 +785,16 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris
             recip[k] = _reciprocal(k, 40)
     # with AVX-512, atm_run_avx512 renders the one-channel triangles it can, up to
     # one it cannot, which the loop's body renders
-    run = simd and c == 1 and recip != NULL and mode != MODE_COVER
+    run = isa != ISA_PORTABLE and c == 1 and recip != NULL and mode != MODE_COVER
     k = 0
     while k < m:
         if run:
-            k = atm_run_avx512(v, vals, tris, idx32, k, m, pixels, sample_t is uint16_t, recip, edge_lim, _RECIPROCAL, w,
-                               h, counts if mode == MODE_COUNTS else NULL, spans, &written, ordered)
+            if isa == ISA_AVX512:
+                k = atm_run_avx512(v, vals, tris, idx32, k, m, pixels, sample_t is uint16_t, recip, edge_lim,
+                                   _RECIPROCAL, w, h, counts if mode == MODE_COUNTS else NULL, spans, &written, ordered)
+            else:
+                k = atm_run_avx2(v, vals, tris, idx32, k, m, pixels, sample_t is uint16_t, recip, edge_lim,
+                                 _RECIPROCAL, w, h, counts if mode == MODE_COUNTS else NULL, spans, &written, ordered)
             if k >= m:
                 break
         j = k
@@ -910,7 +846,7 @@ cdef int64_t _triangles(const int64_t* v, const sample_t* vals, const void* tris
         if pl.fast and not border and dyb <= edge_lim and recip != NULL:
             if c == 1:
                 written += _triangle1(pixels, pl.row[0], pl.dx[0], pl.dy[0], tx, ty, mx, my, bx, by, last,
-                                      long_left, recip, w, h, mode, counts, spans, cover, simd)
+                                      long_left, recip, w, h, mode, counts, spans, cover, isa)
             else:
                 written += _triangle_colour(pixels, &pl, c, tx, ty, mx, my, bx, by, last, long_left, recip, w,
                                             mode, counts, spans, cover)
@@ -954,7 +890,7 @@ cdef int _check_counts(const uint16_t* counts, const int64_t* spans, int64_t w, 
 
 
 cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, const void* tris, bint idx32, int64_t m,
-                 sample_t* pixels, int64_t w, int64_t h, int check, bint simd, int64_t* detail) noexcept nogil:
+                 sample_t* pixels, int64_t w, int64_t h, int check, int isa, int64_t* detail) noexcept nogil:
     """Check the indices, rasterise, check the coverage; the status code, with
     `detail` set on an error."""
     cdef int64_t k, p, npix = w * h
@@ -980,7 +916,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             detail[0] = k
             return BAD_INDEX
     if check == CHECK_TOTAL:
-        if _triangles(v, vals, tris, idx32, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, simd, ordered) == npix:
+        if _triangles(v, vals, tris, idx32, m, c, pixels, MODE_TOTAL, NULL, NULL, NULL, w, h, isa, ordered) == npix:
             return OK
     else:
         counts = <uint16_t*>calloc(<size_t>((w + 1) * h), sizeof(uint16_t))
@@ -991,7 +927,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
             free(counts)
             free(spans)
             return NO_MEMORY
-        _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, simd, ordered)
+        _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COUNTS, counts, spans, NULL, w, h, isa, ordered)
         status = _check_counts(counts, spans, w, h)
         free(counts)
         free(spans)
@@ -1001,7 +937,7 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
     cover = <uint8_t*>calloc(<size_t>npix, 1)
     if cover == NULL:
         return NO_MEMORY
-    _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, simd, ordered)
+    _triangles(v, vals, tris, idx32, m, c, pixels, MODE_COVER, NULL, NULL, cover, w, h, isa, ordered)
     status = OK
     for p in range(npix):
         if cover[p] != 1:
@@ -1014,7 +950,8 @@ cdef int _render(const int64_t* v, int64_t nv, const sample_t* vals, int64_t c, 
 
 def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
               const index_t[:, ::1] triangles, sample_t[:, ::1] out,
-              int64_t width, int64_t height, int check=CHECK_SPANS, bint portable=False, bint zero=False):
+              int64_t width, int64_t height, int check=CHECK_SPANS, bint portable=False, bint zero=False,
+              walk=None):
     """Rasterise the triangles (corner indices int64 or int32) into `out` (H*W x C,
     C <= 4; the samples' type),
     checking that every pixel is written exactly once (`check`: CHECK_SPANS for any
@@ -1023,7 +960,9 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
     Releases the GIL; nothing else may write `out` during the call (short spans are
     merged into it word by word, the samples around them written back as read).
     portable=True: the portable walk even where the processor has AVX-512 (which
-    gives the same pixels; for tests). zero=True: `out` is set to 0 first, in the same
+    gives the same pixels; for tests); walk: one of WALKS to take instead of the
+    fastest (ValueError for a walk this processor cannot take; for tests and
+    benchmarks). zero=True: `out` is set to 0 first, in the same
     release of the GIL (a new image's zeroing and first-touch page faults are work
     that another thread's Python need not wait for)."""
     cdef int64_t detail = 0, nv = vertices.shape[0], m = triangles.shape[0], c = values.shape[1]
@@ -1039,6 +978,9 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
         raise ValueError("rasterise: an image of at least one pixel")
     if check != CHECK_SPANS and check != CHECK_TOTAL:
         raise ValueError(f"rasterise: unknown coverage check {check}")
+    if walk is not None and walk not in WALKS:
+        raise ValueError(f"rasterise: walk {walk!r} is not one of this processor's {WALKS}")
+    cdef int isa = _ISAS["portable" if portable else walk if walk is not None else WALKS[0]]
     # the first element's address, read only where there are elements
     cdef const int64_t* v = &vertices[0, 0] if nv else NULL
     cdef const sample_t* vals = &values[0, 0] if nv else NULL
@@ -1047,7 +989,7 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
         if zero:
             memset(&out[0, 0], 0, <size_t>(width * height * c) * sizeof(sample_t))
         status = _render(v, nv, vals, c, tris, index_t is int32_t, m, &out[0, 0], width, height, check,
-                         _AVX512 and not portable, &detail)
+                         isa, &detail)
     if status == NO_MEMORY:
         raise MemoryError(f"rasterise: no memory for the coverage counters of a {width}x{height} image")
     return status, detail
