@@ -10,7 +10,11 @@ with its holes (nodata 0). Each build runs in a worker process of its own (the t
 every file, timed by thread CPU time (steadier than wall time where others load the
 machine), the kernels timed inside each decode by wrapping their entry points. Every
 worker checks that each file decodes to the same pixels every time, and the table
-says whether the builds' pixels agree.
+says whether the builds' pixels agree. Each build's columns also give the MESH field
+passes' part of the glue (_fields.band_front and band_values, where the build has
+them) and the minor page faults a decode takes in its thread (Linux; a property of
+the process's heap as much as of the decode: glibc gives freed memory back to the
+system, and a decode then faults in fresh pages).
 
     python benchmarks/glue.py [--rounds 7] [--decodes 20] [--against /path/to/other/checkout] [--decoder]
 
@@ -66,14 +70,17 @@ def make_files(folder: Path) -> list[Path]:
 
 def worker(files: list[str], reuse: bool = False) -> None:
     """A round per line on stdin (the number of decodes): prints, as JSON, each file's
-    [whole, triangulation, rasteriser] thread CPU ns per decode and its pixels' hash.
+    [whole, triangulation, rasteriser] thread CPU ns per decode, its pixels' hash, the
+    field passes' ns and the minor page faults per decode (-1 where not counted).
     reuse: decode with one codec.Decoder where the checkout has it."""
+    import resource
+
     import numpy as np
 
     import codec
-    from codec.native import _cdt, _rasterise
+    from codec.native import _cdt, _fields, _rasterise
 
-    spent = {"cdt": 0, "raster": 0}
+    spent = {"cdt": 0, "raster": 0, "fields": 0}
     clock = time.thread_time_ns
 
     def timed(module, name: str, key: str) -> None:
@@ -90,6 +97,13 @@ def worker(files: list[str], reuse: bool = False) -> None:
 
     timed(_cdt, "triangulate", "cdt")
     timed(_rasterise, "rasterise", "raster")
+    for name in ("band_front", "band_values"):  # (a checkout before them has neither)
+        if hasattr(_fields, name):
+            timed(_fields, name, "fields")
+    who = getattr(resource, "RUSAGE_THREAD", None)
+
+    def faults() -> int:
+        return resource.getrusage(who).ru_minflt if who is not None else 0
     from codec import triangulate as triangulation
     if hasattr(triangulation, "Delaunay"):
         # a Reader triangulates in its own triangulate.Delaunay: its kernel object's
@@ -114,13 +128,15 @@ def worker(files: list[str], reuse: bool = False) -> None:
         n = int(line)
         out = {}
         for f, d in data.items():
-            spent.update(cdt=0, raster=0)
+            spent.update(cdt=0, raster=0, fields=0)
+            f0 = faults()
             t0 = clock()
             for _ in range(n):
                 image = decode(d)
             whole = clock() - t0
+            paged = (faults() - f0) / n if who is not None else -1
             assert np.array_equal(image, first[f]), f"{f} decoded to other pixels"
-            out[f] = [whole / n, spent["cdt"] / n, spent["raster"] / n, digest[f]]
+            out[f] = [whole / n, spent["cdt"] / n, spent["raster"] / n, digest[f], spent["fields"] / n, paged]
         print(json.dumps(out), flush=True)
 
 
@@ -154,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     names = [f"this checkout ({how[0]})"] + ([f"--against ({how[1]})"] if args.against else [])
     head = ["file"]
     for name in names:
-        head += [f"{name}: decode us", "triangulation us", "rasteriser us", "glue us"]
+        head += [f"{name}: decode us", "triangulation us", "rasteriser us", "glue us", "of it field passes us",
+                 "page faults"]
     if args.against:
         head += ["glue this / against", "same pixels"]
     print(f"{args.rounds} interleaved rounds of {args.decodes} decodes a file; thread CPU time per decode, "
@@ -166,10 +183,13 @@ def main(argv: list[str] | None = None) -> int:
         glue = []
         for got in results:
             rounds = [r[f] for r in got]
-            glue.append([w - c - r for w, c, r, _ in rounds])
+            glue.append([w - c - r for w, c, r, *_ in rounds])
             for k in range(3):
                 row.append(f"{statistics.median(x[k] for x in rounds) / 1e3:.0f}")
             row.append(f"{statistics.median(glue[-1]) / 1e3:.0f}")
+            row.append(f"{statistics.median(x[4] for x in rounds) / 1e3:.0f}")
+            paged = statistics.median(x[5] for x in rounds)
+            row.append("-" if paged < 0 else f"{paged:.0f}")
         if args.against:
             row.append(f"{statistics.median(a / b for a, b in zip(*glue)):.2f}")
             row.append("yes" if results[0][0][f][3] == results[1][0][f][3] else "NO")

@@ -341,3 +341,19 @@ def test_speed_thread_lists_are_files_of_their_own() -> None:
     every = lists[0] + lists[1]
     assert len({id(data) for data in every}) == len(every)
     assert not any(data is f for data in every for f in files)
+
+
+def test_glue_benchmark_gives_the_field_passes_and_page_faults(tmp_path) -> None:
+    """glue.py's columns for the decode's budget: the MESH field passes' part of the
+    glue (band_front and band_values) and the minor page faults a decode takes."""
+    run = subprocess.run(
+        [sys.executable, "benchmarks/glue.py", "--rounds", "1", "--decodes", "2", "--files", str(tmp_path)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr
+    head, _, *rows = _table(run.stdout)
+    for row in rows:
+        figures = dict(zip(head, row))
+        assert 0 < float(figures["of it field passes us"]) < float(figures["glue us"])
+        paged = figures["page faults"]
+        assert paged == "-" if not sys.platform.startswith("linux") else float(paged) >= 0
