@@ -427,7 +427,8 @@ cdef enum Isa:
 
 #: The walks rasterise(walk=) can take on this processor, the one it takes by default first.
 WALKS = (("avx512",) if _AVX512 else ()) + (("avx2",) if _AVX2 else ()) + ("portable",)
-_ISAS = {"avx512": ISA_AVX512, "avx2": ISA_AVX2, "portable": ISA_PORTABLE}
+# the walks' names by their Isa (a tuple: no module state a call could change)
+_ISA_NAMES = ("portable", "avx2", "avx512")
 
 
 # _MASK[n]: the low n bytes of a word
@@ -980,7 +981,7 @@ def rasterise(const int64_t[:, ::1] vertices, const sample_t[:, ::1] values,
         raise ValueError(f"rasterise: unknown coverage check {check}")
     if walk is not None and walk not in WALKS:
         raise ValueError(f"rasterise: walk {walk!r} is not one of this processor's {WALKS}")
-    cdef int isa = _ISAS["portable" if portable else walk if walk is not None else WALKS[0]]
+    cdef int isa = _ISA_NAMES.index("portable" if portable else walk if walk is not None else WALKS[0])
     # the first element's address, read only where there are elements
     cdef const int64_t* v = &vertices[0, 0] if nv else NULL
     cdef const sample_t* vals = &values[0, 0] if nv else NULL
