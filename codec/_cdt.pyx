@@ -24,6 +24,7 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
     cdef cppclass Slots[X]:
         size_t size() const
         X& operator[](size_t)
+        X* data()
     cdef cppclass CDT:
         vector[Pt] pt
         Slots[int] V
@@ -267,3 +268,75 @@ cdef class Triangulation:
         self.cdt.old.clear()
         return (np.array(removed, dtype=np.int64).reshape(-1, 3),
                 np.array(added, dtype=np.int64).reshape(-1, 3))
+
+    def slots(self):
+        """As _slots (below), one thread at a time."""
+        return self._one_thread("slots", self._slots)
+
+    def dirty(self, into=None):
+        """As _dirty (below), one thread at a time."""
+        return self._one_thread("dirty", self._dirty, into)
+
+    def size(self):
+        """The number of triangle slots (of triangles)."""
+        return self.cdt.V.size() // 3
+
+    def _slots(self):
+        """Every triangle slot's triangle (M x 3, row t the triangle in slot t), each
+        rotated to start at its smallest corner, orientation kept: the rotation the
+        canonical order lists it in (ATM.md §4.2.3), but in slot order. A slot keeps its
+        number until a change rewrites it (changes(), dirty()); new ones come last."""
+        cdef int64_t m = self.cdt.V.size() // 3, t
+        out = np.empty((m, 3), dtype=np.int64)
+        cdef int64_t[:, ::1] o = out
+        cdef int* v = self.cdt.V.data()
+        with nogil:
+            for t in range(m):
+                _rotated(v + 3 * t, &o[t, 0])
+        return out
+
+    def _dirty(self, int64_t[:, ::1] into=None):
+        """(slots, triangles): the triangle slots written since start or the last call
+        of this or changes() (one record, which both empty), in the order they were
+        first written, and the triangle each holds now (K x 3, rotated as _slots
+        rotates them); a slot may hold the triangle it held before. into (a row per
+        slot, size() at least): each slot's triangle goes to its row there instead, and
+        only the slots are returned. Only for a triangulation started with track=True."""
+        cdef int64_t k = self.cdt.dirty.size(), j, t, m = self.cdt.V.size() // 3
+        if not self.cdt.track:
+            raise ValueError("Triangulation.dirty: started without track=True")
+        if into is not None and (into.shape[0] < m or into.shape[1] != 3):
+            raise ValueError("Triangulation.dirty: into needs 3 columns and a row per slot")
+        slots = np.empty(k, dtype=np.int64)
+        out = np.empty((k if into is None else 0, 3), dtype=np.int64)
+        cdef int64_t[::1] s = slots
+        cdef int64_t[:, ::1] o = out if into is None else into
+        cdef int* v = self.cdt.V.data()
+        cdef bint bad = False, by_slot = into is not None
+        with nogil:
+            for j in range(k):
+                t = self.cdt.dirty[j]
+                if not 0 <= t < m:
+                    bad = True  # a slot written but never made: a bug, not an input
+                    break
+                s[j] = t
+                _rotated(v + 3 * t, &o[t if by_slot else j, 0])
+                self.cdt.dirty_mark[t] = 0
+            if not bad:
+                self.cdt.dirty.clear()
+                self.cdt.old.clear()
+        if bad:
+            raise RuntimeError("Triangulation.dirty: a changed slot beyond the triangles")
+        return slots if by_slot else (slots, out)
+
+
+cdef inline void _rotated(const int* v, int64_t* out) noexcept nogil:
+    """Triangle v (3 corners) rotated to start at its smallest corner (orientation kept)."""
+    cdef int64_t a = v[0], b = v[1], c = v[2], r
+    if b < a and b < c:
+        r = a; a = b; b = c; c = r
+    elif c < a and c < b:
+        r = c; c = b; b = a; a = r
+    out[0] = a
+    out[1] = b
+    out[2] = c

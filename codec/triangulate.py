@@ -137,6 +137,26 @@ class Triangulation:
         track_changes=True (ValueError otherwise)."""
         return self._kernel.changes()
 
+    def slots(self) -> np.ndarray:
+        """Every triangle by the kernel's slot (M x 3, row t the triangle in slot t), each
+        rotated to start at its smallest corner as the canonical order lists it: a
+        slot keeps its triangle until a change rewrites it, and new slots come last,
+        so a caller can keep something per triangle by slot."""
+        return self._kernel.slots()
+
+    def dirty(self, into: np.ndarray | None = None):
+        """(slots, triangles): the slots rewritten since construction or the last call of
+        this or changes() (the two share one record) and the triangle each holds now,
+        rotated as slots() rotates them; only with track_changes=True (ValueError
+        otherwise). What changes() reports, by slot, with none of the removed corners.
+        into (int64, 3 columns, a row per slot at least): each slot's triangle is
+        written to its row there, and only the slots are returned."""
+        return self._kernel.dirty(into)
+
+    def size(self) -> int:
+        """The number of triangles (of slots)."""
+        return self._kernel.size()
+
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:
     """The encoder's triangulation: delaunay's triangles (canonical order) of integer

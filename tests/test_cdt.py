@@ -688,3 +688,46 @@ def test_a_triangulation_is_used_by_one_thread_at_a_time():
     assert all(np.array_equal(r, expected) for r in results)
     # after the race the object is free again
     assert np.array_equal(t.triangles(), expected)
+
+
+def test_the_incremental_triangulation_lists_its_slots_and_the_slots_each_insert_rewrites():
+    """#20: refinement keeps its triangles' numbers by the kernel's slot: slots() gives
+    each slot's triangle in canonical rotation, dirty() the slots rewritten since the
+    last call (into a table kept by slot, with into=), and size() the slot count; a
+    table kept by dirty(into=) alone stays slots(), and in canonical order it is
+    triangles(), the rows saying which slot each came from."""
+    from codec.native import _renumber
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(20)
+    for case in range(6):
+        w, h = (int(v) for v in rng.integers(20, 120, 2))
+        pts = np.unique(np.stack([rng.integers(1, w, 400), rng.integers(1, h, 400)], 1), axis=0)
+        pts = pts[rng.permutation(len(pts))]
+        corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+        tri = Triangulation(np.concatenate([corners, pts[:40]]), track_changes=True)
+        with pytest.raises(ValueError, match="a row per slot"):
+            tri.dirty(into=np.zeros((tri.size() - 1, 3), np.int64))
+        table = np.zeros((4 * len(pts), 3), np.int64)
+        table[: tri.size()] = tri.slots()
+        tri.dirty()
+        n = 44
+        for part in np.array_split(pts[40:], 4):
+            tri.insert(part)
+            n += len(part)
+            if case % 2:
+                slots = tri.dirty(into=table)
+            else:
+                slots, rows = tri.dirty()
+                table[slots] = rows
+            assert len(np.unique(slots)) == len(slots) and slots.max() < tri.size()
+            m = tri.size()
+            np.testing.assert_array_equal(table[:m], tri.slots())
+            # canonical rotation: each starts at its smallest corner
+            assert (table[:m, 0] < table[:m, 1:].min(axis=1)).all()
+            canon, source = _renumber.canonical_renumbered(table[:m], np.arange(n), rows=True)
+            np.testing.assert_array_equal(canon, tri.triangles())
+            np.testing.assert_array_equal(canon, table[source])
+            assert tri.dirty()[0].shape == (0,)
+    with pytest.raises(ValueError, match="track"):
+        Triangulation(corners).dirty()
