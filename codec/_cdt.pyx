@@ -3,7 +3,7 @@
 the canonical triangles straight from integer vertices and segments, with the GIL
 released while they are built. codec.triangulate turns the status codes into ATMError."""
 
-from libc.stdint cimport int64_t, uint32_t
+from libc.stdint cimport int64_t, uint8_t, uint32_t
 from libcpp.vector cimport vector
 
 import numpy as np
@@ -34,7 +34,8 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         vector[int] dirty, old
         vector[unsigned char] dirty_mark
         Status build() except + nogil
-        Status insert(const int64_t* xy, int64_t k, int64_t* done, const int64_t* near) except + nogil
+        Status insert(const int64_t* xy, int64_t k, int64_t* done, const int64_t* near,
+                      unsigned char* taken) except + nogil
         Status constrain(int a, int b) except + nogil
         bint legalise() nogil
     uint32_t cdt_canonical "atmcdt::canonical" (CDT& cdt, const int64_t* order,
@@ -145,9 +146,9 @@ cdef class Triangulation:
         """Triangulate vertices (N x 2) afresh; track=True records changes() after it."""
         return self._one_thread("start", self._start, vertices, track)
 
-    def insert(self, points, near=None):
+    def insert(self, points, near=None, taken=None):
         """As _insert (below), one thread at a time."""
-        return self._one_thread("insert", self._insert, points, near)
+        return self._one_thread("insert", self._insert, points, near, taken)
 
     def constrain(self, segments):
         """As _constrain (below), one thread at a time."""
@@ -194,15 +195,18 @@ cdef class Triangulation:
         self.cdt.dirty_mark.assign(self.cdt.V.size() // 3, 0)
         return status
 
-    def _insert(self, const int64_t[:, ::1] points, const int64_t[::1] near=None):
+    def _insert(self, const int64_t[:, ::1] points, const int64_t[::1] near=None, uint8_t[::1] taken=None):
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
         indices continue the vertices' numbering in the points' order. All are checked
         first: if one is refused, only those before it go in (status: its refusal).
         near (K vertex indices, -1 for none): where each point's location walk starts,
-        a hint that changes no triangle (one naming no vertex in place is ignored)."""
+        a hint that changes no triangle (one naming no vertex in place is ignored).
+        taken (K bytes): a point at a position taken (by a vertex, or a point before
+        it) is left out, not refused, and marked 1 there (the others 0)."""
         cdef int64_t k = points.shape[0], done = 0, first = self.cdt.pt.size()
         cdef const int64_t* xy = &points[0, 0] if k else NULL
         cdef const int64_t* hint = NULL
+        cdef unsigned char* left_out = NULL
         cdef Status status
         if points.shape[1] != 2:
             raise ValueError("points are K x 2")
@@ -210,8 +214,12 @@ cdef class Triangulation:
             if near.shape[0] != k:
                 raise ValueError("near has one vertex index per point")
             hint = &near[0] if k else NULL
+        if taken is not None:
+            if taken.shape[0] != k:
+                raise ValueError("taken has one entry per point")
+            left_out = &taken[0] if k else NULL
         with nogil:  # every point checked in the kernel, then inserted in a spatial order
-            status = self.cdt.insert(xy, k, &done, hint)
+            status = self.cdt.insert(xy, k, &done, hint, left_out)
         if status == CDT_INTERNAL:  # a bug: those that went in are no prefix
             went_in = [j for j in range(first, self.cdt.pt.size()) if self.cdt.vinc[j] >= 0]
             return int(status), np.array(went_in, dtype=np.int64)

@@ -122,6 +122,21 @@ class Triangulation:
             _refuse(status, self._count)
         return indices
 
+    def insert_free(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """insert(points, near), leaving out each point at a position taken (by a vertex,
+        or a point before it) instead of refusing it: merge()'s rule, from the kernel's
+        own table of positions. Returns a mask of the points that went in (numbered
+        next, in their order)."""
+        points = np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2)
+        if near is not None:
+            near = np.ascontiguousarray(near, dtype=np.int64).reshape(-1)
+        taken = np.zeros(len(points), np.uint8)
+        status, indices = self._kernel.insert(points, near, taken)
+        self._count += len(indices)
+        if status != _cdt.OK:
+            _refuse(status, self._count)
+        return taken == 0
+
     def constrain(self, segments: np.ndarray) -> None:
         """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
         status = self._kernel.constrain(np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2))

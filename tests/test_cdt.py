@@ -731,3 +731,38 @@ def test_the_incremental_triangulation_lists_its_slots_and_the_slots_each_insert
             assert tri.dirty()[0].shape == (0,)
     with pytest.raises(ValueError, match="track"):
         Triangulation(corners).dirty()
+
+
+def test_inserting_free_points_leaves_out_those_on_taken_positions_as_merge_does():
+    """#20: Triangulation.insert_free leaves out a point at a position taken (by a
+    vertex, or a point of the batch before it) where insert() refuses it: the points
+    that go in are merge()'s, in its order, with their near hints (some naming points
+    left out or not yet in), and the triangles are delaunay()'s of them all. On the
+    old kernel a taken position stopped the batch there."""
+    from codec.mesher.refine import merge
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(31)
+    for case in range(8):
+        w, h = (int(v) for v in rng.integers(10, 60, 2))
+        corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+        first = np.concatenate([corners, np.stack([rng.integers(0, w + 1, 30), rng.integers(0, h + 1, 30)], 1)])
+        first = first[np.unique(first[:, 1] * (w + 1) + first[:, 0], return_index=True)[1]]
+        tri = Triangulation(first, track_changes=bool(case % 2))
+        vertices = first
+        for _ in range(3):
+            points = np.stack([rng.integers(0, w + 1, 40), rng.integers(0, h + 1, 40)], 1)
+            # some on vertices, some twice in the batch
+            points = np.concatenate([points, vertices[rng.integers(0, len(vertices), 5)], points[:5]])
+            points = points[rng.permutation(len(points))]
+            near = rng.integers(-3, len(vertices) + 55, len(points))
+            free = tri.insert_free(points, near)
+            merged = merge(w + 1, vertices, points)
+            np.testing.assert_array_equal(np.concatenate([vertices, points[free]]), merged)
+            assert (~free).any()
+            vertices = merged
+            np.testing.assert_array_equal(tri.triangles(), delaunay(vertices))
+        with pytest.raises(ATMError, match="outside"):
+            tri.insert_free(np.array([[w + 1, 0]]))
+        with pytest.raises(ValueError, match="one entry per point"):
+            tri._kernel.insert(np.zeros((2, 2), np.int64), None, np.zeros(1, np.uint8))
