@@ -756,18 +756,21 @@ def cached(const int64_t[::1] pixel, const int64_t[:, ::1] triangles, int64_t ba
 
 
 def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                     int64_t height):
+                     int64_t height, int64_t room=0):
     """(origin M x 2, coef M x 3 x 3, den M), int64, of elements.triangle_raster: each
     triangle's first corner in raster order, the integer coefficients (alpha, beta,
     gamma) of each listed corner's weight numerator relative to it, and their common
-    denominator (twice the area). Integers, so the very numbers numpy gave. ValueError
-    on an index or coordinate out of range."""
+    denominator (twice the area). Integers, so the very numbers numpy gave. room: make
+    the arrays that many rows long if more than M, the rows after M left for the caller
+    (a mesh's border lines, with no copy of the triangles' rows to join them).
+    ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], t, i, j, k, ox, oy
-    origin_out = np.empty((m, 2), dtype=np.int64)
-    coef_out = np.empty((m, 3, 3), dtype=np.int64)
-    den_out = np.empty(m, dtype=np.int64)
+    cdef int64_t rows = room if room > m else m
+    origin_out = np.empty((rows, 2), dtype=np.int64)
+    coef_out = np.empty((rows, 3, 3), dtype=np.int64)
+    den_out = np.empty(rows, dtype=np.int64)
     cdef int64_t[:, ::1] origin = origin_out
     cdef int64_t[:, :, ::1] coef = coef_out
     cdef int64_t[::1] den = den_out

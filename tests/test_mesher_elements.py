@@ -521,3 +521,23 @@ def test_worst_pixels_read_8_and_16_bit_planes_as_they_are() -> None:
         every = np.arange(len(lines))
         for a, b in zip(lines.worst_pixels(image, z, every), lines.worst_pixels(image.astype(np.float64), z, every)):
             np.testing.assert_array_equal(a, b)
+
+
+def test_mesh_elements_are_the_triangles_joined_with_the_lines() -> None:
+    """#20: mesh_elements has the kernel write the triangles' weights into arrays with
+    room for the border lines' rows: the raster concat() of the two gives, field by
+    field, with no copy of the triangles' rows."""
+    from codec.mesher.elements import concat, line_raster, mesh_elements
+
+    rng = np.random.default_rng(21)
+    for w, h in ((45, 37), (2, 9), (64, 3)):
+        pts = np.stack([rng.integers(0, w, 60), rng.integers(0, h, 60)], 1)
+        v = np.concatenate([[[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], pts])
+        v = v[np.sort(np.unique(v[:, 1] * w + v[:, 0], return_index=True)[1])]
+        t = triangulate(v, None)
+        lines = line_raster(v, w, h)
+        joined = concat([triangle_raster(v, t, w, h, spans=False), lines])
+        made = mesh_elements(v, t, lines)
+        assert len(made) == len(joined) == len(t) + len(lines)
+        for field in ("corners", "origin", "coef", "den", "span_elem", "span_y", "span_x", "span_n", "bounds"):
+            np.testing.assert_array_equal(getattr(made, field), getattr(joined, field))

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import ATMError
 from ..native import _elements, _renumber
 from ..triangulate import Triangulation, triangulate
-from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
+from .elements import Statistics, element_sse, line_raster, mesh_elements, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
 #: from round to round (later rounds see the effect of the earlier ones).
@@ -394,11 +394,12 @@ def refine_to_budget(
                 kept = None  # triangulate() decides, round after round
         vertices, near = merge_new(width, vertices, points, near[big])
     lines = line_raster(vertices, width, height)
-    elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
+    elements = mesh_elements(vertices, tris, lines)
     if final_rows is None:
         return vertices, segments, tris, elements, cache.statistics(layout(lines)), ordered
     # the kept statistics of the final triangles, the border lines' after them
     stats = np.empty((len(final_rows) + len(lines), layout.width))
-    np.take(kept.stats, final_rows, axis=0, out=stats[: len(final_rows)])
+    # (a compiled row copy: np.take's row by row memmove took 2.6x as long)
+    _elements.gather_rows([kept.stats], final_rows, stats[: len(final_rows)])
     stats[len(final_rows):] = layout(lines)
     return vertices, segments, tris, elements, stats, ordered
