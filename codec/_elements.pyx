@@ -29,10 +29,6 @@ ctypedef fused table_t:
 ctypedef fused plane_t:
     float
     double
-    # 8- and 16-bit planes read as they are (each value converted exactly as it is
-    # read): no float64 copy of the image a call
-    uint8_t
-    uint16_t
 
 # What triangle_statistics sums a span from: a prefix table (table_t's types), or one
 # 8- or 16-bit plane itself, summed pixel by pixel in int64 (the integers the table's

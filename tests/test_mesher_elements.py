@@ -497,32 +497,6 @@ def test_triangle_statistics_of_chosen_rows_go_to_those_rows() -> None:
             layout.of_triangles(v, t, z, rows, into, None)
 
 
-def test_worst_pixels_read_8_and_16_bit_planes_as_they_are() -> None:
-    """#20: the worst-pixel kernels read an 8- or 16-bit plane itself (each value made
-    a double as read) instead of a float64 copy of the image every call: the same
-    pixels and errors as from that copy, for triangles and border lines."""
-    from codec.mesher.elements import line_raster
-
-    rng = np.random.default_rng(12)
-    for dtype, top in ((np.uint8, 255), (np.uint16, 65535)):
-        image = rng.integers(0, top + 1, (37, 45)).astype(dtype)
-        pts = np.stack([rng.integers(0, 45, 80), rng.integers(0, 37, 80)], 1)
-        v = np.concatenate([[[0, 0], [44, 0], [0, 36], [44, 36]], pts])
-        v = v[np.sort(np.unique(v[:, 1] * 45 + v[:, 0], return_index=True)[1])]
-        t = triangulate(v, None)
-        z = image[v[:, 1], v[:, 0]].astype(np.float64) + rng.standard_normal(len(v))
-        direct = native._elements.worst_pixels(v, t, 45, 37, z, image)
-        copied = native._elements.worst_pixels(v, t, 45, 37, z, image.astype(np.float64))
-        for a, b in zip(direct, copied):
-            np.testing.assert_array_equal(a, b)
-        for a, b in zip(worst_pixels(image, v, t, z, 45, 37), worst_pixels(image.astype(np.float64), v, t, z, 45, 37)):
-            np.testing.assert_array_equal(a, b)
-        lines = line_raster(v, 45, 37)
-        every = np.arange(len(lines))
-        for a, b in zip(lines.worst_pixels(image, z, every), lines.worst_pixels(image.astype(np.float64), z, every)):
-            np.testing.assert_array_equal(a, b)
-
-
 def test_mesh_elements_are_the_triangles_joined_with_the_lines() -> None:
     """#20: mesh_elements has the kernel write the triangles' weights into arrays with
     room for the border lines' rows: the raster concat() of the two gives, field by

@@ -126,7 +126,8 @@ class Raster:
         # one compiled pass over their spans (the numbers of the numpy expressions it
         # replaced, which made a dozen arrays of the pixels)
         elements = np.ascontiguousarray(elements, dtype=np.int64)
-        plane = _kernel_plane(plane)
+        if plane.dtype != np.float32:
+            plane = plane.astype(np.float64)
         x, y, err = native._elements.element_worst_pixels(
             np.ascontiguousarray(self.corners, dtype=np.int64), np.ascontiguousarray(self.coef, dtype=np.int64),
             np.ascontiguousarray(self.den, dtype=np.int64), np.ascontiguousarray(self.origin, dtype=np.int64),
@@ -369,15 +370,6 @@ def triangle_raster(vertices: np.ndarray, triangles: np.ndarray, width: int, hei
     return Raster(width, height, t, origin, coef, den, empty, empty, empty, empty)
 
 
-def _kernel_plane(plane: np.ndarray) -> np.ndarray:
-    """The plane as the worst-pixel kernels read it: float32, float64, 8 or 16 bits as
-    it is (each value converted exactly as read; a float64 copy of a 512 x 512 plane
-    was 2 MB of fresh pages every round), any other type as float64."""
-    if plane.dtype in (np.float32, np.float64, np.uint8, np.uint16):
-        return plane
-    return plane.astype(np.float64)
-
-
 def mesh_elements(vertices: np.ndarray, triangles: np.ndarray, lines: Raster) -> Raster:
     """concat([triangle_raster(vertices, triangles, width, height, spans=False), lines]):
     the triangles' weights written by the kernel into arrays with room for the lines'
@@ -399,7 +391,8 @@ def worst_pixels(plane: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
     Returns (index into `triangles`, x, y, |error|)."""
     v = np.ascontiguousarray(vertices, dtype=np.int64)
     t = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
-    plane = _kernel_plane(plane)
+    if plane.dtype != np.float32:
+        plane = plane.astype(np.float64)
     x, y, err = native._elements.worst_pixels(
         v, t, width, height, np.ascontiguousarray(vertex_values, dtype=np.float64), np.ascontiguousarray(plane),
     )
