@@ -292,6 +292,7 @@ def refine_to_budget(
     measured = None
     line_sse = None
     final_rows = None  # kept: the slot of each final triangle, whose statistics it has
+    z = None  # the values of the last round's vertices
     near = None  # for each vertex the last round added, a corner of the triangle it fell in
     for r in itertools.count():
         tris = None
@@ -324,7 +325,13 @@ def refine_to_budget(
                 # the same triangles numbered as the vertices now are, in canonical order
                 tris, final_rows = kept.canonical(renumber)
                 break
-        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+        if kept is not None and z is not None and len(z) < len(vertices):
+            # the vertices kept are those of the last round, in place: only the new
+            # ones' values are read
+            new = vertices[len(z):]
+            z = np.concatenate([z, gray[new[:, 1], new[:, 0]].astype(np.float64)])
+        else:
+            z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
         if kept is not None:
             kept.measure(vertices, z)
             m = kept.m
