@@ -119,3 +119,30 @@ def test_refinement_by_slots_gives_the_same_meshes_on_scenes_and_bands(monkeypat
     kept = [codec.encode(image, **options) for image in images]
     _kernel_refused(monkeypatch)
     assert [codec.encode(image, **options) for image in images] == kept
+
+
+def test_the_kept_triangulation_grows_its_tables_and_keeps_each_slots_numbers() -> None:
+    """#20: _Kept's tables by slot (corners, statistics, squared errors) start with room
+    for a budget's triangles and double when a mesh needs more: after insertions far
+    beyond its budget, every slot's numbers are those of its triangle measured afresh,
+    and its canonical list with slots is triangulate()'s."""
+    from codec.mesher.elements import Statistics
+
+    image = range_scene(90, 70, seed=3)
+    gray = image.astype(np.float32)
+    layout = Statistics(image, "structure")
+    rng = np.random.default_rng(2)
+    corners = np.array([[0, 0], [89, 0], [0, 69], [89, 69]])
+    kept = refine._Kept(layout, corners, np.zeros((0, 2), np.int64), target=0)
+    vertices = corners
+    for _ in range(4):
+        points = np.stack([rng.integers(0, 90, 150), rng.integers(0, 70, 150)], 1)
+        vertices, near = kept.add(vertices, points, np.full(len(points), -1, np.int64))
+        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+        kept.measure(vertices, z)
+    assert len(kept.sse) >= kept.m > 2 * 16
+    tris, slots = kept.canonical()
+    np.testing.assert_array_equal(tris, triangulate(vertices))
+    stats, sse = layout.of_triangles(vertices, tris, z)
+    np.testing.assert_array_equal(kept.stats[slots], stats)
+    np.testing.assert_array_equal(kept.sse[slots], sse)
