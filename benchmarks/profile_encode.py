@@ -6,8 +6,9 @@
   band, as 16 bands, and at an error bound (quality=50): calls of codec's own
   `codec.triangulate.triangulate`, counted by wrapping it in every codec module that
   holds it (so the count does not depend on the library behind it), and the rounds of
-  an incremental `codec.triangulate.Triangulation` (each `triangles()` it gives out;
-  the time of all its calls counts as triangulating).
+  an incremental `codec.triangulate.Triangulation` (each `triangles()` it gives out,
+  or `dirty()` where refinement keeps it by slot; the time of all its calls counts as
+  triangulating).
 * time: each encode as a ratio to its peer in the same round, a JPEG encode of
   camera (cv2.imencode, quality 90), and the share of it spent triangulating; the
   medians over `--repeat` interleaved rounds.
@@ -61,9 +62,10 @@ def _timed(function, clock, add):
 class TriangleCounter:
     """Counts (and times) the calls of codec.triangulate.triangulate while installed,
     wherever codec imported it by name, and the rounds of codec.triangulate.Triangulation
-    (its triangles() calls; all its methods timed)."""
+    (its triangles() calls, or dirty() where refinement keeps it by slot; all its
+    methods timed)."""
 
-    TIMED = ("__init__", "insert", "constrain", "triangles")
+    TIMED = ("__init__", "insert", "constrain", "triangles", "dirty", "slots")
 
     def __init__(self) -> None:
         self.calls = 0
@@ -85,7 +87,7 @@ class TriangleCounter:
         incremental = codec.triangulate.Triangulation
         self._methods = {name: getattr(incremental, name) for name in self.TIMED}
         for name, method in self._methods.items():
-            setattr(incremental, name, self._timed(method, name == "triangles"))
+            setattr(incremental, name, self._timed(method, name in ("triangles", "dirty")))
         return self
 
     def _timed(self, method, counts: bool):

@@ -3,7 +3,7 @@
 the canonical triangles straight from integer vertices and segments, with the GIL
 released while they are built. codec.triangulate turns the status codes into ATMError."""
 
-from libc.stdint cimport int64_t, uint32_t
+from libc.stdint cimport int64_t, uint8_t, uint32_t
 from libcpp.vector cimport vector
 
 import numpy as np
@@ -24,6 +24,7 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
     cdef cppclass Slots[X]:
         size_t size() const
         X& operator[](size_t)
+        X* data()
     cdef cppclass CDT:
         vector[Pt] pt
         Slots[int] V
@@ -33,7 +34,8 @@ cdef extern from "cdt.hpp" namespace "atmcdt":
         vector[int] dirty, old
         vector[unsigned char] dirty_mark
         Status build() except + nogil
-        Status insert(const int64_t* xy, int64_t k, int64_t* done, const int64_t* near) except + nogil
+        Status insert(const int64_t* xy, int64_t k, int64_t* done, const int64_t* near,
+                      unsigned char* taken) except + nogil
         Status constrain(int a, int b) except + nogil
         bint legalise() nogil
     uint32_t cdt_canonical "atmcdt::canonical" (CDT& cdt, const int64_t* order,
@@ -144,9 +146,9 @@ cdef class Triangulation:
         """Triangulate vertices (N x 2) afresh; track=True records changes() after it."""
         return self._one_thread("start", self._start, vertices, track)
 
-    def insert(self, points, near=None):
+    def insert(self, points, near=None, taken=None):
         """As _insert (below), one thread at a time."""
-        return self._one_thread("insert", self._insert, points, near)
+        return self._one_thread("insert", self._insert, points, near, taken)
 
     def constrain(self, segments):
         """As _constrain (below), one thread at a time."""
@@ -193,15 +195,18 @@ cdef class Triangulation:
         self.cdt.dirty_mark.assign(self.cdt.V.size() // 3, 0)
         return status
 
-    def _insert(self, const int64_t[:, ::1] points, const int64_t[::1] near=None):
+    def _insert(self, const int64_t[:, ::1] points, const int64_t[::1] near=None, uint8_t[::1] taken=None):
         """(status, indices): insert each point (K x 2) inside the hull; the new vertex
         indices continue the vertices' numbering in the points' order. All are checked
         first: if one is refused, only those before it go in (status: its refusal).
         near (K vertex indices, -1 for none): where each point's location walk starts,
-        a hint that changes no triangle (one naming no vertex in place is ignored)."""
+        a hint that changes no triangle (one naming no vertex in place is ignored).
+        taken (K bytes): a point at a position taken (by a vertex, or a point before
+        it) is left out, not refused, and marked 1 there (the others 0)."""
         cdef int64_t k = points.shape[0], done = 0, first = self.cdt.pt.size()
         cdef const int64_t* xy = &points[0, 0] if k else NULL
         cdef const int64_t* hint = NULL
+        cdef unsigned char* left_out = NULL
         cdef Status status
         if points.shape[1] != 2:
             raise ValueError("points are K x 2")
@@ -209,8 +214,12 @@ cdef class Triangulation:
             if near.shape[0] != k:
                 raise ValueError("near has one vertex index per point")
             hint = &near[0] if k else NULL
+        if taken is not None:
+            if taken.shape[0] != k:
+                raise ValueError("taken has one entry per point")
+            left_out = &taken[0] if k else NULL
         with nogil:  # every point checked in the kernel, then inserted in a spatial order
-            status = self.cdt.insert(xy, k, &done, hint)
+            status = self.cdt.insert(xy, k, &done, hint, left_out)
         if status == CDT_INTERNAL:  # a bug: those that went in are no prefix
             went_in = [j for j in range(first, self.cdt.pt.size()) if self.cdt.vinc[j] >= 0]
             return int(status), np.array(went_in, dtype=np.int64)
@@ -267,3 +276,75 @@ cdef class Triangulation:
         self.cdt.old.clear()
         return (np.array(removed, dtype=np.int64).reshape(-1, 3),
                 np.array(added, dtype=np.int64).reshape(-1, 3))
+
+    def slots(self):
+        """As _slots (below), one thread at a time."""
+        return self._one_thread("slots", self._slots)
+
+    def dirty(self, into=None):
+        """As _dirty (below), one thread at a time."""
+        return self._one_thread("dirty", self._dirty, into)
+
+    def size(self):
+        """The number of triangle slots (of triangles)."""
+        return self.cdt.V.size() // 3
+
+    def _slots(self):
+        """Every triangle slot's triangle (M x 3, row t the triangle in slot t), each
+        rotated to start at its smallest corner, orientation kept: the rotation the
+        canonical order lists it in (ATM.md §4.2.3), but in slot order. A slot keeps its
+        number until a change rewrites it (changes(), dirty()); new ones come last."""
+        cdef int64_t m = self.cdt.V.size() // 3, t
+        out = np.empty((m, 3), dtype=np.int64)
+        cdef int64_t[:, ::1] o = out
+        cdef int* v = self.cdt.V.data()
+        with nogil:
+            for t in range(m):
+                _rotated(v + 3 * t, &o[t, 0])
+        return out
+
+    def _dirty(self, int64_t[:, ::1] into=None):
+        """(slots, triangles): the triangle slots written since start or the last call
+        of this or changes() (one record, which both empty), in the order they were
+        first written, and the triangle each holds now (K x 3, rotated as _slots
+        rotates them); a slot may hold the triangle it held before. into (a row per
+        slot, size() at least): each slot's triangle goes to its row there instead, and
+        only the slots are returned. Only for a triangulation started with track=True."""
+        cdef int64_t k = self.cdt.dirty.size(), j, t, m = self.cdt.V.size() // 3
+        if not self.cdt.track:
+            raise ValueError("Triangulation.dirty: started without track=True")
+        if into is not None and (into.shape[0] < m or into.shape[1] != 3):
+            raise ValueError("Triangulation.dirty: into needs 3 columns and a row per slot")
+        slots = np.empty(k, dtype=np.int64)
+        out = np.empty((k if into is None else 0, 3), dtype=np.int64)
+        cdef int64_t[::1] s = slots
+        cdef int64_t[:, ::1] o = out if into is None else into
+        cdef int* v = self.cdt.V.data()
+        cdef bint bad = False, by_slot = into is not None
+        with nogil:
+            for j in range(k):
+                t = self.cdt.dirty[j]
+                if not 0 <= t < m:
+                    bad = True  # a slot written but never made: a bug, not an input
+                    break
+                s[j] = t
+                _rotated(v + 3 * t, &o[t if by_slot else j, 0])
+                self.cdt.dirty_mark[t] = 0
+            if not bad:
+                self.cdt.dirty.clear()
+                self.cdt.old.clear()
+        if bad:
+            raise RuntimeError("Triangulation.dirty: a changed slot beyond the triangles")
+        return slots if by_slot else (slots, out)
+
+
+cdef inline void _rotated(const int* v, int64_t* out) noexcept nogil:
+    """Triangle v (3 corners) rotated to start at its smallest corner (orientation kept)."""
+    cdef int64_t a = v[0], b = v[1], c = v[2], r
+    if b < a and b < c:
+        r = a; a = b; b = c; c = r
+    elif c < a and c < b:
+        r = c; c = b; b = a; a = r
+    out[0] = a
+    out[1] = b
+    out[2] = c

@@ -328,7 +328,8 @@ cdef void _triangle_sums(double* out, int64_t raw, const source_t* table, int64_
 def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
                         int64_t height, const source_t[:, ::1] table, const double[::1] power1,
                         const double[::1] power2, const int64_t[::1] columns, const int64_t[::1] blocks,
-                        const double[::1] z):
+                        const double[::1] z, const int64_t[::1] only=None, double[:, ::1] into=None,
+                        double[::1] sse_into=None):
     """(M x C statistics, M squared errors or None) of the triangles: per triangle the sums
     over its spans (row y, columns [x0, x1), n pixels) in row order of n, X1, y n, X2,
     y X1, y (y n) (Xk = power_k[x1] - power_k[x0]), then of d_k = table[y s + x1, k] -
@@ -341,8 +342,12 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     elements.element_sse gives it (the same float64 operations in the same order, so
     the same numbers). `table` may instead be the one plane itself (H x W, 8 or 16
     bits, K = 3: b, x b, b b), whose spans are summed pixel by pixel in int64: the
-    integers an integer table's differences give, so the same statistics. ValueError
-    on an index or coordinate out of range."""
+    integers an integer table's differences give, so the same statistics. only (with
+    into, and sse_into if z is given): measure only the triangles only[i] of
+    `triangles`, each written to that row of into (and of sse_into), which are
+    returned (refinement keeps its triangles' numbers by the triangulation's slots,
+    with no gather and scatter of them). ValueError on an index or coordinate out of
+    range."""
     _check(vertices, triangles, width, height)
     cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef bint direct = source_t is uint8_t or source_t is uint16_t
@@ -364,12 +369,25 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef bint errors = z.shape[0] > 0
     if errors and z.shape[0] != vertices.shape[0]:
         raise ValueError("triangle_statistics: z needs a value per vertex")
-    out = np.empty((m, nc), dtype=np.float64)
-    sse_out = np.empty(m if errors else 0, dtype=np.float64)
+    cdef int64_t count = m, i
+    if only is not None:
+        if into is None or into.shape[0] < m or into.shape[1] != nc or (
+                errors and (sse_into is None or sse_into.shape[0] < m)):
+            raise ValueError("triangle_statistics: only needs into (and sse_into) with a row per triangle")
+        for i in range(only.shape[0]):
+            if not 0 <= only[i] < m:
+                raise ValueError("triangle_statistics: a row beyond the triangles")
+        count = only.shape[0]
+        out = into
+        sse_out = sse_into if errors else np.empty(0, dtype=np.float64)
+    else:
+        out = np.empty((m, nc), dtype=np.float64)
+        sse_out = np.empty(m if errors else 0, dtype=np.float64)
     if kk > MAX_PLANES:
         raise ValueError("triangle_statistics: more planes than MAX_PLANES")
     cdef double[:, ::1] o = out
     cdef double[::1] e = sse_out
+    cdef const int64_t* which = &only[0] if only is not None and count else NULL
     cdef double sums[6 + 2 * MAX_PLANES]
     cdef int64_t t, dy, x0, n, k, up, c, ox, oy
     cdef _Rows rows
@@ -380,7 +398,8 @@ def triangle_statistics(const int64_t[:, ::1] vertices, const int64_t[:, ::1] tr
     cdef double f[3]
     cdef bint bad = False
     with nogil:
-        for t in range(m):
+        for i in range(count):
+            t = which[i] if which != NULL else i
             if not _start_listed(&geometry, t, py, px, ys, xs, &up):
                 bad = True
                 break
@@ -733,18 +752,21 @@ def cached(const int64_t[::1] pixel, const int64_t[:, ::1] triangles, int64_t ba
 
 
 def triangle_weights(const int64_t[:, ::1] vertices, const int64_t[:, ::1] triangles, int64_t width,
-                     int64_t height):
+                     int64_t height, int64_t room=0):
     """(origin M x 2, coef M x 3 x 3, den M), int64, of elements.triangle_raster: each
     triangle's first corner in raster order, the integer coefficients (alpha, beta,
     gamma) of each listed corner's weight numerator relative to it, and their common
-    denominator (twice the area). Integers, so the very numbers numpy gave. ValueError
-    on an index or coordinate out of range."""
+    denominator (twice the area). Integers, so the very numbers numpy gave. room: make
+    the arrays that many rows long if more than M, the rows after M left for the caller
+    (a mesh's border lines, with no copy of the triangles' rows to join them).
+    ValueError on an index or coordinate out of range."""
     _check(vertices, triangles, width, height)
     cdef _Mesh geometry = _mesh(vertices, triangles, width, height)
     cdef int64_t m = triangles.shape[0], t, i, j, k, ox, oy
-    origin_out = np.empty((m, 2), dtype=np.int64)
-    coef_out = np.empty((m, 3, 3), dtype=np.int64)
-    den_out = np.empty(m, dtype=np.int64)
+    cdef int64_t rows = room if room > m else m
+    origin_out = np.empty((rows, 2), dtype=np.int64)
+    coef_out = np.empty((rows, 3, 3), dtype=np.int64)
+    den_out = np.empty(rows, dtype=np.int64)
     cdef int64_t[:, ::1] origin = origin_out
     cdef int64_t[:, :, ::1] coef = coef_out
     cdef int64_t[::1] den = den_out

@@ -8,12 +8,14 @@ from libc.stdint cimport int64_t, uint64_t
 import numpy as np
 
 
-def canonical_renumbered(const int64_t[:, ::1] triangles, const int64_t[::1] number):
+def canonical_renumbered(const int64_t[:, ::1] triangles, const int64_t[::1] number, bint rows=False):
     """The rows of number[triangles] (M x 3 int64, `number` a permutation of 0..N-1)
     each rotated to start at its smallest corner (orientation kept), the rows sorted:
     coding.canonical_triangles of it, by a counting sort on the first corner and an
     insertion sort within each fan (a vertex starts a few triangles) instead of a
-    comparison sort of all rows. ValueError if a corner or a number is out of range."""
+    comparison sort of all rows. rows: also return, for each output row, the input row
+    it came from (refinement keeps its triangles' statistics by the kernel's slots).
+    ValueError if a corner or a number is out of range."""
     cdef int64_t m = triangles.shape[0], n = number.shape[0], t, i, j, a, b, c, r
     cdef bint bad = False
     if triangles.shape[1] != 3:
@@ -21,8 +23,9 @@ def canonical_renumbered(const int64_t[:, ::1] triangles, const int64_t[::1] num
     # zeros: a slot not yet filled never reads as part of a later vertex's fan
     out = np.zeros((m, 3), dtype=np.int64)
     start_array = np.zeros(n + 1, dtype=np.int64)
+    source_array = np.empty(m if rows else 0, dtype=np.int64)
     cdef int64_t[:, ::1] o = out
-    cdef int64_t[::1] start = start_array
+    cdef int64_t[::1] start = start_array, source = source_array
     with nogil:
         for t in range(m):
             for i in range(3):
@@ -47,11 +50,15 @@ def canonical_renumbered(const int64_t[:, ::1] triangles, const int64_t[::1] num
                 # the fan of a fills its slots left to right: keep (b, c) increasing
                 while j > 0 and o[j - 1, 0] == a and (o[j - 1, 1] > b or (o[j - 1, 1] == b and o[j - 1, 2] > c)):
                     o[j, 0] = o[j - 1, 0]; o[j, 1] = o[j - 1, 1]; o[j, 2] = o[j - 1, 2]
+                    if rows:
+                        source[j] = source[j - 1]
                     j -= 1
                 o[j, 0] = a; o[j, 1] = b; o[j, 2] = c
+                if rows:
+                    source[j] = t
     if bad:
         raise ValueError("canonical_renumbered: a corner or a number out of range")
-    return out
+    return (out, source_array) if rows else out
 
 
 cdef inline int64_t _slot(uint64_t key, int bits) noexcept nogil:

@@ -1095,8 +1095,12 @@ class CDT {
   // near (k entries, or null): for each point a vertex near it to start its point
   // location from (refinement knows the triangle each new point falls in), -1 for
   // none; any value is safe (one naming no vertex in the triangulation is ignored).
-  Status insert(const i64* xy, i64 k, i64* done, const i64* near = nullptr) {
+  // taken (k entries, or null): a point at a position taken (by a vertex, or a point
+  // before it) is left out instead of refused, with taken[j] = 1 (0 for the others);
+  // those that go in are numbered in their order, and *done counts them.
+  Status insert(const i64* xy, i64 k, i64* done, const i64* near = nullptr, uint8_t* taken = nullptr) {
     *done = 0;
+    if (taken) std::fill(taken, taken + k, (uint8_t)0);
     if (broken) return CDT_INTERNAL;
     if (V.empty()) return k ? CDT_OUTSIDE : CDT_OK;
     i64 first = (i64)pt.size(), limit = k;
@@ -1119,28 +1123,38 @@ class CDT {
       hull_ring();
       for (const Pt& q : pt) positions.add(q);
     }
+    i64 left_out = 0;
     for (i64 j = 0; j < limit; ++j) {
       Pt q{(i32)xy[2 * j], (i32)xy[2 * j + 1]};
-      if (positions.has(q)) refuse(j, CDT_DUPLICATE);
+      if (positions.has(q)) {
+        if (taken) { taken[j] = 1; ++left_out; }
+        else refuse(j, CDT_DUPLICATE);
+      }
       else if (!in_hull(q)) refuse(j, CDT_OUTSIDE);
       else positions.add(q);
     }
+    // the near hints of the points that go in, in their order, where some are left out
+    std::vector<i64> kept_near;
     for (i64 j = 0; j < limit; ++j) {
+      if (taken && taken[j]) continue;
       pt.push_back(Pt{(i32)xy[2 * j], (i32)xy[2 * j + 1]});
       vinc.push_back(-1);
+      if (near && left_out) kept_near.push_back(near[j]);
     }
-    std::vector<i32> batch((size_t)limit);
-    for (i64 j = 0; j < limit; ++j) batch[j] = (i32)(first + j);
+    i64 count = limit - left_out;
+    if (near && left_out) near = kept_near.data();
+    std::vector<i32> batch((size_t)count);
+    for (i64 j = 0; j < count; ++j) batch[j] = (i32)(first + j);
     std::vector<uint64_t> keys = insertion_order(batch);
-    Status st = insert_in_order(keys, first + limit, near, first);
+    Status st = insert_in_order(keys, first + count, near, first);
     if (st != CDT_OK) {
       // a bug: the points that went in (vinc set) are no prefix of the batch, and the
       // others are vertices of no triangle; nothing more is done with this one
       broken = true;
-      for (i64 j = first; j < first + limit; ++j) *done += vinc[j] >= 0;
+      for (i64 j = first; j < first + count; ++j) *done += vinc[j] >= 0;
       return st;
     }
-    *done = limit;
+    *done = count;
     return status;
   }
 };

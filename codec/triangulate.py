@@ -122,6 +122,21 @@ class Triangulation:
             _refuse(status, self._count)
         return indices
 
+    def insert_free(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """insert(points, near), leaving out each point at a position taken (by a vertex,
+        or a point before it) instead of refusing it: merge()'s rule, from the kernel's
+        own table of positions. Returns a mask of the points that went in (numbered
+        next, in their order)."""
+        points = np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2)
+        if near is not None:
+            near = np.ascontiguousarray(near, dtype=np.int64).reshape(-1)
+        taken = np.zeros(len(points), np.uint8)
+        status, indices = self._kernel.insert(points, near, taken)
+        self._count += len(indices)
+        if status != _cdt.OK:
+            _refuse(status, self._count)
+        return taken == 0
+
     def constrain(self, segments: np.ndarray) -> None:
         """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""
         status = self._kernel.constrain(np.ascontiguousarray(segments, dtype=np.int64).reshape(-1, 2))
@@ -136,6 +151,26 @@ class Triangulation:
         """(removed, added) triangles since construction or the last call; only with
         track_changes=True (ValueError otherwise)."""
         return self._kernel.changes()
+
+    def slots(self) -> np.ndarray:
+        """Every triangle by the kernel's slot (M x 3, row t the triangle in slot t), each
+        rotated to start at its smallest corner as the canonical order lists it: a
+        slot keeps its triangle until a change rewrites it, and new slots come last,
+        so a caller can keep something per triangle by slot."""
+        return self._kernel.slots()
+
+    def dirty(self, into: np.ndarray | None = None):
+        """(slots, triangles): the slots rewritten since construction or the last call of
+        this or changes() (the two share one record) and the triangle each holds now,
+        rotated as slots() rotates them; only with track_changes=True (ValueError
+        otherwise). What changes() reports, by slot, with none of the removed corners.
+        into (int64, 3 columns, a row per slot at least): each slot's triangle is
+        written to its row there, and only the slots are returned."""
+        return self._kernel.dirty(into)
+
+    def size(self) -> int:
+        """The number of triangles (of slots)."""
+        return self._kernel.size()
 
 
 def triangulate(vertices: np.ndarray, segments: np.ndarray | None = None) -> np.ndarray:

@@ -63,4 +63,4 @@ cd /
 LD_PRELOAD="$runtime" PYTHONMALLOC=malloc "$venv/bin/pytest" -q -p no:cacheprovider --import-mode=append \
   --rootdir="$src" -c "$src/pyproject.toml" \
   --deselect "tests/test_encode_front.py::test_profile_encode_prints_a_cpu_budget_per_stage_and_puts_the_stages_back" \
-  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual,refit,lossless_float,holes,holemask,mesher_elements,mesher_polylines,stages,bound,encode_front,cdt_insert_checks,raster_order_split,decoder_object,decode_out,rasterise_order,vertex_steps_pairs,rasterise_walks}.py "$@"
+  "$src"/tests/test_{decoders,container,meshcode,fuzz_smoke,stream,conformance,fields,cdt,canonical,residual,refit,lossless_float,holes,holemask,mesher_elements,mesher_polylines,stages,bound,encode_front,cdt_insert_checks,raster_order_split,decoder_object,decode_out,rasterise_order,vertex_steps_pairs,rasterise_walks,mesher_refine}.py "$@"

@@ -688,3 +688,81 @@ def test_a_triangulation_is_used_by_one_thread_at_a_time():
     assert all(np.array_equal(r, expected) for r in results)
     # after the race the object is free again
     assert np.array_equal(t.triangles(), expected)
+
+
+def test_the_incremental_triangulation_lists_its_slots_and_the_slots_each_insert_rewrites():
+    """#20: refinement keeps its triangles' numbers by the kernel's slot: slots() gives
+    each slot's triangle in canonical rotation, dirty() the slots rewritten since the
+    last call (into a table kept by slot, with into=), and size() the slot count; a
+    table kept by dirty(into=) alone stays slots(), and in canonical order it is
+    triangles(), the rows saying which slot each came from."""
+    from codec.native import _renumber
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(20)
+    for case in range(6):
+        w, h = (int(v) for v in rng.integers(20, 120, 2))
+        pts = np.unique(np.stack([rng.integers(1, w, 400), rng.integers(1, h, 400)], 1), axis=0)
+        pts = pts[rng.permutation(len(pts))]
+        corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+        tri = Triangulation(np.concatenate([corners, pts[:40]]), track_changes=True)
+        with pytest.raises(ValueError, match="a row per slot"):
+            tri.dirty(into=np.zeros((tri.size() - 1, 3), np.int64))
+        table = np.zeros((4 * len(pts), 3), np.int64)
+        table[: tri.size()] = tri.slots()
+        tri.dirty()
+        n = 44
+        for part in np.array_split(pts[40:], 4):
+            tri.insert(part)
+            n += len(part)
+            if case % 2:
+                slots = tri.dirty(into=table)
+            else:
+                slots, rows = tri.dirty()
+                table[slots] = rows
+            assert len(np.unique(slots)) == len(slots) and slots.max() < tri.size()
+            m = tri.size()
+            np.testing.assert_array_equal(table[:m], tri.slots())
+            # canonical rotation: each starts at its smallest corner
+            assert (table[:m, 0] < table[:m, 1:].min(axis=1)).all()
+            canon, source = _renumber.canonical_renumbered(table[:m], np.arange(n), rows=True)
+            np.testing.assert_array_equal(canon, tri.triangles())
+            np.testing.assert_array_equal(canon, table[source])
+            assert tri.dirty()[0].shape == (0,)
+    with pytest.raises(ValueError, match="track"):
+        Triangulation(corners).dirty()
+
+
+def test_inserting_free_points_leaves_out_those_on_taken_positions_as_merge_does():
+    """#20: Triangulation.insert_free leaves out a point at a position taken (by a
+    vertex, or a point of the batch before it) where insert() refuses it: the points
+    that go in are merge()'s, in its order, with their near hints (some naming points
+    left out or not yet in), and the triangles are delaunay()'s of them all. On the
+    old kernel a taken position stopped the batch there."""
+    from codec.mesher.refine import merge
+    from codec.triangulate import Triangulation
+
+    rng = np.random.default_rng(31)
+    for case in range(8):
+        w, h = (int(v) for v in rng.integers(10, 60, 2))
+        corners = np.array([[0, 0], [w, 0], [0, h], [w, h]])
+        first = np.concatenate([corners, np.stack([rng.integers(0, w + 1, 30), rng.integers(0, h + 1, 30)], 1)])
+        first = first[np.unique(first[:, 1] * (w + 1) + first[:, 0], return_index=True)[1]]
+        tri = Triangulation(first, track_changes=bool(case % 2))
+        vertices = first
+        for _ in range(3):
+            points = np.stack([rng.integers(0, w + 1, 40), rng.integers(0, h + 1, 40)], 1)
+            # some on vertices, some twice in the batch
+            points = np.concatenate([points, vertices[rng.integers(0, len(vertices), 5)], points[:5]])
+            points = points[rng.permutation(len(points))]
+            near = rng.integers(-3, len(vertices) + 55, len(points))
+            free = tri.insert_free(points, near)
+            merged = merge(w + 1, vertices, points)
+            np.testing.assert_array_equal(np.concatenate([vertices, points[free]]), merged)
+            assert (~free).any()
+            vertices = merged
+            np.testing.assert_array_equal(tri.triangles(), delaunay(vertices))
+        with pytest.raises(ATMError, match="outside"):
+            tri.insert_free(np.array([[w + 1, 0]]))
+        with pytest.raises(ValueError, match="one entry per point"):
+            tri._kernel.insert(np.zeros((2, 2), np.int64), None, np.zeros(1, np.uint8))

@@ -462,3 +462,56 @@ def test_the_border_lines_refuse_two_vertices_at_one_pixel() -> None:
         native._elements.line_elements(v, 5, 4)
     with pytest.raises(ValueError, match="two vertices at one border pixel"):
         native._elements.line_elements(np.r_[v[:4], [[4, 1], [4, 1]]], 5, 4)
+
+
+def test_triangle_statistics_of_chosen_rows_go_to_those_rows() -> None:
+    """#20: Statistics.of_triangles(rows=, into=, sse_into=) measures only the rows
+    asked for, each into its own row of the caller's arrays (refinement's statistics
+    kept by slot), with the numbers of the plain call; a row beyond the triangles or
+    arrays too small are refused."""
+    from codec.triangulate import triangulate
+
+    rng = np.random.default_rng(4)
+    for dtype in (np.uint8, np.uint16, np.float32):
+        image = (rng.random((40, 52)) * 200).astype(dtype)
+        layout = Statistics(image, "structure")
+        pts = np.unique(np.stack([rng.integers(0, 52, 90), rng.integers(0, 40, 90)], 1), axis=0)
+        v = np.concatenate([[[0, 0], [51, 0], [0, 39], [51, 39]], pts])
+        v = v[np.unique(v[:, 1] * 52 + v[:, 0], return_index=True)[1]]
+        t = triangulate(v, None)
+        z = image[v[:, 1], v[:, 0]].astype(np.float64)
+        stats, sse = layout.of_triangles(v, t, z)
+        rows = rng.permutation(len(t))[: len(t) // 3]
+        into = np.full_like(stats, -7.0)
+        sse_into = np.full(len(t), -7.0)
+        layout.of_triangles(v, t, z, rows, into, sse_into)
+        np.testing.assert_array_equal(into[rows], stats[rows])
+        np.testing.assert_array_equal(sse_into[rows], sse[rows])
+        others = np.setdiff1d(np.arange(len(t)), rows)
+        assert (into[others] == -7).all() and (sse_into[others] == -7).all()
+        with pytest.raises(ValueError, match="beyond the triangles"):
+            layout.of_triangles(v, t, z, np.array([len(t)]), into, sse_into)
+        with pytest.raises(ValueError, match="a row per triangle"):
+            layout.of_triangles(v, t, z, rows, into[:-1], sse_into)
+        with pytest.raises(ValueError, match="a row per triangle"):
+            layout.of_triangles(v, t, z, rows, into, None)
+
+
+def test_mesh_elements_are_the_triangles_joined_with_the_lines() -> None:
+    """#20: mesh_elements has the kernel write the triangles' weights into arrays with
+    room for the border lines' rows: the raster concat() of the two gives, field by
+    field, with no copy of the triangles' rows."""
+    from codec.mesher.elements import concat, line_raster, mesh_elements
+
+    rng = np.random.default_rng(21)
+    for w, h in ((45, 37), (2, 9), (64, 3)):
+        pts = np.stack([rng.integers(0, w, 60), rng.integers(0, h, 60)], 1)
+        v = np.concatenate([[[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], pts])
+        v = v[np.sort(np.unique(v[:, 1] * w + v[:, 0], return_index=True)[1])]
+        t = triangulate(v, None)
+        lines = line_raster(v, w, h)
+        joined = concat([triangle_raster(v, t, w, h, spans=False), lines])
+        made = mesh_elements(v, t, lines)
+        assert len(made) == len(joined) == len(t) + len(lines)
+        for field in ("corners", "origin", "coef", "den", "span_elem", "span_y", "span_x", "span_n", "bounds"):
+            np.testing.assert_array_equal(getattr(made, field), getattr(joined, field))

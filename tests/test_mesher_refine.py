@@ -64,3 +64,85 @@ def test_the_kept_statistics_are_gathered_part_by_part_as_from_the_joined_store(
         after = rng.standard_normal((4, layout.width))
         assert np.array_equal(cache.statistics(), joined[cache._last])
         assert np.array_equal(cache.statistics(after), np.concatenate([joined[cache._last], after]))
+
+
+def _kernel_refused(monkeypatch) -> None:
+    """Make refinement's kept triangulation refuse to start, so that every round
+    triangulates anew and lists its triangles in canonical order (the path taken
+    where the kernel refuses the start)."""
+    from codec.errors import ATMError
+
+    def refuse(*args, **kwargs):
+        raise ATMError("refused")
+
+    monkeypatch.setattr(refine, "_Kept", refuse)
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_refinement_by_slots_gives_what_canonical_lists_give_ties_included(monkeypatch, seed: int) -> None:
+    """#20: refinement keeps its triangles' statistics and squared errors by the
+    kernel's slot and measures only the slots each insertion rewrote, with no list of
+    every triangle a round; ties at the batch's cut go to the first in canonical order
+    and the candidates are taken in it. A periodic image on a grid of its period makes
+    many triangles of exactly equal error, so the ties decide: the vertices, triangles,
+    raster and statistics must be those of refinement on canonical lists (taking the
+    tied triangles in slot order instead changes the vertices here)."""
+    from codec.mesher.elements import Statistics
+
+    rng = np.random.default_rng(seed)
+    gray = np.tile(rng.integers(0, 255, (8, 8)).astype(np.uint8), (9, 9))[:65, :65]
+    g = np.r_[0:64:8, 64]
+    vertices = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2).astype(np.int64)
+    walls = np.zeros((0, 2), np.int64)
+    by_slots = refine.refine_to_budget(gray, vertices, walls, 900, Statistics(gray, "structure"))
+    _kernel_refused(monkeypatch)
+    listed = refine.refine_to_budget(gray, vertices, walls, 900, Statistics(gray, "structure"))
+    for a, b in zip(by_slots, listed):
+        if isinstance(a, np.ndarray):
+            np.testing.assert_array_equal(a, b)
+    for field in ("corners", "origin", "coef", "den", "span_elem"):
+        np.testing.assert_array_equal(getattr(by_slots[3], field), getattr(listed[3], field))
+    assert by_slots[5] == listed[5] and len(by_slots[0]) == 900
+
+
+@pytest.mark.parametrize("bands", [1, 3])
+def test_refinement_by_slots_gives_the_same_meshes_on_scenes_and_bands(monkeypatch, bands: int) -> None:
+    """#20: the same for the adaptive mesher on range scenes with walls, where a band's
+    finish changes the mesh before the last triangulation (the kept statistics then
+    seed the cache of triangles by their pixels) and the mean squared error it is
+    handed is summed in canonical order: the encoded bytes are those of refinement on
+    canonical lists."""
+    import codec
+
+    images = [range_scene(160, 120, seed=s) for s in (2, 9)]
+    options = {"points": 1200, "band_height": 120 // bands + 1} if bands > 1 else {"points": 1200}
+    kept = [codec.encode(image, **options) for image in images]
+    _kernel_refused(monkeypatch)
+    assert [codec.encode(image, **options) for image in images] == kept
+
+
+def test_the_kept_triangulation_grows_its_tables_and_keeps_each_slots_numbers() -> None:
+    """#20: _Kept's tables by slot (corners, statistics, squared errors) start with room
+    for a budget's triangles and double when a mesh needs more: after insertions far
+    beyond its budget, every slot's numbers are those of its triangle measured afresh,
+    and its canonical list with slots is triangulate()'s."""
+    from codec.mesher.elements import Statistics
+
+    image = range_scene(90, 70, seed=3)
+    gray = image.astype(np.float32)
+    layout = Statistics(image, "structure")
+    rng = np.random.default_rng(2)
+    corners = np.array([[0, 0], [89, 0], [0, 69], [89, 69]])
+    kept = refine._Kept(layout, corners, np.zeros((0, 2), np.int64), target=0)
+    vertices = corners
+    for _ in range(4):
+        points = np.stack([rng.integers(0, 90, 150), rng.integers(0, 70, 150)], 1)
+        vertices, near = kept.add(vertices, points, np.full(len(points), -1, np.int64))
+        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+        kept.measure(vertices, z)
+    assert len(kept.sse) >= kept.m > 2 * 16
+    tris, slots = kept.canonical()
+    np.testing.assert_array_equal(tris, triangulate(vertices))
+    stats, sse = layout.of_triangles(vertices, tris, z)
+    np.testing.assert_array_equal(kept.stats[slots], stats)
+    np.testing.assert_array_equal(kept.sse[slots], sse)

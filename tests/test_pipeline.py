@@ -42,10 +42,12 @@ def counting(module, name: str):
 def triangulations():
     """Count the calls of codec's own triangulate (whatever library is behind it), in
     every codec module that holds it, and the triangulations an incremental
-    codec.triangulate.Triangulation gives out (one a refinement round)."""
+    codec.triangulate.Triangulation gives out (one a refinement round: its triangles(),
+    or the slots dirty() reports where refinement keeps it by slot)."""
     real = codec.triangulate.triangulate
     incremental = codec.triangulate.Triangulation
     real_triangles = incremental.triangles
+    real_dirty = incremental.dirty
     for name in ("codec.pipeline", "codec.meshcode", "codec.holes", "codec.mesher.adaptive", "codec.mesher.uniform"):
         importlib.import_module(name)
     holders = [m for n, m in list(sys.modules.items()) if n.startswith("codec") and getattr(m, "triangulate", None) is real]
@@ -59,15 +61,21 @@ def triangulations():
         calls.append(1)
         return real_triangles(self)
 
+    def dirty(self, *args, **kwargs):
+        calls.append(1)
+        return real_dirty(self, *args, **kwargs)
+
     for m in holders:
         m.triangulate = counted
     incremental.triangles = triangles
+    incremental.dirty = dirty
     try:
         yield calls
     finally:
         for m in holders:
             m.triangulate = real
         incremental.triangles = real_triangles
+        incremental.dirty = real_dirty
 
 
 @contextlib.contextmanager

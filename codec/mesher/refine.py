@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import ATMError
 from ..native import _elements, _renumber
 from ..triangulate import Triangulation, triangulate
-from .elements import Statistics, concat, element_sse, line_raster, triangle_raster, worst_pixels
+from .elements import Statistics, element_sse, line_raster, mesh_elements, worst_pixels
 
 #: Refinement rounds; each inserts part of what is left, the parts shrinking by DECAY
 #: from round to round (later rounds see the effect of the earlier ones).
@@ -102,6 +102,20 @@ class _Cache:
             self.keys, self.rows, self.sse = keys, rows, sse
         return sse
 
+    def seed(self, vertices: np.ndarray, triangles: np.ndarray, stats: np.ndarray, sse: np.ndarray, width: int,
+             height: int) -> None:
+        """Take a triangulation measured elsewhere (a _Kept one, when the caller's finish
+        changes the mesh) as the last measured: its triangles (any corner order) and
+        their statistics and squared errors, row by row."""
+        pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
+        none = np.zeros(0, np.int64)
+        keys, rows, _, _ = _elements.cached(pixel, np.ascontiguousarray(triangles, dtype=np.int64),
+                                            _key_base(width, height), none, none, np.zeros(0), 0)
+        self.keys, self.rows, self.sse = keys, rows, np.array(sse)
+        self._parts = [stats]
+        self._stored = len(triangles)
+        self._last = rows
+
     def statistics(self, after: np.ndarray | None = None) -> np.ndarray:
         """The statistics of the triangles last measured, in their order, followed by the
         rows of `after` if given. Gathered part by part into one array: no store of
@@ -120,39 +134,103 @@ class _Cache:
         return out
 
 
-class _Growing:
-    """The triangulation of refinement's vertices and walls, kept between rounds
-    (codec.triangulate.Triangulation): a round's new vertices, which merge() appends,
-    are inserted instead of triangulating all the vertices again. The triangles are
-    triangulate()'s, in the same canonical order (ATM.md §4.2.5's triangulation is
-    unique). Where the kernel refuses the start (all vertices on one line, crossing
-    walls), it gives None and triangulate() decides."""
+class _Kept:
+    """The triangulation of refinement's vertices and walls kept between rounds
+    (codec.triangulate.Triangulation, tracking its changes), with each triangle's
+    statistics and squared error (against the mesh through the sampled values) kept
+    by the kernel's slot: a round's new vertices, which merge() appends, are inserted,
+    and only the slots the insertions rewrote are measured. No round lists or looks up
+    every triangle: the canonical order (ATM.md §4.2.3) is needed only to break ties
+    among the triangles tied at the batch's cut and to order the candidates, and comes
+    from the few triangles concerned. The triangles are triangulate()'s (ATM.md
+    §4.2.5's triangulation is unique), each measured with its corners in canonical
+    rotation, so every number is the one a canonical list would give. Raises ATMError
+    where the kernel refuses the start (all vertices on one line, crossing walls) or
+    an insertion."""
 
-    def __init__(self) -> None:
-        self._tri: Triangulation | None = None
-        self._count = 0
-        self._failed = False
+    def __init__(self, layout: Statistics, vertices: np.ndarray, segments: np.ndarray, target: int):
+        self.layout = layout
+        self.tri = Triangulation(vertices, track_changes=True)
+        self.tri.constrain(segments)
+        self.count = len(vertices)
+        self.m = self.tri.size()
+        # room for the triangles of `target` vertices (2 n - 5 at most with 4 hull
+        # corners), grown by doubling should a mesh need more
+        room = max(self.m, 2 * target + 16)
+        self.corners = np.empty((room, 3), np.int64)
+        self.stats = np.empty((room, layout.width))
+        self.sse = np.empty(room)
+        self.corners[: self.m] = self.tri.slots()
+        self.tri.dirty()  # every slot is in `corners`: the changes so far are read
+        self._pending = np.arange(self.m)  # the slots not measured yet
 
-    def __call__(self, vertices: np.ndarray, segments: np.ndarray,
-                 near: np.ndarray | None = None) -> np.ndarray | None:
-        """The triangles of `vertices` (those since the last call appended) and the
-        walls; near: for each appended vertex one near it, where its point location
-        starts (a hint: ignored unless it has one entry per vertex appended)."""
-        if self._failed:
-            return None
-        try:
-            if self._tri is None:
-                self._tri = Triangulation(vertices)
-                self._tri.constrain(segments)
-            elif len(vertices) > self._count:
-                if near is not None and len(near) != len(vertices) - self._count:
-                    near = None
-                self._tri.insert(vertices[self._count:], near)
-        except ATMError:
-            self._failed = True
-            return None
-        self._count = len(vertices)
-        return self._tri.triangles()
+    def insert(self, vertices: np.ndarray, near: np.ndarray | None) -> None:
+        """Insert the vertices appended since the last call; near: for each a vertex
+        near it, where its point location starts (a hint: ignored unless it has one
+        entry per vertex appended)."""
+        if len(vertices) == self.count:
+            return
+        if near is not None and len(near) != len(vertices) - self.count:
+            near = None
+        self.tri.insert(vertices[self.count:], near)
+        self.count = len(vertices)
+        self._rewritten()
+
+    def add(self, vertices: np.ndarray, points: np.ndarray, near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """merge_new(width, vertices, points, near), the points inserted as they are
+        appended: those at a pixel taken (by a vertex, or a point before them) are left
+        out by the kernel's own table of positions, not by a table of every vertex
+        made each round."""
+        free = self.tri.insert_free(points, near)
+        vertices, near = np.concatenate([vertices, points[free]]), near[free]
+        self.count = len(vertices)
+        self._rewritten()
+        return vertices, near
+
+    def _rewritten(self) -> None:
+        """Take the slots the last insertion rewrote (room made for new ones)."""
+        self.m = self.tri.size()
+        if self.m > len(self.sse):
+            room = 2 * self.m
+            self.corners = _grown(self.corners, room)
+            self.stats = _grown(self.stats, room)
+            self.sse = _grown(self.sse, room)
+        # the rewritten slots' triangles straight into their rows
+        self._pending = self.tri.dirty(into=self.corners)
+
+    def measure(self, vertices: np.ndarray, z: np.ndarray | None) -> None:
+        """Measure the slots rewritten since the last measure (z: the vertex values for
+        their squared errors; None: statistics only, no round follows), each into its
+        rows of the kept statistics and squared errors."""
+        self.layout.of_triangles(vertices, self.corners[: self.m], z, self._pending, self.stats, self.sse)
+        self._pending = self._pending[:0]
+
+    def canonical(self, number: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(triangles, slots): every triangle in canonical order, its vertices numbered
+        number[i] (default: as inserted), and the slot of each."""
+        if number is None:
+            number = np.arange(self.count)
+        return _renumber.canonical_renumbered(self.corners[: self.m], np.ascontiguousarray(number, dtype=np.int64),
+                                              rows=True)
+
+    def in_canonical_order(self, elements: np.ndarray) -> np.ndarray:
+        """Elements (slots below m, then border lines m, m + 1, ...; distinct) in the
+        order a canonical list gives them: triangles by their corners, then lines."""
+        tri = elements[elements < self.m]
+        c = self.corners[tri]
+        n = self.count
+        if n**3 < 2**62:
+            order = np.argsort((c[:, 0] * n + c[:, 1]) * n + c[:, 2], kind="stable")
+        else:
+            order = np.lexsort((c[:, 2], c[:, 1], c[:, 0]))
+        return np.concatenate([tri[order], np.sort(elements[elements >= self.m])])
+
+
+def _grown(a: np.ndarray, rows: int) -> np.ndarray:
+    """`a` with room for `rows` rows, its rows kept."""
+    out = np.empty((rows,) + a.shape[1:], a.dtype)
+    out[: len(a)] = a
+    return out
 
 
 def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_walls: bool = False):
@@ -163,7 +241,9 @@ def _raster_order(vertices: np.ndarray, segments: np.ndarray, width: int, sort_w
     (the stored polylines) in the raster order of their first vertices, so that their
     stored starts are small forward gaps (about 30 % fewer bytes for them); only before
     a triangulation, which with cocircular vertices may depend on the segment order."""
-    order = np.argsort(vertices[:, 1] * width + vertices[:, 0], kind="stable")
+    # (the vertices are distinct: their pixel numbers have no ties for a stable sort
+    # to keep in order, and numpy's default sort is 4-5x quicker on them)
+    order = np.argsort(vertices[:, 1] * width + vertices[:, 0])
     renumber = np.empty(len(order), np.int64)
     renumber[order] = np.arange(len(order))
     vertices = np.ascontiguousarray(vertices[order], dtype=np.int64)
@@ -205,58 +285,98 @@ def refine_to_budget(
     shared rows and holes go in there, so that the band is triangulated once a round).
     """
     height, width = gray.shape
-    cache = _Cache(layout)
-    growing = _Growing()
+    area = width * height
+    cache = _Cache(layout)  # the triangulations not kept (kernel refused, or after finish)
+    kept: _Kept | None = None
     ordered = False
     measured = None
+    line_sse = None
+    final_rows = None  # kept: the slot of each final triangle, whose statistics it has
+    z = None  # the values of the last round's vertices
     near = None  # for each vertex the last round added, a corner of the triangle it fell in
     for r in itertools.count():
         tris = None
-        if r == rounds or target <= len(vertices):
-            if finish is not None:
-                vertices, segments = finish(vertices, segments, measured)
-                growing = None  # the caller changed the mesh: it is triangulated anew
-            else:
-                tris = growing(vertices, segments, near)
+        last = r == rounds or target <= len(vertices)
+        if last and finish is not None:
+            if kept is not None:
+                # the mean squared error of the last one measured, summed in canonical order
+                _, slots = kept.canonical()
+                measured = float(np.concatenate([kept.sse[slots], line_sse]).sum()) / area
+                cache.seed(vertices, kept.corners[: kept.m], kept.stats[: kept.m], kept.sse[: kept.m], width, height)
+                kept = None  # the caller changes the mesh: it is triangulated anew
+            vertices, segments = finish(vertices, segments, measured)
+        elif r == 0:
+            try:
+                kept = _Kept(layout, vertices, segments, target)
+            except ATMError:
+                kept = None  # triangulate() decides, round after round
+        elif kept is not None:
+            try:
+                kept.insert(vertices, near)
+            except ATMError:
+                kept = None
+        if last:
+            if kept is not None:
+                kept.measure(vertices, None)
             # the last triangulation: made as the MESH chunk's check will make it
             vertices, segments, renumber = _raster_order(vertices, segments, width, sort_walls=True)
             ordered = True
-            if tris is not None:
+            if kept is not None:
                 # the same triangles numbered as the vertices now are, in canonical order
-                tris = _renumber.canonical_renumbered(tris, renumber)
-        elif growing is not None:
-            tris = growing(vertices, segments, near)
-        z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
-        if tris is None:
+                tris, final_rows = kept.canonical(renumber)
+                break
+        if kept is not None and z is not None and len(z) < len(vertices):
+            # the vertices kept are those of the last round, in place: only the new
+            # ones' values are read
+            new = vertices[len(z):]
+            z = np.concatenate([z, gray[new[:, 1], new[:, 0]].astype(np.float64)])
+        else:
+            z = gray[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+        if kept is not None:
+            kept.measure(vertices, z)
+            m = kept.m
+            tri_sse = kept.sse[:m]
+        else:
             tris = triangulate(vertices, segments)
-        tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
+            tri_sse = cache.measure(vertices, tris, z, width, height, ordered)
+            m = len(tris)
         missing = target - len(vertices)
         if ordered:
             break
         lines = line_raster(vertices, width, height)
-        sse = np.concatenate([tri_sse, element_sse(lines, layout(lines), z)])
-        measured = float(sse.sum()) / (width * height)
+        line_sse = element_sse(lines, layout(lines), z)
+        sse = np.concatenate([tri_sse, line_sse])
+        if kept is None:
+            measured = float(sse.sum()) / area
         if r == 0:
-            quarter = min(len(sse), math.ceil(missing / 4))
-            if np.partition(sse, len(sse) - quarter)[len(sse) - quarter :].sum() >= CONCENTRATED * sse.sum():
+            # (in canonical order: the sums' rounding depends on it)
+            ranked = sse if kept is None else np.concatenate([tri_sse[kept.canonical()[1]], line_sse])
+            quarter = min(len(ranked), math.ceil(missing / 4))
+            if np.partition(ranked, len(ranked) - quarter)[len(ranked) - quarter :].sum() >= CONCENTRATED * ranked.sum():
                 rounds = max(rounds, focused_rounds)
         weights = DECAY ** np.arange(rounds - r)
         batch = math.ceil(missing * weights[0] / weights.sum())
         if batch < len(sse):
-            # the batch largest, ties to the lower index (as a stable sort would)
+            # the batch largest, ties to the first in canonical order (as a stable sort
+            # of a canonical list would)
             cut = -np.partition(-sse, batch - 1)[batch - 1]
             above = np.flatnonzero(sse > cut)
-            cand = np.concatenate([above, np.flatnonzero(sse == cut)[: batch - len(above)]])
+            tied = np.flatnonzero(sse == cut)
+            if kept is not None and len(above) + len(tied) > batch:
+                tied = kept.in_canonical_order(tied)
+            cand = np.concatenate([above, tied[: batch - len(above)]])
         else:
             cand = np.arange(len(sse))
-        cand = np.sort(cand[sse[cand] > 0])
-        on_tri = cand[cand < len(tris)]
-        # each candidate triangle's worst pixel (candidates sorted: in triangle order)
-        owns, x, y, err = worst_pixels(gray, vertices, tris[on_tri], z, width, height)
+        cand = cand[sse[cand] > 0]
+        cand = np.sort(cand) if kept is None else kept.in_canonical_order(cand)
+        on_tri = cand[cand < m]
+        corners = tris[on_tri] if kept is None else kept.corners[on_tri]
+        # each candidate triangle's worst pixel (in canonical order)
+        owns, x, y, err = worst_pixels(gray, vertices, corners, z, width, height)
         # a corner of the triangle each worst pixel lies in: where its insertion's point
         # location starts (the border lines' have none)
-        near = tris[on_tri[owns], 0]
-        _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= len(tris)] - len(tris))
+        near = corners[owns, 0]
+        _, lx, ly, lerr = lines.worst_pixels(gray, z, cand[cand >= m] - m)
         # (np.concatenate: np.r_ parses its index each call, 10 us a time)
         x, y, err = np.concatenate([x, lx]), np.concatenate([y, ly]), np.concatenate([err, lerr])
         near = np.concatenate([near, np.full(len(lx), -1, np.int64)])
@@ -266,10 +386,27 @@ def refine_to_budget(
             continue
         if not big.any():
             # nothing worth a vertex: keep this triangulation, in raster order
+            if kept is not None:
+                tris, final_rows = kept.canonical()
             vertices, segments, renumber = _raster_order(vertices, segments, width)
             tris = renumber[tris]
             break
-        vertices, near = merge_new(width, vertices, np.stack([x[big], y[big]], axis=1), near[big])
+        points = np.stack([x[big], y[big]], axis=1)
+        if kept is not None and finish is None:
+            # inserted now (a finish would change the mesh first: those wait for it)
+            try:
+                vertices, near = kept.add(vertices, points, near[big])
+                continue
+            except ATMError:
+                kept = None  # triangulate() decides, round after round
+        vertices, near = merge_new(width, vertices, points, near[big])
     lines = line_raster(vertices, width, height)
-    elements = concat([triangle_raster(vertices, tris, width, height, spans=False), lines])
-    return vertices, segments, tris, elements, cache.statistics(layout(lines)), ordered
+    elements = mesh_elements(vertices, tris, lines)
+    if final_rows is None:
+        return vertices, segments, tris, elements, cache.statistics(layout(lines)), ordered
+    # the kept statistics of the final triangles, the border lines' after them
+    stats = np.empty((len(final_rows) + len(lines), layout.width))
+    # (a compiled row copy: np.take's row by row memmove took 2.6x as long)
+    _elements.gather_rows([kept.stats], final_rows, stats[: len(final_rows)])
+    stats[len(final_rows):] = layout(lines)
+    return vertices, segments, tris, elements, stats, ordered
