@@ -13,16 +13,18 @@ from libc.stdint cimport int16_t, int64_t, uint8_t
 import numpy as np
 
 
-def edge_gradient(const float[:, ::1] sx, const float[:, ::1] sy, float limit, float scale):
+def edge_gradient(const float[:, ::1] sx, const float[:, ::1] sy, float limit, float scale, out=None):
     """(magnitude, ix, iy) of Sobel derivatives sx, sy (H x W float32): dx = sx / 4,
     dy = sy / 4, magnitude = sqrt(dx dx + dy dy) (float32), and ix, iy = dx, dy clipped
-    to +-limit, times scale, rounded half to even (int16; limit * scale within int16)."""
+    to +-limit, times scale, rounded half to even (int16; limit * scale within int16).
+    out: an H x W float32 plane to write the magnitude into (sx or sy itself may be
+    it: each pixel is read before it is written), instead of a new one."""
     cdef Py_ssize_t h = sx.shape[0], w = sx.shape[1]
     if sy.shape[0] != h or sy.shape[1] != w:
         raise ValueError("edge_gradient: dx and dy differ in size")
     if not (0 <= limit and rintf(limit * scale) <= 32767):
         raise ValueError("edge_gradient: the clipped derivatives do not fit int16")
-    mag_out = np.empty((h, w), dtype=np.float32)
+    mag_out = _plane_out(out, h, w, "edge_gradient")
     ix_out = np.empty((h, w), dtype=np.int16)
     iy_out = np.empty((h, w), dtype=np.int16)
     if h == 0 or w == 0:
@@ -54,12 +56,24 @@ def edge_gradient(const float[:, ::1] sx, const float[:, ::1] sy, float limit, f
     return mag_out, ix_out, iy_out
 
 
-def hessian_norm(const float[:, ::1] dxx, const float[:, ::1] dyy, const float[:, ::1] dxy):
-    """sqrt(dxx dxx + 2 dxy dxy + dyy dyy) (H x W float32) of second derivatives."""
+def _plane_out(out, Py_ssize_t h, Py_ssize_t w, str who):
+    """`out` checked as a writable C-contiguous H x W float32 plane, or a new one if None."""
+    if out is None:
+        return np.empty((h, w), dtype=np.float32)
+    if (not isinstance(out, np.ndarray) or out.dtype != np.float32 or out.shape != (h, w)
+            or not out.flags.c_contiguous or not out.flags.writeable):
+        raise ValueError(f"{who}: out must be a writable C-contiguous {h} x {w} float32 plane")
+    return out
+
+
+def hessian_norm(const float[:, ::1] dxx, const float[:, ::1] dyy, const float[:, ::1] dxy, out=None):
+    """sqrt(dxx dxx + 2 dxy dxy + dyy dyy) (H x W float32) of second derivatives; out:
+    an H x W float32 plane to write it into (one of the derivatives itself may be it:
+    each pixel is read before it is written), instead of a new one."""
     cdef Py_ssize_t h = dxx.shape[0], w = dxx.shape[1]
     if dyy.shape[0] != h or dyy.shape[1] != w or dxy.shape[0] != h or dxy.shape[1] != w:
         raise ValueError("hessian_norm: the derivatives differ in size")
-    out = np.empty((h, w), dtype=np.float32)
+    out = _plane_out(out, h, w, "hessian_norm")
     if h == 0 or w == 0:
         return out
     cdef float[:, ::1] o_v = out

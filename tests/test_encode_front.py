@@ -409,3 +409,56 @@ def test_density_gives_numpys_numbers_from_two_compiled_passes(corpus):
         native._gradients.density_roots(zero, np.zeros((5, 8), np.uint8))
     with pytest.raises(ValueError, match="differ in size"):
         native._gradients.density_scale(np.zeros((5, 9)), np.zeros((4, 9), np.uint8), 1.0, 0.25)
+
+
+def test_the_front_writes_into_planes_it_owns_and_frees_them_before_refinement(monkeypatch):
+    """#20: a 741 x 500 encode faulted in about 3,300 fresh pages (2 us each) as its heap
+    grew past the last peak: the gradient magnitude and the Hessian's norm are written
+    into a derivative's plane, the same numbers, and the front's image-sized planes
+    (edges, magnitude, density) are gone before refinement makes its own."""
+    import weakref
+
+    from codec.mesher import sampling
+
+    rng = np.random.default_rng(11)
+    sx, sy, sxy = (rng.normal(0, 300, (23, 31)).astype(np.float32) for _ in range(3))
+    mag, ix, iy = native._gradients.edge_gradient(sx, sy, 32767 / edges._SCALE, edges._SCALE)
+    into = sx.copy()
+    got = native._gradients.edge_gradient(into, sy, 32767 / edges._SCALE, edges._SCALE, out=into)
+    assert got[0] is into and np.array_equal(into, mag)
+    assert np.array_equal(got[1], ix) and np.array_equal(got[2], iy)
+    norm = native._gradients.hessian_norm(sx, sy, sxy)
+    into = sx.copy()
+    assert native._gradients.hessian_norm(into, sy, sxy, out=into) is into and np.array_equal(into, norm)
+    for bad in (np.zeros((23, 30), np.float32), np.zeros((23, 31)), np.zeros((31, 23), np.float32).T,
+                np.zeros((23, 31), np.float32)[::-1], [[0.0] * 31] * 23):
+        with pytest.raises(ValueError, match="out must be"):
+            native._gradients.hessian_norm(sx, sy, sxy, out=bad)
+        with pytest.raises(ValueError, match="out must be"):
+            native._gradients.edge_gradient(sx, sy, 100.0, edges._SCALE, out=bad)
+    frozen = np.zeros((23, 31), np.float32)
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="out must be"):
+        native._gradients.hessian_norm(sx, sy, sxy, out=frozen)
+
+    planes = []
+    for module, name in ((edges, "detect"), (sampling, "density")):
+        real = getattr(module, name)
+
+        def kept(*args, _real=real, **kwargs):
+            out = _real(*args, **kwargs)
+            planes.extend(weakref.ref(p) for p in (out[:2] if isinstance(out, tuple) else (out,)))
+            return out
+
+        monkeypatch.setattr(module, name, kept)
+    refine = adaptive.refine_to_budget
+    alive = []
+
+    def refine_to_budget(*args, **kwargs):
+        alive.append(sum(p() is not None for p in planes))
+        return refine(*args, **kwargs)
+
+    monkeypatch.setattr(adaptive, "refine_to_budget", refine_to_budget)
+    image = load_corpus()["camera"][:200, :240]
+    adaptive.build(image, 1000)
+    assert len(planes) == 3 and alive == [0]

@@ -35,7 +35,8 @@ def curvature(gray: np.ndarray) -> np.ndarray:
     dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
     dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REPLICATE)
     dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    return native._gradients.hessian_norm(dxx, dyy, dxy)
+    # into dxx's plane, ours, not a fresh one (page faults: codec.mesher.edges.gradient)
+    return native._gradients.hessian_norm(dxx, dyy, dxy, out=dxx)
 
 
 def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor: float = FLOOR) -> np.ndarray:
