@@ -454,33 +454,87 @@ def otsu_level(const float[:, ::1] magnitude, float scale):
     return level
 
 
+cdef extern from *:
+    """
+    /* numpy's pairwise sum of a float64 array (add.reduce of a contiguous one, which
+       np.mean divides by the count), of the values d[i] of the pixels with x[i] == 0 in
+       raster order, read as the sum reaches them: no array of them is made */
+    typedef struct { const double* d; const uint8_t* x; Py_ssize_t i; } atm_free_values;
+    /* the next n free values into a (n <= 128), without a branch a pixel: each pixel's
+       value is written and kept only if the pixel is free */
+    static inline void atm_take_free(atm_free_values* v, double* a, Py_ssize_t n) {
+        Py_ssize_t j = 0, i = v->i;
+        while (j < n) {
+            a[j] = v->d[i];
+            j += v->x[i] == 0;
+            i++;
+        }
+        v->i = i;
+    }
+    static double atm_pairwise_free(atm_free_values* v, Py_ssize_t n) {
+        double a[128];
+        if (n < 8) {
+            double res = 0.;
+            atm_take_free(v, a, n);
+            for (Py_ssize_t i = 0; i < n; i++) res += a[i];
+            return res;
+        }
+        if (n <= 128) {  /* numpy's PW_BLOCKSIZE: eight running sums */
+            double r[8], res;
+            Py_ssize_t i;
+            atm_take_free(v, a, n);
+            for (int j = 0; j < 8; j++) r[j] = a[j];
+            for (i = 8; i < n - (n % 8); i += 8)
+                for (int j = 0; j < 8; j++) r[j] += a[i + j];
+            res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+            for (; i < n; i++) res += a[i];
+            return res;
+        }
+        Py_ssize_t n2 = n / 2;
+        n2 -= n2 % 8;
+        double first = atm_pairwise_free(v, n2);  /* the first half's values come first */
+        double second = atm_pairwise_free(v, n - n2);
+        return first + second;
+    }
+    """
+    ctypedef struct atm_free_values:
+        const double* d
+        const uint8_t* x
+        Py_ssize_t i
+    double atm_pairwise_free(atm_free_values* v, Py_ssize_t n) noexcept nogil
+
+
 def density_roots(const float[:, ::1] curvature, const uint8_t[:, ::1] excluded):
-    """(d, free): d = sqrt(curvature) in float64 (H x W; numpy's square root of the
-    float64 value, so the same numbers), and the d of the pixels not excluded, in raster
-    order (as d[~excluded] lists them), for sampling.density's mean."""
+    """(d, mean): d = sqrt(curvature) in float64 (H x W; numpy's square root of the
+    float64 value, so the same numbers), and the mean of the d of the pixels not
+    excluded (0.0 if none), as numpy's d[~excluded].mean() sums them (pairwise, in
+    raster order), for sampling.density."""
     cdef Py_ssize_t h = curvature.shape[0], w = curvature.shape[1]
     if excluded.shape[0] != h or excluded.shape[1] != w:
         raise ValueError("density_roots: the curvature and the exclusion mask differ in size")
     d_out = np.empty((h, w), dtype=np.float64)
-    free_out = np.empty(h * w, dtype=np.float64)
     if h == 0 or w == 0:
-        return d_out, free_out
+        return d_out, 0.0
     cdef double[:, ::1] d_v = d_out
-    cdef double[::1] free_v = free_out
     cdef const float* c = &curvature[0, 0]
     cdef const uint8_t* x = &excluded[0, 0]
     cdef double* d = &d_v[0, 0]
-    cdef double* free = &free_v[0]
     cdef Py_ssize_t i, n = h * w, nf = 0
-    cdef double v
+    cdef atm_free_values values
+    cdef double total = 0.0
     with nogil:
+        # the roots and the count apart, each a loop the compiler vectorises
         for i in range(n):
-            v = sqrt(<double>c[i])
-            d[i] = v
-            if not x[i]:
-                free[nf] = v
-                nf += 1
-    return d_out, free_out[:nf]
+            d[i] = sqrt(<double>c[i])
+        for i in range(n):
+            nf += x[i] == 0
+        if nf:
+            values.d = d
+            values.x = x
+            values.i = 0
+            # the reduction starts from add's identity, 0.0, then adds the pairwise sum
+            total = 0.0 + atm_pairwise_free(&values, nf)
+    return d_out, total / nf if nf else 0.0
 
 
 def density_scale(double[:, ::1] d, const uint8_t[:, ::1] excluded, double mean, double floor):

@@ -462,3 +462,28 @@ def test_the_front_writes_into_planes_it_owns_and_frees_them_before_refinement(m
     image = load_corpus()["camera"][:200, :240]
     adaptive.build(image, 1000)
     assert len(planes) == 3 and alive == [0]
+
+
+def test_the_density_mean_is_numpys_pairwise_sum_without_the_array():
+    """#20: sampling.density's mean of the free pixels' roots took an array of them (up
+    to 3 MB at 741 x 500, fresh pages each encode) for numpy to sum: the kernel sums
+    them as numpy's pairwise sum does (blocks of 8 running sums up to 128 values, halves
+    cut at multiples of 8), read from the roots in raster order, the same bits."""
+    rng = np.random.default_rng(13)
+    sizes = [(1, n) for n in (1, 2, 7, 8, 9, 15, 16, 17, 127, 128, 129, 130, 255, 256, 257, 1000)]
+    sizes += [(91, 90), (64, 128), (97, 211), (300, 401)]  # 8,190 .. 120,300 pixels
+    for h, w in sizes:
+        curv = (rng.random((h, w)) ** 3 * 1e4).astype(np.float32)
+        for share in (0.0, 0.01, 0.3, 0.9, 1.0):
+            excluded = rng.random((h, w)) < share
+            d, mean = native._gradients.density_roots(curv, excluded.view(np.uint8))
+            roots = np.sqrt(curv.astype(np.float64))
+            assert np.array_equal(d, roots)
+            free = roots[~excluded]
+            assert mean == (free.mean() if len(free) else 0.0), (h, w, share)
+    # non-finite curvatures reach the mean as numpy's would
+    curv = np.array([[np.inf, 4.0, np.nan, 9.0]], np.float32)
+    for keep in ([1, 1, 0, 1], [0, 1, 1, 1], [1, 1, 1, 1]):
+        excluded = np.array([keep], np.uint8) == 0
+        mean = native._gradients.density_roots(curv, excluded.view(np.uint8))[1]
+        assert np.array_equal(mean, np.sqrt(curv.astype(np.float64))[~excluded].mean(), equal_nan=True)

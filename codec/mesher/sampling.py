@@ -44,10 +44,11 @@ def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor:
     and zero on excluded pixels."""
     if power == 0.5 and curv.dtype == np.float32:
         # two compiled passes, the numbers of the numpy steps below (x ** 0.5 is numpy's
-        # square root; the mean is numpy's, of the same values in the same order)
+        # square root; the mean numpy's pairwise sum of the same values in the same
+        # order, without the array of them, up to 3 MB at 741 x 500)
         mask = np.ascontiguousarray(excluded, dtype=bool).view(np.uint8)
-        d, free = native._gradients.density_roots(np.ascontiguousarray(curv), mask)
-        native._gradients.density_scale(d, mask, free.mean() if len(free) else 0.0, floor)
+        d, mean = native._gradients.density_roots(np.ascontiguousarray(curv), mask)
+        native._gradients.density_scale(d, mask, mean, floor)
         return d
     # in place where numpy made a temporary per step (the same operations: x ** 0.5 is
     # numpy's square root)
