@@ -51,20 +51,25 @@ cdef extern from *:
                            Py_ssize_t n, float limit, float scale) noexcept nogil
 
 
-def edge_gradient(const float[:, ::1] sx, const float[:, ::1] sy, float limit, float scale, out=None):
+def edge_gradient(const float[:, ::1] sx, const float[:, ::1] sy, float limit, float scale, out=None,
+                  ix_out=None, iy_out=None):
     """(magnitude, ix, iy) of Sobel derivatives sx, sy (H x W float32): dx = sx / 4,
     dy = sy / 4, magnitude = sqrt(dx dx + dy dy) (float32), and ix, iy = dx, dy clipped
     to +-limit, times scale, rounded half to even (int16; limit * scale within int16).
     out: an H x W float32 plane to write the magnitude into (sx or sy itself may be
-    it: each pixel is read before it is written), instead of a new one."""
+    it: each pixel is read before it is written), instead of a new one; ix_out,
+    iy_out: H x W int16 planes for ix and iy (sharing no memory with sx or sy)."""
     cdef Py_ssize_t h = sx.shape[0], w = sx.shape[1]
     if sy.shape[0] != h or sy.shape[1] != w:
         raise ValueError("edge_gradient: dx and dy differ in size")
     if not (0 <= limit and rintf(limit * scale) <= 32767):
         raise ValueError("edge_gradient: the clipped derivatives do not fit int16")
     mag_out = _plane_out(out, h, w, "edge_gradient")
-    ix_out = np.empty((h, w), dtype=np.int16)
-    iy_out = np.empty((h, w), dtype=np.int16)
+    ix_out = _plane_out(ix_out, h, w, "edge_gradient", np.int16)
+    iy_out = _plane_out(iy_out, h, w, "edge_gradient", np.int16)
+    if any(np.may_share_memory(o, i) for o in (ix_out, iy_out) for i in (sx, sy, mag_out)) \
+            or np.may_share_memory(ix_out, iy_out):
+        raise ValueError("edge_gradient: ix_out and iy_out must share no memory with the other planes")
     if h == 0 or w == 0:
         return mag_out, ix_out, iy_out
     # flat pointers over the C-contiguous planes: a loop the compiler can vectorise
@@ -80,13 +85,13 @@ def edge_gradient(const float[:, ::1] sx, const float[:, ::1] sy, float limit, f
     return mag_out, ix_out, iy_out
 
 
-def _plane_out(out, Py_ssize_t h, Py_ssize_t w, str who):
-    """`out` checked as a writable C-contiguous H x W float32 plane, or a new one if None."""
+def _plane_out(out, Py_ssize_t h, Py_ssize_t w, str who, dtype=np.float32):
+    """`out` checked as a writable C-contiguous H x W plane of `dtype`, or a new one if None."""
     if out is None:
-        return np.empty((h, w), dtype=np.float32)
-    if (not isinstance(out, np.ndarray) or out.dtype != np.float32 or out.shape != (h, w)
+        return np.empty((h, w), dtype=dtype)
+    if (not isinstance(out, np.ndarray) or out.dtype != dtype or out.shape != (h, w)
             or not out.flags.c_contiguous or not out.flags.writeable):
-        raise ValueError(f"{who}: out must be a writable C-contiguous {h} x {w} float32 plane")
+        raise ValueError(f"{who}: out must be a writable C-contiguous {h} x {w} {np.dtype(dtype)} plane")
     return out
 
 

@@ -487,3 +487,56 @@ def test_the_density_mean_is_numpys_pairwise_sum_without_the_array():
         excluded = np.array([keep], np.uint8) == 0
         mean = native._gradients.density_roots(curv, excluded.view(np.uint8))[1]
         assert np.array_equal(mean, np.sqrt(curv.astype(np.float64))[~excluded].mean(), equal_nan=True)
+
+
+def _whole_plane_gradient(gray: np.ndarray):
+    """edges.gradient of an 8-bit-scale float32 plane as whole planes made it."""
+    g = cv2.GaussianBlur(gray, (0, 0), edges.SIGMA, borderType=cv2.BORDER_REPLICATE)
+    sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    return native._gradients.edge_gradient(sx, sy, 32767 / edges._SCALE, edges._SCALE)
+
+
+def _whole_plane_curvature(gray: np.ndarray) -> np.ndarray:
+    from codec.mesher import sampling
+
+    g = cv2.GaussianBlur(gray, (0, 0), sampling.SIGMA, borderType=cv2.BORDER_REPLICATE)
+    return native._gradients.hessian_norm(*(cv2.Sobel(g, cv2.CV_32F, dx, dy, ksize=3, borderType=cv2.BORDER_REPLICATE)
+                                            for dx, dy in ((2, 0), (0, 2), (1, 1))))
+
+
+def test_the_filter_chains_in_strips_give_the_whole_planes_numbers(monkeypatch):
+    """#20: edges.gradient and sampling.curvature smooth and differentiate a strip of
+    rows at a time (codec.mesher.strips), with the rows of context their filters read:
+    the same numbers as whole planes, at every strip boundary, for images shorter and
+    taller than a strip, and the kernels' int16 planes checked."""
+    from codec.mesher import sampling, strips
+
+    for sigma in (edges.SIGMA, sampling.SIGMA, 0.8, 2.0, 3.3):
+        # OpenCV's own kernel size for float data at this sigma: a delta's spread
+        delta = np.zeros((1, 61), np.float32)
+        delta[0, 30] = 1
+        spread = np.flatnonzero(cv2.GaussianBlur(delta, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)[0])
+        assert spread.max() - 30 == strips.gaussian_radius(sigma) == 30 - spread.min()
+    assert list(strips.strips(5, 2, rows=2)) == [(0, 2, 0, 4), (2, 4, 0, 5), (4, 5, 2, 5)]
+    assert [(y0, y1, len(s), k) for y0, y1, s, k in strips.smoothed(np.zeros((5, 3), np.float32), 1.0)] == [
+        (0, 5, 5, slice(0, 5))]
+    rng = np.random.default_rng(14)
+    monkeypatch.setattr(strips, "ROWS", 7)  # many boundaries in small images
+    corpus = load_corpus()
+    images = [structure(corpus["motorcycle_disp"]), structure(corpus["camera"])[:40, :53]]
+    images += [(rng.random((h, w)) * 255).astype(np.float32) for h, w in ((1, 9), (2, 5), (6, 11), (7, 7), (8, 30), (23, 4))]
+    for rows in (7, 128):
+        monkeypatch.setattr(strips, "ROWS", rows)
+        for gray in images:
+            for got, want in zip(edges.gradient(gray, 255.0), _whole_plane_gradient(gray)):
+                assert got.dtype == want.dtype and np.array_equal(got, want), gray.shape
+            assert np.array_equal(sampling.curvature(gray), _whole_plane_curvature(gray)), gray.shape
+    sx = np.zeros((4, 5), np.float32)
+    with pytest.raises(ValueError, match="int16"):
+        native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=np.zeros((4, 5), np.int32))
+    with pytest.raises(ValueError, match="share no memory"):
+        native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=sx.view(np.int16).reshape(-1)[:20].reshape(4, 5))
+    shared = np.zeros((4, 5), np.int16)
+    with pytest.raises(ValueError, match="share no memory"):
+        native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=shared, iy_out=shared)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import strips
 from .. import native
 from ..errors import OptionError
 
@@ -31,12 +32,15 @@ def curvature(gray: np.ndarray) -> np.ndarray:
     in one compiled pass, codec._gradients.hessian_norm)."""
     import cv2
 
-    g = cv2.GaussianBlur(gray.astype(np.float32, copy=False), (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
-    dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    # into dxx's plane, ours, not a fresh one (page faults: codec.mesher.edges.gradient)
-    return native._gradients.hessian_norm(dxx, dyy, dxy, out=dxx)
+    g = gray.astype(np.float32, copy=False)
+    h, w = g.shape
+    norm = np.empty((h, w), np.float32)
+    # a strip of rows at a time (codec.mesher.strips), as edges.gradient
+    for y0, y1, smooth, k in strips.smoothed(g, SIGMA):
+        dxx, dyy, dxy = (cv2.Sobel(smooth, cv2.CV_32F, dx, dy, ksize=3, borderType=cv2.BORDER_REPLICATE)
+                         for dx, dy in ((2, 0), (0, 2), (1, 1)))
+        native._gradients.hessian_norm(dxx[k], dyy[k], dxy[k], out=norm[y0:y1])
+    return norm
 
 
 def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor: float = FLOOR) -> np.ndarray:
