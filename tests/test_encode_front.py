@@ -540,3 +540,27 @@ def test_the_filter_chains_in_strips_give_the_whole_planes_numbers(monkeypatch):
     shared = np.zeros((4, 5), np.int16)
     with pytest.raises(ValueError, match="share no memory"):
         native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=shared, iy_out=shared)
+
+
+def test_order_chains_finds_neighbours_without_an_image_sized_table():
+    """#20: order_chains found each chain pixel's neighbours' places through a table as
+    large as the padded image (int64: 3 MB at 741 x 500, read at random, its pages
+    faulted in each encode); a ring of slots ahead of the pixel read does, the same
+    chains, with memory in proportion to the chain pixels and the row length."""
+    import tracemalloc
+
+    from tests.test_mesher_polylines import OFFSETS, _chains_by_hand, _simple_mask
+
+    rng = np.random.default_rng(31)
+    sparse = np.zeros((900, 1100), bool)
+    sparse[200:262, 300:422] = _simple_mask(rng, 60, 120)
+    for mask in (sparse, _simple_mask(rng, 37, 1000), _simple_mask(rng, 300, 9)):
+        offsets = np.array([dy * mask.shape[1] + dx for dy, dx in OFFSETS], np.int64)
+        flat = mask.ravel().view(np.uint8)
+        tracemalloc.start()
+        got = native._polylines.order_chains(flat, offsets)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        for a, b in zip(got, _chains_by_hand(mask)):
+            assert np.array_equal(a, b)
+        assert peak < 200 * int(mask.sum()) + 64 * mask.shape[1] + 65536, (mask.shape, peak)
