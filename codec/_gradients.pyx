@@ -421,8 +421,12 @@ def otsu_level(const float[:, ::1] magnitude, float scale):
     truncated), in one pass with no image-sized temporaries and in one thread: the
     histogram, then Otsu's between-class variance in OpenCV's arithmetic and order
     (its first maximum wins)."""
-    cdef Py_ssize_t h = magnitude.shape[0], w = magnitude.shape[1], y, x
+    cdef Py_ssize_t h = magnitude.shape[0], w = magnitude.shape[1], y, x, x0, n
     cdef int64_t[256] hist
+    # four histograms counted in turn: a run of pixels at one level (a flat region's
+    # zero gradient) made each count wait for the one before (0.45 ms at 741 x 500)
+    cdef int64_t[4][256] part
+    cdef uint8_t[256] levels
     cdef int i
     cdef float v, top = 255, zero = 0
     cdef const float* row
@@ -433,13 +437,28 @@ def otsu_level(const float[:, ::1] magnitude, float scale):
     cdef double each = 1.0 / <double>(h * w)
     with nogil:
         for i in range(256):
-            hist[i] = 0
+            part[0][i] = 0
+            part[1][i] = 0
+            part[2][i] = 0
+            part[3][i] = 0
         for y in range(h):
             row = &magnitude[y, 0]
-            for x in range(w):
-                v = row[x] * scale
-                v = zero if v < zero else (top if v > top else v)
-                hist[<uint8_t>v] += 1
+            for x0 in range(0, w, 256):
+                n = min(256, w - x0)
+                # the levels of up to 256 pixels first (a loop the compiler vectorises)
+                for x in range(n):
+                    v = row[x0 + x] * scale
+                    v = zero if v < zero else (top if v > top else v)
+                    levels[x] = <uint8_t>v
+                for x in range(0, n - 3, 4):
+                    part[0][levels[x]] += 1
+                    part[1][levels[x + 1]] += 1
+                    part[2][levels[x + 2]] += 1
+                    part[3][levels[x + 3]] += 1
+                for x in range(n - n % 4, n):
+                    part[0][levels[x]] += 1
+        for i in range(256):
+            hist[i] = part[0][i] + part[1][i] + part[2][i] + part[3][i]
         for i in range(256):
             mu += i * <double>hist[i]
         mu *= each

@@ -564,3 +564,21 @@ def test_order_chains_finds_neighbours_without_an_image_sized_table():
         for a, b in zip(got, _chains_by_hand(mask)):
             assert np.array_equal(a, b)
         assert peak < 200 * int(mask.sum()) + 64 * mask.shape[1] + 65536, (mask.shape, peak)
+
+
+def test_otsu_level_in_four_histograms_gives_opencvs_threshold_on_wide_flat_rows():
+    """#20: otsu_level counts its histogram in four parts, the levels of up to 256
+    pixels of a row at a time (a flat region's run of one level made each count wait
+    for the one before): OpenCV's threshold still, on rows wider than a block, of every
+    width modulo 4, mostly at one level."""
+    rng = np.random.default_rng(41)
+    for w in (1, 3, 255, 256, 257, 258, 259, 741, 1030):
+        h = int(rng.integers(1, 9))
+        mag = np.zeros((h, w), np.float32)
+        some = rng.random((h, w)) < 0.2
+        mag[some] = (rng.random(int(some.sum())) * 40).astype(np.float32)
+        mag[0, -1] = 41.0
+        top = float(mag.max())
+        levels = np.clip(np.multiply(mag, np.float32(255.0 / top)), 0, 255).astype(np.uint8)
+        want, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+        assert native._gradients.otsu_level(mag, np.float32(255.0 / top)) == want, w
