@@ -22,9 +22,12 @@ OPTIMISE = ["/O2", "/fp:precise"] if sys.platform == "win32" else ["-O2", "-ffp-
 #: inlining limits leave them as calls. -O3 keeps IEEE semantics (no reassociation
 #: without -ffast-math; contraction stays off), so the numbers and bytes are the same.
 #: _gradients' square roots (sqrtf, sqrt) vectorise only without errno, which nothing
-#: reads: -fno-math-errno keeps their correctly rounded results.
+#: reads: -fno-math-errno keeps their correctly rounded results. Its clips (selects
+#: that keep NaN) and float-to-int conversions vectorise only with -fno-trapping-math:
+#: nothing enables floating-point traps, and the values are the same.
 PER_KERNEL = {} if sys.platform == "win32" else {
-    "codec._elements": ["-O3"], "codec._lsq": ["-O3"], "codec._gradients": ["-O3", "-fno-math-errno"],
+    "codec._elements": ["-O3"], "codec._lsq": ["-O3"],
+    "codec._gradients": ["-O3", "-fno-math-errno", "-fno-trapping-math"],
 }
 
 extensions = [

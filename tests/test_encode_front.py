@@ -409,3 +409,176 @@ def test_density_gives_numpys_numbers_from_two_compiled_passes(corpus):
         native._gradients.density_roots(zero, np.zeros((5, 8), np.uint8))
     with pytest.raises(ValueError, match="differ in size"):
         native._gradients.density_scale(np.zeros((5, 9)), np.zeros((4, 9), np.uint8), 1.0, 0.25)
+
+
+def test_the_front_writes_into_planes_it_owns_and_frees_them_before_refinement(monkeypatch):
+    """#20: a 741 x 500 encode faulted in about 3,300 fresh pages (2 us each) as its heap
+    grew past the last peak: the gradient magnitude and the Hessian's norm are written
+    into a derivative's plane, the same numbers, and the front's image-sized planes
+    (edges, magnitude, density) are gone before refinement makes its own."""
+    import weakref
+
+    from codec.mesher import sampling
+
+    rng = np.random.default_rng(11)
+    sx, sy, sxy = (rng.normal(0, 300, (23, 31)).astype(np.float32) for _ in range(3))
+    mag, ix, iy = native._gradients.edge_gradient(sx, sy, 32767 / edges._SCALE, edges._SCALE)
+    into = sx.copy()
+    got = native._gradients.edge_gradient(into, sy, 32767 / edges._SCALE, edges._SCALE, out=into)
+    assert got[0] is into and np.array_equal(into, mag)
+    assert np.array_equal(got[1], ix) and np.array_equal(got[2], iy)
+    norm = native._gradients.hessian_norm(sx, sy, sxy)
+    into = sx.copy()
+    assert native._gradients.hessian_norm(into, sy, sxy, out=into) is into and np.array_equal(into, norm)
+    for bad in (np.zeros((23, 30), np.float32), np.zeros((23, 31)), np.zeros((31, 23), np.float32).T,
+                np.zeros((23, 31), np.float32)[::-1], [[0.0] * 31] * 23):
+        with pytest.raises(ValueError, match="out must be"):
+            native._gradients.hessian_norm(sx, sy, sxy, out=bad)
+        with pytest.raises(ValueError, match="out must be"):
+            native._gradients.edge_gradient(sx, sy, 100.0, edges._SCALE, out=bad)
+    frozen = np.zeros((23, 31), np.float32)
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="out must be"):
+        native._gradients.hessian_norm(sx, sy, sxy, out=frozen)
+
+    planes = []
+    for module, name in ((edges, "detect"), (sampling, "density")):
+        real = getattr(module, name)
+
+        def kept(*args, _real=real, **kwargs):
+            out = _real(*args, **kwargs)
+            planes.extend(weakref.ref(p) for p in (out[:2] if isinstance(out, tuple) else (out,)))
+            return out
+
+        monkeypatch.setattr(module, name, kept)
+    refine = adaptive.refine_to_budget
+    alive = []
+
+    def refine_to_budget(*args, **kwargs):
+        alive.append(sum(p() is not None for p in planes))
+        return refine(*args, **kwargs)
+
+    monkeypatch.setattr(adaptive, "refine_to_budget", refine_to_budget)
+    image = load_corpus()["camera"][:200, :240]
+    adaptive.build(image, 1000)
+    assert len(planes) == 3 and alive == [0]
+
+
+def test_the_density_mean_is_numpys_pairwise_sum_without_the_array():
+    """#20: sampling.density's mean of the free pixels' roots took an array of them (up
+    to 3 MB at 741 x 500, fresh pages each encode) for numpy to sum: the kernel sums
+    them as numpy's pairwise sum does (blocks of 8 running sums up to 128 values, halves
+    cut at multiples of 8), read from the roots in raster order, the same bits."""
+    rng = np.random.default_rng(13)
+    sizes = [(1, n) for n in (1, 2, 7, 8, 9, 15, 16, 17, 127, 128, 129, 130, 255, 256, 257, 1000)]
+    sizes += [(91, 90), (64, 128), (97, 211), (300, 401)]  # 8,190 .. 120,300 pixels
+    for h, w in sizes:
+        curv = (rng.random((h, w)) ** 3 * 1e4).astype(np.float32)
+        for share in (0.0, 0.01, 0.3, 0.9, 1.0):
+            excluded = rng.random((h, w)) < share
+            d, mean = native._gradients.density_roots(curv, excluded.view(np.uint8))
+            roots = np.sqrt(curv.astype(np.float64))
+            assert np.array_equal(d, roots)
+            free = roots[~excluded]
+            assert mean == (free.mean() if len(free) else 0.0), (h, w, share)
+    # non-finite curvatures reach the mean as numpy's would
+    curv = np.array([[np.inf, 4.0, np.nan, 9.0]], np.float32)
+    for keep in ([1, 1, 0, 1], [0, 1, 1, 1], [1, 1, 1, 1]):
+        excluded = np.array([keep], np.uint8) == 0
+        mean = native._gradients.density_roots(curv, excluded.view(np.uint8))[1]
+        assert np.array_equal(mean, np.sqrt(curv.astype(np.float64))[~excluded].mean(), equal_nan=True)
+
+
+def _whole_plane_gradient(gray: np.ndarray):
+    """edges.gradient of an 8-bit-scale float32 plane as whole planes made it."""
+    g = cv2.GaussianBlur(gray, (0, 0), edges.SIGMA, borderType=cv2.BORDER_REPLICATE)
+    sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+    return native._gradients.edge_gradient(sx, sy, 32767 / edges._SCALE, edges._SCALE)
+
+
+def _whole_plane_curvature(gray: np.ndarray) -> np.ndarray:
+    from codec.mesher import sampling
+
+    g = cv2.GaussianBlur(gray, (0, 0), sampling.SIGMA, borderType=cv2.BORDER_REPLICATE)
+    return native._gradients.hessian_norm(*(cv2.Sobel(g, cv2.CV_32F, dx, dy, ksize=3, borderType=cv2.BORDER_REPLICATE)
+                                            for dx, dy in ((2, 0), (0, 2), (1, 1))))
+
+
+def test_the_filter_chains_in_strips_give_the_whole_planes_numbers(monkeypatch):
+    """#20: edges.gradient and sampling.curvature smooth and differentiate a strip of
+    rows at a time (codec.mesher.strips), with the rows of context their filters read:
+    the same numbers as whole planes, at every strip boundary, for images shorter and
+    taller than a strip, and the kernels' int16 planes checked."""
+    from codec.mesher import sampling, strips
+
+    for sigma in (edges.SIGMA, sampling.SIGMA, 0.8, 2.0, 3.3):
+        # OpenCV's own kernel size for float data at this sigma: a delta's spread
+        delta = np.zeros((1, 61), np.float32)
+        delta[0, 30] = 1
+        spread = np.flatnonzero(cv2.GaussianBlur(delta, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)[0])
+        assert spread.max() - 30 == strips.gaussian_radius(sigma) == 30 - spread.min()
+    assert list(strips.strips(5, 2, rows=2)) == [(0, 2, 0, 4), (2, 4, 0, 5), (4, 5, 2, 5)]
+    assert [(y0, y1, len(s), k) for y0, y1, s, k in strips.smoothed(np.zeros((5, 3), np.float32), 1.0)] == [
+        (0, 5, 5, slice(0, 5))]
+    rng = np.random.default_rng(14)
+    monkeypatch.setattr(strips, "ROWS", 7)  # many boundaries in small images
+    corpus = load_corpus()
+    images = [structure(corpus["motorcycle_disp"]), structure(corpus["camera"])[:40, :53]]
+    images += [(rng.random((h, w)) * 255).astype(np.float32) for h, w in ((1, 9), (2, 5), (6, 11), (7, 7), (8, 30), (23, 4))]
+    for rows in (7, 128):
+        monkeypatch.setattr(strips, "ROWS", rows)
+        for gray in images:
+            for got, want in zip(edges.gradient(gray, 255.0), _whole_plane_gradient(gray)):
+                assert got.dtype == want.dtype and np.array_equal(got, want), gray.shape
+            assert np.array_equal(sampling.curvature(gray), _whole_plane_curvature(gray)), gray.shape
+    sx = np.zeros((4, 5), np.float32)
+    with pytest.raises(ValueError, match="int16"):
+        native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=np.zeros((4, 5), np.int32))
+    with pytest.raises(ValueError, match="share no memory"):
+        native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=sx.view(np.int16).reshape(-1)[:20].reshape(4, 5))
+    shared = np.zeros((4, 5), np.int16)
+    with pytest.raises(ValueError, match="share no memory"):
+        native._gradients.edge_gradient(sx, sx, 100.0, edges._SCALE, ix_out=shared, iy_out=shared)
+
+
+def test_order_chains_finds_neighbours_without_an_image_sized_table():
+    """#20: order_chains found each chain pixel's neighbours' places through a table as
+    large as the padded image (int64: 3 MB at 741 x 500, read at random, its pages
+    faulted in each encode); a ring of slots ahead of the pixel read does, the same
+    chains, with memory in proportion to the chain pixels and the row length."""
+    import tracemalloc
+
+    from tests.test_mesher_polylines import OFFSETS, _chains_by_hand, _simple_mask
+
+    rng = np.random.default_rng(31)
+    sparse = np.zeros((900, 1100), bool)
+    sparse[200:262, 300:422] = _simple_mask(rng, 60, 120)
+    for mask in (sparse, _simple_mask(rng, 37, 1000), _simple_mask(rng, 300, 9)):
+        offsets = np.array([dy * mask.shape[1] + dx for dy, dx in OFFSETS], np.int64)
+        flat = mask.ravel().view(np.uint8)
+        tracemalloc.start()
+        got = native._polylines.order_chains(flat, offsets)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        for a, b in zip(got, _chains_by_hand(mask)):
+            assert np.array_equal(a, b)
+        assert peak < 200 * int(mask.sum()) + 64 * mask.shape[1] + 65536, (mask.shape, peak)
+
+
+def test_otsu_level_in_four_histograms_gives_opencvs_threshold_on_wide_flat_rows():
+    """#20: otsu_level counts its histogram in four parts, the levels of up to 256
+    pixels of a row at a time (a flat region's run of one level made each count wait
+    for the one before): OpenCV's threshold still, on rows wider than a block, of every
+    width modulo 4, mostly at one level."""
+    rng = np.random.default_rng(41)
+    for w in (1, 3, 255, 256, 257, 258, 259, 741, 1030):
+        h = int(rng.integers(1, 9))
+        mag = np.zeros((h, w), np.float32)
+        some = rng.random((h, w)) < 0.2
+        mag[some] = (rng.random(int(some.sum())) * 40).astype(np.float32)
+        mag[0, -1] = 41.0
+        top = float(mag.max())
+        levels = np.clip(np.multiply(mag, np.float32(255.0 / top)), 0, 255).astype(np.uint8)
+        want, _ = cv2.threshold(levels, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+        assert native._gradients.otsu_level(mag, np.float32(255.0 / top)) == want, w

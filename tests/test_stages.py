@@ -639,3 +639,30 @@ def _gradients_of(sx: np.ndarray, sy: np.ndarray):
     from codec.native import _gradients
 
     return _gradients.edge_gradient(sx, sy, 32767 / edges._SCALE, edges._SCALE)
+
+
+def test_the_gradient_kernel_in_blocks_gives_numpys_numbers_in_place() -> None:
+    """#20: edge_gradient works in blocks (each block's inputs read before its outputs
+    are written, so that the arithmetic vectorises: 0.74 -> 0.49 ms on a 741 x 500
+    plane): the same numbers at every block boundary, with NaN and infinities, and with
+    the magnitude written over sx's own plane."""
+    from codec.native import _gradients
+
+    rng = np.random.default_rng(12)
+    limit = 32767 / edges._SCALE
+    for h, w in ((1, 1), (1, 255), (1, 256), (1, 257), (3, 171), (17, 61)):
+        planes = _derivative_planes(rng, h, w)
+        special = rng.choice(np.array([np.nan, np.inf, -np.inf, 0.0, 9e3, -9e3], np.float32), (h, w))
+        planes.append(np.where(rng.random((h, w)) < 0.3, special, planes[0]).astype(np.float32))
+        for sx in planes:
+            for sy in planes[::-1]:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    dx, dy = sx / 4, sy / 4
+                    mag = np.sqrt(dx * dx + dy * dy)
+                    clipped = [np.clip(d, -limit, limit) * edges._SCALE for d in (dx, dy)]
+                    ix, iy = (np.where(np.isnan(c), 0, np.round(c)).astype(np.int16) for c in clipped)
+                into = sx.copy()
+                got = _gradients.edge_gradient(into, sy, limit, edges._SCALE, out=into)
+                assert got[0] is into
+                assert np.array_equal(into, mag, equal_nan=True)
+                assert np.array_equal(got[1], ix) and np.array_equal(got[2], iy)

@@ -201,6 +201,10 @@ def build(
         per_tile = (r, max(1, round(each / r)))
     dens = sampling.density(sampling.curvature(gray), excluded)
     samples = sampling.sample(dens, tiles, per_tile) if region > 0 else np.zeros((0, 2), np.int64)
+    # the front's image-sized planes (5 MB at 741 x 500) go before refinement makes its
+    # own: an encode's peak is refinement's, and the heap above the last peak is given
+    # back to the system at the end, to be faulted in again (2 us a page) by the next
+    dens = found = magnitude = excluded = None
     vertices = merge(width, wall_pts, corners, samples)
     fit = None if values != "lsq" else "structure" if image.ndim == 2 else image
     layout = Statistics(image if image.ndim == 2 else gray, fit)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import strips
 from .. import native
 from ..errors import OptionError
 
@@ -35,13 +36,20 @@ def gradient(gray: np.ndarray, peak: float) -> tuple[np.ndarray, np.ndarray, np.
     # one pass: the float32 product numpy's astype-then-multiply made in two; none for
     # 8-bit data, whose product by 1 is the plane itself (GaussianBlur only reads it)
     g = gray if peak == 255 and gray.dtype == np.float32 else np.multiply(gray, np.float32(255.0 / peak), dtype=np.float32)
-    g = cv2.GaussianBlur(g, (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
-    sx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    sy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    # not cv2.magnitude: its result differs in the last bit with the arrays' memory
-    # alignment (vector and scalar code paths), which made the thresholds and the wall
-    # selection, and so the bytes, vary from run to run
-    return native._gradients.edge_gradient(sx, sy, 32767 / _SCALE, _SCALE)
+    h, w = g.shape
+    mag = np.empty((h, w), np.float32)
+    ix = np.empty((h, w), np.int16)
+    iy = np.empty((h, w), np.int16)
+    # a strip of rows at a time (codec.mesher.strips)
+    for y0, y1, smooth, k in strips.smoothed(g, SIGMA):
+        sx = cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
+        sy = cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
+        # not cv2.magnitude: its result differs in the last bit with the arrays' memory
+        # alignment (vector and scalar code paths), which made the thresholds and the
+        # wall selection, and so the bytes, vary from run to run
+        native._gradients.edge_gradient(sx[k], sy[k], 32767 / _SCALE, _SCALE, out=mag[y0:y1],
+                                        ix_out=ix[y0:y1], iy_out=iy[y0:y1])
+    return mag, ix, iy
 
 
 def auto_thresholds(magnitude: np.ndarray) -> tuple[float, float]:

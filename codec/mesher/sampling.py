@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import strips
 from .. import native
 from ..errors import OptionError
 
@@ -31,11 +32,15 @@ def curvature(gray: np.ndarray) -> np.ndarray:
     in one compiled pass, codec._gradients.hessian_norm)."""
     import cv2
 
-    g = cv2.GaussianBlur(gray.astype(np.float32, copy=False), (0, 0), SIGMA, borderType=cv2.BORDER_REPLICATE)
-    dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)
-    return native._gradients.hessian_norm(dxx, dyy, dxy)
+    g = gray.astype(np.float32, copy=False)
+    h, w = g.shape
+    norm = np.empty((h, w), np.float32)
+    # a strip of rows at a time (codec.mesher.strips), as edges.gradient
+    for y0, y1, smooth, k in strips.smoothed(g, SIGMA):
+        dxx, dyy, dxy = (cv2.Sobel(smooth, cv2.CV_32F, dx, dy, ksize=3, borderType=cv2.BORDER_REPLICATE)
+                         for dx, dy in ((2, 0), (0, 2), (1, 1)))
+        native._gradients.hessian_norm(dxx[k], dyy[k], dxy[k], out=norm[y0:y1])
+    return norm
 
 
 def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor: float = FLOOR) -> np.ndarray:
@@ -43,10 +48,11 @@ def density(curv: np.ndarray, excluded: np.ndarray, power: float = POWER, floor:
     and zero on excluded pixels."""
     if power == 0.5 and curv.dtype == np.float32:
         # two compiled passes, the numbers of the numpy steps below (x ** 0.5 is numpy's
-        # square root; the mean is numpy's, of the same values in the same order)
+        # square root; the mean numpy's pairwise sum of the same values in the same
+        # order, without the array of them, up to 3 MB at 741 x 500)
         mask = np.ascontiguousarray(excluded, dtype=bool).view(np.uint8)
-        d, free = native._gradients.density_roots(np.ascontiguousarray(curv), mask)
-        native._gradients.density_scale(d, mask, free.mean() if len(free) else 0.0, floor)
+        d, mean = native._gradients.density_roots(np.ascontiguousarray(curv), mask)
+        native._gradients.density_scale(d, mask, mean, floor)
         return d
     # in place where numpy made a temporary per step (the same operations: x ** 0.5 is
     # numpy's square root)
