@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import codec
 from codec.mesh import segments
 from codec.mesher import adaptive, refine
 from codec.triangulate import triangulate
@@ -146,3 +147,35 @@ def test_the_kept_triangulation_grows_its_tables_and_keeps_each_slots_numbers() 
     stats, sse = layout.of_triangles(vertices, tris, z)
     np.testing.assert_array_equal(kept.stats[slots], stats)
     np.testing.assert_array_equal(kept.sse[slots], sse)
+
+
+def test_a_band_too_large_for_triangle_keys_is_seeded_and_measured_again_in_full() -> None:
+    """#20 (review): a band of 1,664,511 pixels or more has no triangle keys
+    (_key_base 0). Seeding the cache after a finish() kept a row per triangle with no
+    key, and the next round's measure raised ValueError from _elements.cached: a
+    1300 x 1300 image with holes in one band failed to encode. Now nothing is kept there
+    and the round measures every triangle, with the numbers of a fresh measurement."""
+    from codec.mesher.elements import Statistics
+
+    w = h = 1300
+    assert refine._key_base(w, h) == 0
+    yy, xx = np.mgrid[0:h, 0:w]
+    image = ((xx * 7 + yy * 3) % 4000 + 100).astype(np.uint16)
+    layout = Statistics(image, "structure")
+    rng = np.random.default_rng(4)
+    inner = np.stack([rng.integers(1, w - 1, 300), rng.integers(1, h - 1, 300)], 1)
+    vertices = np.unique(np.concatenate([[[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], inner]), axis=0)
+    tris = triangulate(vertices)
+    z = image[vertices[:, 1], vertices[:, 0]].astype(np.float64)
+    stats, sse = layout.of_triangles(vertices, tris, z)
+    cache = refine._Cache(layout)
+    cache.seed(vertices, tris, stats, sse, w, h)
+    np.testing.assert_array_equal(cache.measure(vertices, tris, z, w, h), sse)
+    np.testing.assert_array_equal(cache.statistics(), stats)
+
+    holes = image.copy()
+    holes[400:700, 500:900] = 0
+    data = codec.encode(holes, nodata=0, band_height=h)
+    decoded = codec.decode(data)
+    assert decoded.shape == (h, w)
+    np.testing.assert_array_equal(decoded == 0, holes == 0)

@@ -111,7 +111,12 @@ class _Cache:
         none = np.zeros(0, np.int64)
         keys, rows, _, _ = _elements.cached(pixel, np.ascontiguousarray(triangles, dtype=np.int64),
                                             _key_base(width, height), none, none, np.zeros(0), 0)
-        self.keys, self.rows, self.sse = keys, rows, np.array(sse)
+        # (no keys where the band is too large for them: then nothing is kept, as in
+        # measure(), and the next round measures every triangle)
+        if len(keys):
+            self.keys, self.rows, self.sse = keys, rows, np.array(sse)
+        else:
+            self.keys, self.rows, self.sse = none, none, np.zeros(0)
         self._parts = [stats]
         self._stored = len(triangles)
         self._last = rows
