@@ -766,3 +766,40 @@ def test_inserting_free_points_leaves_out_those_on_taken_positions_as_merge_does
             tri.insert_free(np.array([[w + 1, 0]]))
         with pytest.raises(ValueError, match="one entry per point"):
             tri._kernel.insert(np.zeros((2, 2), np.int64), None, np.zeros(1, np.uint8))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["uniform", "clusters", "lattice"]),
+       st.sampled_from([(512, 48), (2000, 24), (90, 600)]), st.sampled_from([0.004, 0.03, 0.2]))
+def test_a_band_of_thousands_of_vertices_is_swept_to_the_triangles_of_insertion(seed, kind, shape, share):
+    """Bands the size of a decoder's (thousands of vertices, evenly spread, in clusters
+    as an adaptive mesh puts them, or on a lattice, with ties): the sweep-line's
+    triangles (delaunay, vertices in raster order: a long front, fills on both sides of
+    many vertices, its walks started from buckets of x those fills re-point) are those
+    of the same vertices inserted one by one into the band's corners (point location
+    and Lawson flips, no front); some checked against Triangle too."""
+    rng = np.random.default_rng(seed)
+    w, h = shape
+    count = max(4, int(share * w * h))
+    if kind == "uniform":
+        pts = rng.integers(0, [w, h], (count, 2))
+    elif kind == "clusters":
+        centres = rng.integers(0, [w, h], (int(rng.integers(1, 12)), 2))
+        pts = centres[rng.integers(0, len(centres), count)] + rng.normal(0, rng.uniform(1, 30), (count, 2))
+        pts = np.clip(np.rint(pts), 0, [w - 1, h - 1]).astype(np.int64)
+    else:
+        step = int(rng.integers(2, 6))
+        pts = rng.integers(0, [w // step, h // step], (count, 2)) * step
+    corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]])
+    pts = np.unique(np.concatenate([pts, corners]), axis=0)
+    pts = pts[np.lexsort((pts[:, 0], pts[:, 1]))]
+    swept = delaunay(pts)
+    inner = ~((pts[:, 0] % (w - 1) == 0) & (pts[:, 1] % (h - 1) == 0))
+    inserted = Triangulation(corners)
+    inserted.insert(pts[inner])
+    number = np.concatenate([np.flatnonzero(~inner)[[0, 1, 2, 3]], np.flatnonzero(inner)])
+    # corners went in as given: (0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1), which is
+    # their raster order too
+    np.testing.assert_array_equal(swept, canonical_triangles(number[inserted.triangles()]))
+    if len(pts) <= 3000:
+        np.testing.assert_array_equal(swept, by_triangle(pts, None))
