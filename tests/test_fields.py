@@ -266,6 +266,29 @@ def test_position_keys_follow_the_gaps(gaps: list[int], bits: int) -> None:
         assert _fields.position_keys(nums[1:], packed, bits, span - 1) == (False, None)
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 300), st.integers(0, 32), st.integers(0, 9), st.integers(0, 2**32 - 1))
+def test_position_keys_cut_every_field_width_at_every_bit(n: int, bits: int, extra: int, seed: int) -> None:
+    """The low bits cut from whole big-endian words (and, near the field's end, byte
+    by byte) are numpy's unpacked bits, for every width up to 32 and every bit offset,
+    whatever bytes follow the field (position_keys takes a longer buffer)."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(seed)
+    low = rng.integers(0, 1 << bits, n, dtype=np.int64) if bits else np.zeros(n, np.int64)
+    high = rng.integers(0, 4, n, dtype=np.int64)
+    gaps = (high << bits) | low
+    fields = meshcode.position_fields(gaps, bits)
+    packed = np.frombuffer(fields["position_bits"] + rng.bytes(extra), np.uint8)
+    # numpy's reading: each gap's bits, most significant first, one after another
+    unpacked = np.unpackbits(packed)[: n * bits].reshape(n, bits).astype(np.int64)
+    lows = (unpacked << np.arange(bits - 1, -1, -1)).sum(1) if bits else np.zeros(n, np.int64)
+    keys = np.cumsum((high << bits) + lows + 1) - 1
+    span = int(keys[-1]) + 1 if n else 1
+    ok, out = _fields.position_keys(high, packed, bits, span)
+    assert ok and out.tolist() == keys.tolist()
+
+
 def test_validate_checks_elements_in_one_pass_whatever_the_arrays() -> None:
     """mesh.validate's element checks (a compiled pass) refuse each kind of bad mesh
     with its own message, for int32 and strided arrays as for int64."""
