@@ -627,53 +627,18 @@ cdef void _count_sort_rows(const int64_t[:, ::1] rows, int64_t[:, ::1] out, int6
             out[j, 0] = a; out[j, 1] = b; out[j, 2] = c
 
 
-cdef extern from *:
-    """
-    /* The eight bytes at p as one big-endian word: a load and a byte swap where the
-       compiler has one, else byte by byte. */
-    #include <string.h>
-    static inline uint64_t atm_load_be64(const uint8_t* p) {
-    #if (defined(__GNUC__) || defined(__clang__)) && defined(__BYTE_ORDER__) && defined(__ORDER_LITTLE_ENDIAN__)
-        uint64_t w;
-        memcpy(&w, p, 8);
-    #if __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
-        return __builtin_bswap64(w);
-    #else
-        return w;
-    #endif
-    #else
-        return ((uint64_t)p[0] << 56) | ((uint64_t)p[1] << 48) | ((uint64_t)p[2] << 40) | ((uint64_t)p[3] << 32)
-             | ((uint64_t)p[4] << 24) | ((uint64_t)p[5] << 16) | ((uint64_t)p[6] << 8) | (uint64_t)p[7];
-    #endif
-    }
-    """
-    uint64_t atm_load_be64(const uint8_t* p) noexcept nogil
-
-
-cdef bint _position_keys(const int64_t* high, int64_t n, const uint8_t* packed, int64_t size, int bits,
-                         int64_t span, int64_t* o) noexcept nogil:
-    """position_keys' pass into o (n); False if a gap or a key reaches span. packed:
-    `size` bytes, at least n * bits bits. A gap's low bits are cut from the eight
-    bytes at its first bit's byte, read as one big-endian word (a field of up to 32
-    bits starting at any of a byte's 8 bits lies within them), not gathered a bit at a
-    time (a tenth of band_front's time went there); the gaps whose eight bytes would
-    run past the field take them a byte at a time, zero beyond its end."""
-    cdef int64_t j, i, gap, key = -1, low, at, byte
-    cdef uint64_t word, mask = (<uint64_t>1 << bits) - 1
+cdef bint _position_keys(const int64_t* high, int64_t n, const uint8_t* packed, int bits, int64_t span,
+                         int64_t* o) noexcept nogil:
+    """position_keys' pass into o (n); False if a gap or a key reaches span."""
+    cdef int64_t j, gap, key = -1, low, at
+    cdef int b
     for j in range(n):
         if high[j] < 0 or high[j] >= span:
             return False
         low = 0
-        if bits:
-            at = j * bits
-            byte = at >> 3
-            if byte + 8 <= size:
-                word = atm_load_be64(packed + byte)
-            else:
-                word = 0
-                for i in range(8):
-                    word = (word << 8) | (packed[byte + i] if byte + i < size else 0)
-            low = <int64_t>((word >> (64 - (at & 7) - bits)) & mask)
+        at = j * bits
+        for b in range(bits):
+            low = (low << 1) | ((packed[(at + b) >> 3] >> (7 - ((at + b) & 7))) & 1)
         gap = (high[j] << bits) | low
         if gap >= span:
             return False
@@ -698,8 +663,7 @@ def position_keys(const int64_t[::1] high, const uint8_t[::1] packed, int bits, 
     cdef int64_t[::1] o = out
     if n:
         with nogil:
-            ok = _position_keys(&high[0], n, &packed[0] if packed.shape[0] else NULL, packed.shape[0], bits, span,
-                                     &o[0])
+            ok = _position_keys(&high[0], n, &packed[0] if packed.shape[0] else NULL, bits, span, &o[0])
     return (True, out) if ok else (False, None)
 
 
@@ -1034,22 +998,22 @@ def band_vertices(const int64_t[::1] line_keys, const int64_t[::1] free_keys,
     return True, vertices, places[:nf], flat_arr[:total], walls_arr[:nw], on_line_arr[:na]
 
 
-cdef inline int64_t _radix_passes(int64_t span, int64_t* digit) noexcept nogil:
-    """The passes of at most 11-bit digits a radix sort of keys below span needs, and
-    (digit) each pass's bits."""
-    cdef int64_t bits = 0, passes
-    while bits < 63 and (<int64_t>1 << bits) < span:
-        bits += 1
-    passes = (bits + 10) // 11
-    digit[0] = (bits + passes - 1) // passes if passes else 1
-    return passes
+cdef enum:
+    ARGSORT_BUCKETS = 2048  # buckets _argsort's digits need at most (11-bit digits)
 
 
-cdef inline int64_t _count_words(int64_t span) noexcept nogil:
-    """The digit counts' words of _argsort for keys below span: every pass's at once."""
-    cdef int64_t digit
-    cdef int64_t passes = _radix_passes(span, &digit)
-    return passes * (<int64_t>1 << digit)
+cdef inline void _digit_places(const uint64_t* words, int64_t n, int64_t shift, int64_t mask,
+                               int64_t* count) noexcept nogil:
+    """count[d]: the place the first of the n words whose digit (word >> shift) & mask is
+    d goes in a radix pass (the digits counted, then an exclusive running sum)."""
+    cdef int64_t j, b, c, total = 0
+    memset(count, 0, (mask + 1) * sizeof(int64_t))
+    for j in range(n):
+        count[(words[j] >> shift) & mask] += 1
+    for b in range(mask + 1):
+        c = count[b]
+        count[b] = total
+        total += c
 
 
 cdef inline bint _packed(int64_t n, int64_t span) noexcept nogil:
@@ -1059,68 +1023,45 @@ cdef inline bint _packed(int64_t n, int64_t span) noexcept nogil:
 
 cdef inline int64_t _argsort_words(int64_t n, int64_t span) noexcept nogil:
     """The int64 words of buffer _argsort needs."""
-    return (2 if _packed(n, span) else 4) * n + _count_words(span)
-
-
-cdef inline void _exclusive_sums(int64_t* count, int64_t buckets) noexcept nogil:
-    """Each digit's count -> the place where the first key with that digit goes."""
-    cdef int64_t b, c, total = 0
-    for b in range(buckets):
-        c = count[b]
-        count[b] = total
-        total += c
+    return (2 if _packed(n, span) else 4) * n + ARGSORT_BUCKETS
 
 
 cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* buf) noexcept nogil:
     """argsort_keys' radix passes into buf (_argsort_words(n, span) entries); the
     sorted places (a pointer into buf), NULL if a key lies outside 0..span-1. Keys and
     places that fit 32 bits each (every band's) move as one word, key above place:
-    half the stores and half the buffer of moving them apart. Every pass's digits are
-    counted in the one read of the keys that checks them (a pass then only moves
-    them: one read of the keys fewer a pass)."""
-    cdef int64_t j, b, digit, passes, p, shift, mask, buckets
-    cdef bint bad = False, packed = _packed(n, span)
+    half the stores and half the buffer of moving them apart."""
+    cdef int64_t j, b, bits = 0, passes, digit, shift = 0, mask
+    cdef bint bad = False
     cdef uint64_t* w_src
     cdef uint64_t* w_dst
     cdef uint64_t* w_tmp
-    cdef uint64_t u, word, low32 = (<uint64_t>1 << 32) - 1  # (a key below 2**32 has at most 32 bits)
-    passes = _radix_passes(span, &digit)
-    buckets = <int64_t>1 << digit  # at most 2048
-    mask = buckets - 1
+    cdef uint64_t word, low32 = (<uint64_t>1 << 32) - 1  # (a key below 2**32 has at most 32 bits)
+    while bits < 63 and (<int64_t>1 << bits) < span:
+        bits += 1
+    passes = (bits + 10) // 11
+    digit = (bits + passes - 1) // passes if passes else 1
+    mask = (<int64_t>1 << digit) - 1  # at most ARGSORT_BUCKETS - 1
     # raw pointers (memoryview indexing reloads its base at each of the scatter's stores)
     cdef int64_t* k_src = buf
     cdef int64_t* k_dst = buf + n
     cdef int64_t* i_src = buf + 2 * n
     cdef int64_t* i_dst = buf + 3 * n
-    cdef int64_t* counts = buf + (2 if packed else 4) * n
-    cdef int64_t* count
+    cdef int64_t* count = buf + 4 * n
     cdef int64_t* tmp
-    memset(counts, 0, passes * buckets * sizeof(int64_t))
-    # (a key out of range still lands in some bucket: no count is written out of bounds)
-    if passes == 2:  # (every band's sorts below 2**22 pixels: the loop unrolled)
-        for j in range(n):
-            u = <uint64_t>keys[j]
-            bad |= u >= <uint64_t>span
-            counts[u & <uint64_t>mask] += 1
-            counts[buckets + <int64_t>((u >> digit) & <uint64_t>mask)] += 1
-    else:
-        for j in range(n):
-            u = <uint64_t>keys[j]
-            bad |= u >= <uint64_t>span
-            for p in range(passes):
-                counts[p * buckets + <int64_t>((u >> (p * digit)) & <uint64_t>mask)] += 1
+    for j in range(n):
+        bad |= <uint64_t>keys[j] >= <uint64_t>span
     if bad:
         return NULL
-    for p in range(passes):
-        _exclusive_sums(counts + p * buckets, buckets)
-    if packed:
+    if _packed(n, span):
         w_src = <uint64_t*>buf
         w_dst = <uint64_t*>(buf + n)
+        count = buf + 2 * n
         for j in range(n):
             w_src[j] = (<uint64_t>keys[j] << 32) | <uint64_t>j
         shift = 32
-        for p in range(passes):
-            count = counts + p * buckets
+        while passes > 0:
+            _digit_places(w_src, n, shift, mask, count)
             for j in range(n):
                 word = w_src[j]
                 b = (word >> shift) & mask
@@ -1130,6 +1071,7 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
             w_src = w_dst
             w_dst = w_tmp
             shift += digit
+            passes -= 1
         # the places, unpacked where their words were
         for j in range(n):
             (<int64_t*>w_src)[j] = <int64_t>(w_src[j] & low32)
@@ -1137,11 +1079,10 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
     for j in range(n):
         k_src[j] = keys[j]
         i_src[j] = j
-    shift = 0
-    for p in range(passes):
-        count = counts + p * buckets
+    while passes > 0:
+        _digit_places(<const uint64_t*>k_src, n, shift, mask, count)  # (keys checked >= 0)
         for j in range(n):
-            b = (k_src[j] >> shift) & mask  # (keys checked >= 0)
+            b = (k_src[j] >> shift) & mask
             k_dst[count[b]] = k_src[j]
             i_dst[count[b]] = i_src[j]
             count[b] += 1
@@ -1152,6 +1093,7 @@ cdef int64_t* _argsort(const int64_t* keys, int64_t n, int64_t span, int64_t* bu
         i_src = i_dst
         i_dst = tmp
         shift += digit
+        passes -= 1
     return i_src
 
 
@@ -1318,8 +1260,7 @@ cdef bint _front(const uint8_t* lengths_field, int64_t lengths_size, const uint8
     pad = 8 * packed_size - nf * bits  # all in the last byte
     if pad and packed[packed_size - 1] & ((1 << pad) - 1):
         return False
-    if nf and not _position_keys(nums + 1, nf, packed, packed_size, <int>bits, span,
-                                    free_keys if by_rows else curve_keys):
+    if nf and not _position_keys(nums + 1, nf, packed, <int>bits, span, free_keys if by_rows else curve_keys):
         return False
     if not by_rows:
         # keys along the curve: their pixels, sorted into raster order
@@ -1409,9 +1350,7 @@ def band_front(const uint8_t[::1] lengths_field, const uint8_t[::1] starts_field
     most = total if total > nf else nf
     lines = <int64_t*>malloc(sizeof(int64_t) * (count + 2 * nsteps + 6 * total + 1))
     frees = <int64_t*>malloc(sizeof(int64_t) * (4 * nf + 2))
-    # (the sorts' spans are the pixels and the curve's: the counts' words of either)
-    sort_buf = <int64_t*>malloc(sizeof(int64_t) * ((2 if _packed(most, max(width * rows, curve_span)) else 4) * most
-                                                   + max(_count_words(width * rows), _count_words(curve_span))))
+    sort_buf = <int64_t*>malloc(sizeof(int64_t) * _argsort_words(most, max(width * rows, curve_span)))
     if lines == NULL or frees == NULL or sort_buf == NULL:
         free(lines)
         free(frees)
