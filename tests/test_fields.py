@@ -400,6 +400,58 @@ def test_band_vertices_merges_the_key_lists() -> None:
     assert _fields.line_ranks(chain, np.zeros(len(chain), np.int64)) is None  # no permutation
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 50), st.integers(0, 400), st.floats(0, 1),
+       st.sampled_from(["none", "first", "last", "any"]))
+def test_band_vertices_merge_is_the_sorted_union(seed: int, width: int, n: int, share: float, dup: str) -> None:
+    """The merge by selects puts every key of both increasing lists in its sorted
+    place, whatever the mix (either list empty, one list's keys all before the
+    other's), and refuses a key in both lists wherever it lies."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(seed)
+    keys = np.unique(rng.integers(0, width * 60, n))
+    if rng.random() < 0.2:  # one list's keys all before the other's
+        on_line = np.arange(len(keys)) < int(share * len(keys))
+    else:
+        on_line = rng.random(len(keys)) < share
+    line_keys, free_keys = keys[on_line], keys[~on_line]
+    lengths = np.array([len(line_keys)]) if len(line_keys) >= 2 else np.zeros(0, np.int64)
+    chain = line_keys if len(lengths) else np.zeros(0, np.int64)
+    distinct, ranks, appear = _fields.line_ranks(chain, np.argsort(chain, kind="stable"))
+    if len(lengths) == 0:
+        line_keys = free_keys[:0]
+        free_keys = keys
+    ok, vertices, places, flat, walls, first = _fields.band_vertices(distinct, free_keys, ranks, appear, lengths, width)
+    assert ok
+    merged = np.sort(np.r_[line_keys, free_keys])
+    assert vertices.tolist() == np.stack([merged % width, merged // width], 1).tolist()
+    assert merged[places].tolist() == free_keys.tolist()
+    assert merged[flat].tolist() == chain.tolist()
+    if dup != "none" and len(distinct) and len(free_keys):
+        at = {"first": 0, "last": len(distinct) - 1, "any": int(rng.integers(0, len(distinct)))}[dup]
+        shared = np.unique(np.r_[free_keys, distinct[at]])
+        assert not _fields.band_vertices(distinct, shared, ranks, appear, lengths, width)[0]
+
+
+def test_band_vertices_takes_the_largest_keys() -> None:
+    """Keys up to int64's largest (the value past a list's end) are merged in their
+    places, never read or written past either list."""
+    from codec.native import _fields
+
+    top, wide = 2**63 - 1, 2**62
+    line = np.array([5, top], np.int64)
+    ranks, appear = np.array([0, 1], np.int64), np.array([0, 1], np.int64)
+    ok, vertices, places, flat, _, _ = _fields.band_vertices(line, np.array([0, 7], np.int64), ranks, appear,
+                                                             np.array([2]), wide)
+    assert ok and vertices.tolist() == [[0, 0], [5, 0], [7, 0], [top - wide, 1]]
+    assert places.tolist() == [0, 2] and flat.tolist() == [1, 3]
+    assert not _fields.band_vertices(line, np.array([0, top], np.int64), ranks, appear, np.array([2]), wide)[0]
+    ok, vertices, places, _, _, _ = _fields.band_vertices(line[:0], np.array([3, top], np.int64), ranks[:0],
+                                                          appear[:0], np.zeros(0, np.int64), wide)
+    assert ok and vertices.tolist() == [[3, 0], [top - wide, 1]] and places.tolist() == [0, 1]
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.sampled_from(["fans", "hub", "far", "negative"]))
 def test_canonical_triangles_counting_sort_and_its_fallback(seed: int, kind: str) -> None:
