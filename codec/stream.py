@@ -8,17 +8,22 @@ decoded rows as each band's chunk arrives.
 from __future__ import annotations
 
 import itertools
-from typing import BinaryIO, Callable, Iterator
+from typing import TYPE_CHECKING, BinaryIO, Callable, Iterator
 
 import numpy as np
 
-from . import container, decoding, integers, lossless_float, pipeline, representation, residual
-from . import slack as slack_rule
-from . import holes as hole_stage
+from . import container, decoding, integers, lossless_float, residual
 from .errors import ATMError, OptionError
 from .mesh import Mesh
 from .native import _fields
-from .settings import Settings
+
+if TYPE_CHECKING:
+    from .settings import Settings
+
+# The encoder's modules (codec.pipeline and what it imports, codec.settings,
+# codec.representation, codec.slack, codec.holes) are imported by StreamEncoder's
+# methods, not here: a process that only decodes never loads them (a first decode
+# imported them all, 15 of its 60 ms of imports).
 
 
 class StreamEncoder:
@@ -67,6 +72,9 @@ class StreamEncoder:
         channel_axis: bool = False,
         **options,
     ):
+        from . import pipeline
+        from .settings import Settings
+
         if settings is None:
             settings = Settings.from_options(**options)
         elif options:
@@ -143,6 +151,9 @@ class StreamEncoder:
     def _settle(self, pending: list[tuple[np.ndarray, np.ndarray]]) -> None:
         """Plan again with the roughness of the first band (codec.slack), which
         `pending`'s rows (and holes) cover, open the writer, and code those rows."""
+        from . import pipeline
+        from . import slack as slack_rule
+
         self._pending = None
         rows, missing = pending[0] if len(pending) == 1 else (
             np.concatenate([r for r, _ in pending]), np.concatenate([m for _, m in pending]))
@@ -248,6 +259,9 @@ class StreamEncoder:
         return q
 
     def _flush(self) -> None:
+        from . import holes as hole_stage
+        from . import pipeline, representation
+
         if self._filled < 2 and self.height > 1:
             return  # only the shared row of a band already written
         band_holes = self._holes[: self._filled]

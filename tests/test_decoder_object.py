@@ -163,3 +163,31 @@ def test_a_decoder_names_a_damaged_frame_as_codec_decode_does_after_a_frame_read
     with pytest.raises(codec.CorruptError) as reused:
         decoder.decode(damaged)
     assert str(reused.value) == str(fresh.value)
+
+
+def test_a_process_that_only_decodes_loads_no_encoder_module(tmp_path) -> None:
+    """codec.decode, codec.Decoder and a StreamDecoder of every kind of file load none
+    of the encoder's modules (codec.pipeline and what only it needs): a first decode
+    spent a quarter of its CPU time importing them."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    names = []
+    for k, data in enumerate(_files()):
+        (tmp_path / f"{k}.atm").write_bytes(data)
+        names.append(str(tmp_path / f"{k}.atm"))
+    encoder = ["codec.pipeline", "codec.settings", "codec.representation", "codec.slack", "codec.holes"]
+    code = (
+        "import io, json, sys, codec\n"
+        f"for name in {names!r}:\n"
+        "    data = open(name, 'rb').read()\n"
+        "    codec.decode(data)\n"
+        "    codec.Decoder().decode(data)\n"
+        "    list(codec.StreamDecoder(io.BytesIO(data)))\n"
+        f"print(json.dumps([m for m in {encoder!r} if m in sys.modules]))\n"
+    )
+    root = Path(__file__).resolve().parent.parent
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
+    assert json.loads(out.stdout) == []

@@ -266,6 +266,29 @@ def test_position_keys_follow_the_gaps(gaps: list[int], bits: int) -> None:
         assert _fields.position_keys(nums[1:], packed, bits, span - 1) == (False, None)
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 300), st.integers(0, 32), st.integers(0, 9), st.integers(0, 2**32 - 1))
+def test_position_keys_cut_every_field_width_at_every_bit(n: int, bits: int, extra: int, seed: int) -> None:
+    """The low bits cut from whole big-endian words (and, near the field's end, byte
+    by byte) are numpy's unpacked bits, for every width up to 32 and every bit offset,
+    whatever bytes follow the field (position_keys takes a longer buffer)."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(seed)
+    low = rng.integers(0, 1 << bits, n, dtype=np.int64) if bits else np.zeros(n, np.int64)
+    high = rng.integers(0, 4, n, dtype=np.int64)
+    gaps = (high << bits) | low
+    fields = meshcode.position_fields(gaps, bits)
+    packed = np.frombuffer(fields["position_bits"] + rng.bytes(extra), np.uint8)
+    # numpy's reading: each gap's bits, most significant first, one after another
+    unpacked = np.unpackbits(packed)[: n * bits].reshape(n, bits).astype(np.int64)
+    lows = (unpacked << np.arange(bits - 1, -1, -1)).sum(1) if bits else np.zeros(n, np.int64)
+    keys = np.cumsum((high << bits) + lows + 1) - 1
+    span = int(keys[-1]) + 1 if n else 1
+    ok, out = _fields.position_keys(high, packed, bits, span)
+    assert ok and out.tolist() == keys.tolist()
+
+
 def test_validate_checks_elements_in_one_pass_whatever_the_arrays() -> None:
     """mesh.validate's element checks (a compiled pass) refuse each kind of bad mesh
     with its own message, for int32 and strided arrays as for int64."""
@@ -375,6 +398,58 @@ def test_band_vertices_merges_the_key_lists() -> None:
     shared.sort()
     assert not _fields.band_vertices(distinct, shared, ranks, appear, lengths, width)[0]
     assert _fields.line_ranks(chain, np.zeros(len(chain), np.int64)) is None  # no permutation
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 50), st.integers(0, 400), st.floats(0, 1),
+       st.sampled_from(["none", "first", "last", "any"]))
+def test_band_vertices_merge_is_the_sorted_union(seed: int, width: int, n: int, share: float, dup: str) -> None:
+    """The merge by selects puts every key of both increasing lists in its sorted
+    place, whatever the mix (either list empty, one list's keys all before the
+    other's), and refuses a key in both lists wherever it lies."""
+    from codec.native import _fields
+
+    rng = np.random.default_rng(seed)
+    keys = np.unique(rng.integers(0, width * 60, n))
+    if rng.random() < 0.2:  # one list's keys all before the other's
+        on_line = np.arange(len(keys)) < int(share * len(keys))
+    else:
+        on_line = rng.random(len(keys)) < share
+    line_keys, free_keys = keys[on_line], keys[~on_line]
+    lengths = np.array([len(line_keys)]) if len(line_keys) >= 2 else np.zeros(0, np.int64)
+    chain = line_keys if len(lengths) else np.zeros(0, np.int64)
+    distinct, ranks, appear = _fields.line_ranks(chain, np.argsort(chain, kind="stable"))
+    if len(lengths) == 0:
+        line_keys = free_keys[:0]
+        free_keys = keys
+    ok, vertices, places, flat, walls, first = _fields.band_vertices(distinct, free_keys, ranks, appear, lengths, width)
+    assert ok
+    merged = np.sort(np.r_[line_keys, free_keys])
+    assert vertices.tolist() == np.stack([merged % width, merged // width], 1).tolist()
+    assert merged[places].tolist() == free_keys.tolist()
+    assert merged[flat].tolist() == chain.tolist()
+    if dup != "none" and len(distinct) and len(free_keys):
+        at = {"first": 0, "last": len(distinct) - 1, "any": int(rng.integers(0, len(distinct)))}[dup]
+        shared = np.unique(np.r_[free_keys, distinct[at]])
+        assert not _fields.band_vertices(distinct, shared, ranks, appear, lengths, width)[0]
+
+
+def test_band_vertices_takes_the_largest_keys() -> None:
+    """Keys up to int64's largest (the value past a list's end) are merged in their
+    places, never read or written past either list."""
+    from codec.native import _fields
+
+    top, wide = 2**63 - 1, 2**62
+    line = np.array([5, top], np.int64)
+    ranks, appear = np.array([0, 1], np.int64), np.array([0, 1], np.int64)
+    ok, vertices, places, flat, _, _ = _fields.band_vertices(line, np.array([0, 7], np.int64), ranks, appear,
+                                                             np.array([2]), wide)
+    assert ok and vertices.tolist() == [[0, 0], [5, 0], [7, 0], [top - wide, 1]]
+    assert places.tolist() == [0, 2] and flat.tolist() == [1, 3]
+    assert not _fields.band_vertices(line, np.array([0, top], np.int64), ranks, appear, np.array([2]), wide)[0]
+    ok, vertices, places, _, _, _ = _fields.band_vertices(line[:0], np.array([3, top], np.int64), ranks[:0],
+                                                          appear[:0], np.zeros(0, np.int64), wide)
+    assert ok and vertices.tolist() == [[3, 0], [top - wide, 1]] and places.tolist() == [0, 1]
 
 
 @settings(max_examples=60, deadline=None)
