@@ -157,6 +157,9 @@ class _Errors:
         self.worst = np.zeros(height * width)
         # per channel only where the largest is not all of it
         self.squared = np.zeros((height * width, channels)) if channels > 1 else None
+        # each row's sum per channel, kept by the kernel where the errors are whole
+        # numbers (integer samples): exact, as a float64 sum of them is below 2**53
+        self.rows = np.zeros((height, channels), np.int64) if keep else None
 
     def measure(self, mesh: Mesh, changed: np.ndarray | None = None) -> None:
         """Measure the triangles of `mesh` that have a corner marked in `changed` (per
@@ -170,19 +173,31 @@ class _Errors:
             self.worst[:] = sq.max(axis=1)
             if self.squared is not None:
                 self.squared[:] = sq
+            if self.rows is not None:
+                self.rows[:] = sq.reshape(h, w, -1).astype(np.int64).sum(axis=1)
             return
         _bound.measure(
             np.ascontiguousarray(mesh.vertices, dtype=np.int64),
             np.ascontiguousarray(mesh.values, dtype=np.int64).reshape(len(mesh.vertices), -1),
             np.ascontiguousarray(mesh.triangles, dtype=np.int64),
             None if changed is None else np.ascontiguousarray(changed, dtype=np.uint8),
-            self.reference, self.valid, self.worst, self.squared, w, h,
+            self.reference, self.valid, self.worst, self.squared, w, h, self.rows,
         )
 
     def per_channel(self) -> np.ndarray:
         """H x W x C squared errors (holes 0)."""
         sq = self.worst if self.squared is None else self.squared
         return sq.reshape(self.height, self.width, -1)
+
+    def total(self, rows: np.ndarray) -> np.ndarray:
+        """Per channel, the sum of the squared errors of the `rows` (a mask, H): the
+        kept row sums where they are exact in float64 (the value the float64 sum of the
+        errors has, in any order), else that sum."""
+        if self.rows is not None:
+            total = self.rows[rows].sum(axis=0)
+            if total.max(initial=0) < 1 << 53:
+                return total
+        return self.per_channel()[rows].sum(axis=(0, 1))
 
 
 def refine_to_bound(
@@ -241,11 +256,10 @@ def refine_to_bound(
         # bound's where the RMS of the rows it belongs to is over it
         row_limit = np.full(h, over_limit)
         if rms_sq is not None:
-            sq = errors.per_channel()
             for rows in ([counted], [~counted]) if not last_band else ([counted],):
                 sel = rows[0]
                 count = sel.sum() * w if valid is None else valid[sel].sum()
-                if count and (sq[sel].sum(axis=(0, 1)) / count > rms_sq + 1e-9).any():
+                if count and (errors.total(sel) / count > rms_sq + 1e-9).any():
                     row_limit[sel] = np.minimum(row_limit[sel], rms_sq)
         row_limit[:pinned_rows] = np.inf
         over, bad_count, candidates, on_walls = _bound.count(worst, row_limit, over_limit, is_vertex, walls)
