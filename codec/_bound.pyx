@@ -35,7 +35,7 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
             const int64_t[:, ::1] triangles, const uint8_t[::1] changed,
             const sample_t[:, ::1] reference, const uint8_t[::1] valid,
             double[::1] worst, double[:, ::1] sq, int64_t width, int64_t height,
-            int64_t[:, ::1] rows=None):
+            int64_t[:, ::1] rows=None, sample_t[:, ::1] decoded=None):
     """Measure the decoded error of every triangle (of every one with a corner marked in
     `changed`, per vertex, when given): for each pixel of its closed area, the squared
     difference of the decoded value and `reference` (H*W x C, the image: uint8, uint16
@@ -44,13 +44,19 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
     0 where `valid` (H*W, may be None) is 0. Triangles with no area are skipped (they
     hold no pixel a decoder writes). Returns the number of triangles measured.
 
-    rows (H x C, may be None; integer `reference` only, with `sq` unless C is 1): each
-    row's sum of the squared errors per channel, kept as the pixels are measured again
-    (each new error minus the one it replaces, from `sq`, or `worst` for one channel).
-    The errors of integer samples are whole numbers, so these sums are exact and equal
-    any float64 sum of them below 2**53, in whatever order: refinement's RMS test
-    then reads H x C sums instead of adding H*W*C errors each round (a tenth of an RGB
-    photo's encode to a quality).
+    rows (H x C, may be None; integer `reference` only, with `sq` or `decoded` unless C
+    is 1): each row's sum of the squared errors per channel, kept as the pixels are
+    measured again (each new error minus the one it replaces: from `decoded`, else from
+    `sq`, or `worst` for one channel). The errors of integer samples are whole numbers,
+    so these sums are exact and equal any float64 sum of them below 2**53, in whatever
+    order: refinement's RMS test then reads H x C sums instead of adding H*W*C errors
+    each round (a tenth of an RGB photo's encode to a quality).
+
+    decoded (H*W x C, may be None; `values` then in the samples' range): each measured
+    pixel's decoded value; before a pixel is first measured it must hold the pixel's
+    `reference` sample (an error of 0). Where the errors are kept only as their row
+    sums, it stands for `sq` at an eighth of the memory for 8-bit samples (the
+    measure's time went mostly to waiting for `sq`'s cache lines).
 
     ValueError if an array's shape does not fit, a corner index is beyond the vertices,
     a vertex lies outside the image, or the image has more than 2**32 pixels (the exact
@@ -72,8 +78,10 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
     if changed is not None and changed.shape[0] != n:
         raise ValueError("measure: changed, one flag per vertex")
     if rows is not None and (rows.shape[0] != height or rows.shape[1] != c or sample_t is double
-                             or (sq is None and c > 1)):
-        raise ValueError("measure: rows H x C, for integer samples and with sq unless one channel")
+                             or (sq is None and decoded is None and c > 1)):
+        raise ValueError("measure: rows H x C, for integer samples and with sq or decoded unless one channel")
+    if decoded is not None and (decoded.shape[0] != npix or decoded.shape[1] != c):
+        raise ValueError("measure: decoded H*W x C")
     cdef int64_t k, i, t, status = 0
     with nogil:
         for k in range(n):
@@ -87,12 +95,23 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
                         status = 2
                 if status:
                     break
+    cdef int64_t top_value = 0
+    if decoded is not None and sample_t is not double and status == 0:
+        top_value = 255 if sample_t is uint8_t else 65535
+        with nogil:
+            for k in range(n):
+                for i in range(c):
+                    if not (0 <= values[k, i] <= top_value):
+                        status = 3
+    if status == 3:
+        raise ValueError("measure: a value beyond the samples' range (decoded)")
     if status == 1:
         raise ValueError("measure: a vertex outside the image")
     if status == 2:
         raise ValueError("measure: a corner index beyond the vertices")
     cdef bint has_sq = sq is not None, has_valid = valid is not None, has_changed = changed is not None
-    cdef bint has_rows = rows is not None
+    cdef bint has_rows = rows is not None, has_decoded = decoded is not None
+    cdef double old
     cdef int64_t count = 0, ch, x, y, lo, hi, p, j, l, q, r
     cdef int64_t c0, c1, c2, x0, y0, x1, y1, x2, y2, d, d2, xmin, xmax, ymin, ymax, e, rest
     cdef int64_t a[3]
@@ -208,7 +227,7 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
                     vq[ch] = _floor_div_fast(plane[ch], d2)
                     vr[ch] = plane[ch] - vq[ch] * d2
                 p = y * width + lo
-                if c == 1 and not has_sq:
+                if c == 1 and not has_sq and not has_decoded:
                     q = vq[0]
                     r = vr[0]
                     e = 0
@@ -239,7 +258,14 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
                         if has_valid and not valid[p]:
                             s = 0.0
                         if has_rows:
-                            added[ch] += <int64_t>s - <int64_t>(sq[p, ch] if has_sq else worst[p])
+                            if has_decoded:
+                                old = <double>decoded[p, ch] - <double>reference[p, ch]
+                                old = 0.0 if has_valid and not valid[p] else old * old
+                            else:
+                                old = sq[p, ch] if has_sq else worst[p]
+                            added[ch] += <int64_t>s - <int64_t>old
+                        if has_decoded:
+                            decoded[p, ch] = <sample_t>vq[ch]
                         if has_sq:
                             sq[p, ch] = s
                         most = s if s > most else most  # (maxsd: no branch)
@@ -316,12 +342,14 @@ def spread(const double[:, ::1] worst, const double[::1] row_limit, const uint8_
                 best[bx] = 0.0
             for y in range(by, min(by + cell, h)):
                 limit = row_limit[y]
-                for x in range(w):
-                    e = worst[y, x]
-                    # strictly greater: the first of equals stays, as argmax keeps it
-                    if e > limit and e > best[x // cell] and not is_vertex[y, x] and not (has_walls and walls[y, x]):
-                        best[x // cell] = e
-                        at[x // cell] = y * w + x
+                # block by block (a division a pixel took most of the pass)
+                for bx in range(blocks_x):
+                    for x in range(bx * cell, min(bx * cell + cell, w)):
+                        e = worst[y, x]
+                        # strictly greater: the first of equals stays, as argmax keeps it
+                        if e > limit and e > best[bx] and not is_vertex[y, x] and not (has_walls and walls[y, x]):
+                            best[bx] = e
+                            at[bx] = y * w + x
             for bx in range(blocks_x):
                 if best[bx] > 0.0:
                     out[k, 0] = at[bx] % w

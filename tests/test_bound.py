@@ -90,23 +90,30 @@ def test_measuring_the_changed_triangles_keeps_every_pixel_exact():
 
 
 
+def _random_case(rng, trial: int, channels: tuple[int, ...]):
+    """(w, h, c, dtype, the corners and some pixels, a part of them with the corners,
+    samples H*W x C, valid or None) for a kept-error test."""
+    w, h = (int(x) for x in rng.integers(4, 45, 2))
+    c = channels[trial % len(channels)]
+    dtype = np.uint16 if trial % 2 else np.uint8
+    corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]])
+    pixels = rng.permutation(w * h)[: rng.integers(4, w * h // 2)]
+    pts = np.unique(np.r_[corners, np.c_[pixels % w, pixels // w]], axis=0)
+    old = np.unique(np.r_[corners, pts[rng.random(len(pts)) < 0.5]], axis=0)
+    reference = rng.integers(0, np.iinfo(dtype).max + 1, (h * w, c)).astype(dtype)
+    valid = (rng.random(h * w) < 0.8).astype(np.uint8) if trial % 4 == 1 else None
+    return w, h, c, dtype, pts, old, reference, valid
+
+
 def test_the_kept_row_sums_are_the_errors_sums_round_after_round():
     """rows (H x C) holds each row's sum of the kept squared errors per channel, through
     whole measures and measures of the changed triangles only (a pixel on an edge two
     measured triangles share is counted once), holes 0, gray (worst only) and colour."""
     rng = np.random.default_rng(11)
     for trial in range(60):
-        w, h = (int(x) for x in rng.integers(4, 45, 2))
-        c = (1, 3, 4)[trial % 3]
-        dtype = np.uint16 if trial % 2 else np.uint8
+        w, h, c, dtype, pts, old, reference, valid = _random_case(rng, trial, (1, 3, 4))
         top = np.iinfo(dtype).max + 1
-        corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]])
-        pixels = rng.permutation(w * h)[: rng.integers(4, w * h // 2)]
-        pts = np.unique(np.r_[corners, np.c_[pixels % w, pixels // w]], axis=0)
-        old = np.unique(np.r_[corners, pts[rng.random(len(pts)) < 0.5]], axis=0)
         added = pts[~(pts[:, None] == old[None]).all(axis=2).any(axis=1)]
-        reference = rng.integers(0, top, (h * w, c)).astype(dtype)
-        valid = (rng.random(h * w) < 0.8).astype(np.uint8) if trial % 4 == 1 else None
         worst, rows = np.zeros(h * w), np.zeros((h, c), np.int64)
         sq = np.zeros((h * w, c)) if c > 1 else None
         tri = Triangulation(old)
@@ -126,6 +133,39 @@ def test_the_kept_row_sums_are_the_errors_sums_round_after_round():
                                reference.astype(np.float64), valid)
         np.testing.assert_array_equal(rows, want.reshape(h, w, c).sum(axis=1))
 
+
+
+
+def test_the_decoded_store_keeps_the_sums_the_errors_keep():
+    """With `decoded` (the pixels' decoded values, the samples until measured) in place
+    of `sq`, the row sums and the largest errors stay those of the kept errors round
+    after round, and `decoded` is the decoder's image where measured."""
+    rng = np.random.default_rng(17)
+    for trial in range(60):
+        w, h, c, dtype, _, old, reference, valid = _random_case(rng, trial, (3, 4, 1))
+        top = np.iinfo(dtype).max + 1
+        kept = dict(worst=np.zeros(h * w), rows=np.zeros((h, c), np.int64), sq=np.zeros((h * w, c)))
+        store = dict(worst=np.zeros(h * w), rows=np.zeros((h, c), np.int64), decoded=reference.copy())
+        tri = Triangulation(old)
+        vertices = old.astype(np.int64)
+        values = rng.integers(0, top, (len(old), c)).astype(np.int64)
+        changed = None
+        for _ in range(3):
+            for state in (kept, store):
+                _bound.measure(vertices, values, tri.triangles(), changed, reference, valid, state["worst"],
+                               state.get("sq"), w, h, state["rows"], state.get("decoded"))
+            np.testing.assert_array_equal(store["worst"], kept["worst"])
+            np.testing.assert_array_equal(store["rows"], kept["rows"])
+            mesh = Mesh(vertices, (values if c > 1 else values[:, 0]).astype(dtype), tri.triangles(), w, h, [], None)
+            np.testing.assert_array_equal(store["decoded"], decoder_cpu.render(mesh).reshape(h * w, c))
+            added = np.unique(np.c_[rng.integers(0, w, 5), rng.integers(0, h, 5)], axis=0)
+            added = added[~(added[:, None] == vertices[None]).all(axis=2).any(axis=1)]
+            tri.insert(added)
+            moved = rng.random(len(vertices)) < 0.2
+            values = np.r_[values, rng.integers(0, top, (len(added), c))].astype(np.int64)
+            values[: len(vertices)][moved] = rng.integers(0, top, (int(moved.sum()), c))
+            changed = np.r_[moved, np.ones(len(added), bool)].astype(np.uint8)
+            vertices = np.r_[vertices, added].astype(np.int64)
 
 
 def test_measure_does_not_depend_on_the_triangles_order():
@@ -234,6 +274,12 @@ def test_the_kernels_refuse_what_does_not_fit():
     with pytest.raises(ValueError, match="rows H x C"):
         _bound.measure(v, values, np.array([[0, 1, 2]], np.int64), None, reference.astype(np.uint8), None,
                        worst, None, 4, 4, np.zeros((3, 1), np.int64))
+    with pytest.raises(ValueError, match="samples' range"):
+        _bound.measure(v, values + 256, np.array([[0, 1, 2]], np.int64), None, reference.astype(np.uint8), None,
+                       worst, None, 4, 4, np.zeros((4, 1), np.int64), np.zeros((16, 1), np.uint8))
+    with pytest.raises(ValueError, match="decoded H"):
+        _bound.measure(v, values, np.array([[0, 1, 2]], np.int64), None, reference.astype(np.uint8), None,
+                       worst, None, 4, 4, None, np.zeros((15, 1), np.uint8))
     with pytest.raises(ValueError, match="cell"):
         _bound.spread(np.zeros((4, 4)), np.zeros(4), np.zeros((4, 4), np.uint8), None, 0)
     with pytest.raises(ValueError, match="must fit"):
