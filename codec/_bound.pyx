@@ -110,7 +110,8 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
     if status == 2:
         raise ValueError("measure: a corner index beyond the vertices")
     cdef bint has_sq = sq is not None, has_valid = valid is not None, has_changed = changed is not None
-    cdef bint has_rows = rows is not None, has_decoded = decoded is not None
+    cdef bint has_rows = rows is not None, has_decoded = decoded is not None, hole
+    cdef int64_t ri, di, si, most_i
     cdef double old
     cdef int64_t count = 0, ch, x, y, lo, hi, p, j, l, q, r
     cdef int64_t c0, c1, c2, x0, y0, x1, y1, x2, y2, d, d2, xmin, xmax, ymin, ymax, e, rest
@@ -250,6 +251,35 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
                     continue
                 for ch in range(c):
                     added[ch] = 0
+                if sample_t is not double and has_decoded:
+                    # in integers (the values are checked to be samples, so every
+                    # error is below 2**32): no conversion to and from float64 a
+                    # channel, the same errors
+                    for x in range(lo, hi + 1):
+                        hole = has_valid and not valid[p]
+                        most_i = 0
+                        for ch in range(c):
+                            ri = <int64_t>reference[p, ch]
+                            di = vq[ch] - ri
+                            si = 0 if hole else di * di
+                            if has_rows:
+                                di = <int64_t>decoded[p, ch] - ri
+                                added[ch] += si - (0 if hole else di * di)
+                            decoded[p, ch] = <sample_t>vq[ch]
+                            if has_sq:
+                                sq[p, ch] = <double>si
+                            most_i = si if si > most_i else most_i
+                            vq[ch] += sq_[ch]
+                            vr[ch] += sr[ch]
+                            carry = vr[ch] >= d2
+                            vr[ch] -= d2 & -carry
+                            vq[ch] += carry
+                        worst[p] = <double>most_i
+                        p += 1
+                    if has_rows:
+                        for ch in range(c):
+                            rows[y, ch] += added[ch]
+                    continue
                 for x in range(lo, hi + 1):
                     most = 0.0
                     for ch in range(c):
@@ -296,19 +326,21 @@ def count(const double[:, ::1] worst, const double[::1] row_limit, double over_l
         raise ValueError("count: walls (H x W) must fit worst")
     cdef bint has_walls = walls is not None
     cdef double limit, e
+    cdef int64_t bad_here, off_vertex, on_wall
     with nogil:
         for y in range(h):
             limit = row_limit[y]
+            # counted without branches (a bad pixel is found in no order a predictor
+            # learns)
             for x in range(w):
                 e = worst[y, x]
                 over += e > over_limit
-                if e > limit:
-                    bad += 1
-                    if not is_vertex[y, x]:
-                        if has_walls and walls[y, x]:
-                            on_walls += 1
-                        else:
-                            candidates += 1
+                bad_here = e > limit
+                off_vertex = bad_here & (is_vertex[y, x] == 0)
+                on_wall = off_vertex & (walls[y, x] != 0) if has_walls else 0
+                bad += bad_here
+                on_walls += on_wall
+                candidates += off_vertex - on_wall
     return over, bad, candidates, on_walls
 
 
