@@ -150,7 +150,7 @@ class _Errors:
     def __init__(self, image: np.ndarray, valid: np.ndarray | None, height: int, width: int) -> None:
         self.height, self.width, self.shape = height, width, image.shape
         # in the stored samples' own type where the kernel takes it (a quarter or an
-        # eighth of float64's size: triangles are measured in no spatial order)
+        # eighth of float64's size: fewer cache lines to wait for)
         keep = image.dtype in (np.uint8, np.uint16)
         self.reference = np.ascontiguousarray(image, dtype=None if keep else np.float64).reshape(height * width, -1)
         channels = self.reference.shape[1]
