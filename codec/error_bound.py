@@ -132,11 +132,12 @@ class _Growing:
                     grown.constraints, grown.holes)
 
 
-def _squared_errors(mesh: Mesh, image: np.ndarray) -> np.ndarray:
-    """H x W x C squared errors of the decoded mesh."""
-    decoded = decoder_cpu.render(mesh).astype(np.float64)
-    diff = decoded - np.asarray(image, dtype=np.float64)  # no copy when given as float64
-    return (diff * diff).reshape(mesh.height, mesh.width, -1)
+def _pixels(image: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """The samples of `image` (H x W or H x W x C) at the points `xy` (K x 2: x, y), as
+    image[y, x]: one np.take of whole rows of the image seen as H*W x C (indexing two
+    axes of an RGB photo took three times as long)."""
+    h, w = image.shape[:2]
+    return np.take(image.reshape(h * w, *image.shape[2:]), xy[:, 1] * w + xy[:, 0], axis=0)
 
 
 class _Errors:
@@ -149,14 +150,21 @@ class _Errors:
     def __init__(self, image: np.ndarray, valid: np.ndarray | None, height: int, width: int) -> None:
         self.height, self.width, self.shape = height, width, image.shape
         # in the stored samples' own type where the kernel takes it (a quarter or an
-        # eighth of float64's size: triangles are measured in no spatial order)
+        # eighth of float64's size: fewer cache lines to wait for)
         keep = image.dtype in (np.uint8, np.uint16)
         self.reference = np.ascontiguousarray(image, dtype=None if keep else np.float64).reshape(height * width, -1)
         channels = self.reference.shape[1]
         self.valid = None if valid is None else np.ascontiguousarray(valid, dtype=np.uint8).reshape(-1)
         self.worst = np.zeros(height * width)
-        # per channel only where the largest is not all of it
-        self.squared = np.zeros((height * width, channels)) if channels > 1 else None
+        # each row's sum per channel, kept by the kernel where the errors are whole
+        # numbers (integer samples): exact, as a float64 sum of them is below 2**53
+        self.rows = np.zeros((height, channels), np.int64) if keep else None
+        # the errors per channel only where the largest is not all of it: with integer
+        # samples as the decoded image (the kernel's old errors for the row sums, at an
+        # eighth of the memory for 8-bit samples; an error of 0 until measured), else
+        # as they are
+        self.decoded = self.reference.copy() if keep and channels > 1 else None
+        self.squared = np.zeros((height * width, channels)) if channels > 1 and not keep else None
 
     def measure(self, mesh: Mesh, changed: np.ndarray | None = None) -> None:
         """Measure the triangles of `mesh` that have a corner marked in `changed` (per
@@ -164,25 +172,49 @@ class _Errors:
         h, w = self.height, self.width
         if len(mesh.triangles) == 0 or h * w > 1 << 32:
             # a one-pixel-wide image (no triangles), or one the decoder refuses
-            sq = _squared_errors(mesh, self.reference.reshape(self.shape)).reshape(h * w, -1)
-            if self.valid is not None:
-                sq[self.valid == 0] = 0.0
+            decoded = decoder_cpu.render(mesh).reshape(h * w, -1)
+            if self.decoded is not None:
+                self.decoded[:] = decoded
+            sq = self._squared(decoded)
             self.worst[:] = sq.max(axis=1)
             if self.squared is not None:
                 self.squared[:] = sq
+            if self.rows is not None:
+                self.rows[:] = sq.reshape(h, w, -1).astype(np.int64).sum(axis=1)
             return
         _bound.measure(
             np.ascontiguousarray(mesh.vertices, dtype=np.int64),
             np.ascontiguousarray(mesh.values, dtype=np.int64).reshape(len(mesh.vertices), -1),
             np.ascontiguousarray(mesh.triangles, dtype=np.int64),
             None if changed is None else np.ascontiguousarray(changed, dtype=np.uint8),
-            self.reference, self.valid, self.worst, self.squared, w, h,
+            self.reference, self.valid, self.worst, self.squared, w, h, self.rows, self.decoded,
         )
+
+    def _squared(self, decoded: np.ndarray) -> np.ndarray:
+        """H*W x C squared errors of the `decoded` image (H*W x C), holes 0."""
+        diff = decoded.astype(np.float64) - self.reference
+        sq = diff * diff
+        if self.valid is not None:
+            sq[self.valid == 0] = 0.0
+        return sq
 
     def per_channel(self) -> np.ndarray:
         """H x W x C squared errors (holes 0)."""
-        sq = self.worst if self.squared is None else self.squared
+        if self.decoded is not None:
+            sq = self._squared(self.decoded)
+        else:
+            sq = self.worst if self.squared is None else self.squared
         return sq.reshape(self.height, self.width, -1)
+
+    def total(self, rows: np.ndarray) -> np.ndarray:
+        """Per channel, the sum of the squared errors of the `rows` (a mask, H): the
+        kept row sums where they are exact in float64 (the value the float64 sum of the
+        errors has, in any order), else that sum."""
+        if self.rows is not None:
+            total = self.rows[rows].sum(axis=0)
+            if total.max(initial=0) < 1 << 53:
+                return total
+        return self.per_channel()[rows].sum(axis=(0, 1))
 
 
 def refine_to_bound(
@@ -241,11 +273,10 @@ def refine_to_bound(
         # bound's where the RMS of the rows it belongs to is over it
         row_limit = np.full(h, over_limit)
         if rms_sq is not None:
-            sq = errors.per_channel()
             for rows in ([counted], [~counted]) if not last_band else ([counted],):
                 sel = rows[0]
                 count = sel.sum() * w if valid is None else valid[sel].sum()
-                if count and (sq[sel].sum(axis=(0, 1)) / count > rms_sq + 1e-9).any():
+                if count and (errors.total(sel) / count > rms_sq + 1e-9).any():
                     row_limit[sel] = np.minimum(row_limit[sel], rms_sq)
         row_limit[:pinned_rows] = np.inf
         over, bad_count, candidates, on_walls = _bound.count(worst, row_limit, over_limit, is_vertex, walls)
@@ -256,8 +287,8 @@ def refine_to_bound(
             done = max(done, 1.0 - bad_count / first_bad)
             progress(done)
         # a bad pixel that is already a vertex (fitted, not sampled) gets its own value
-        vx, vy = mesh.vertices[:, 0], mesh.vertices[:, 1]
-        at_vertex = (worst[vy, vx] > row_limit[vy]) & ~fixed
+        vy = mesh.vertices[:, 1]
+        at_vertex = (errors.worst[vy * w + mesh.vertices[:, 0]] > row_limit[vy]) & ~fixed
         count = max(8, int(len(mesh.vertices) * GROWTH))
         if sq_limit is not None and bound.max_error < 1:
             count = max(count, int(FAR * over))
@@ -291,7 +322,7 @@ def refine_to_bound(
         fixed = np.concatenate([fixed, np.zeros(len(new), bool)])
         grown = Mesh(
             np.concatenate([mesh.vertices, new]) if len(new) else mesh.vertices,
-            np.concatenate([mesh.values, image[new[:, 1], new[:, 0]]]) if len(new) else mesh.values,
+            np.concatenate([mesh.values, _pixels(image, new)]) if len(new) else mesh.values,
             mesh.triangles, w, h, mesh.constraints, mesh.holes,
         )
         order = np.arange(len(grown.vertices))
@@ -317,11 +348,13 @@ def refine_to_bound(
         vertices, triangles = grown.vertices, grown.triangles
         if values == "sample":
             vals = grown.values.copy()
-            vals[sampled] = image[vertices[sampled, 1], vertices[sampled, 0]]
+            at = np.flatnonzero(sampled)  # (masks on N x C arrays: three times as long)
+            vals[at] = _pixels(image, vertices[at])
         else:
             # vertices whose own pixel was off keep their pixel value from now on
             previous = grown.values.copy()
-            previous[was_sampled] = image[vertices[was_sampled, 1], vertices[was_sampled, 0]]
+            at = np.flatnonzero(was_sampled)
+            previous[at] = _pixels(image, vertices[at])
             # only what the round changed is fitted again: the corners of the new
             # triangles and the neighbours of vertices that took their pixel value;
             # the rest of the mesh keeps its values (refitting it all each round cost

@@ -89,6 +89,129 @@ def test_measuring_the_changed_triangles_keeps_every_pixel_exact():
         np.testing.assert_array_equal(worst, want)
 
 
+
+def _random_case(rng, trial: int, channels: tuple[int, ...]):
+    """(w, h, c, dtype, the corners and some pixels, a part of them with the corners,
+    samples H*W x C, valid or None) for a kept-error test."""
+    w, h = (int(x) for x in rng.integers(4, 45, 2))
+    c = channels[trial % len(channels)]
+    dtype = np.uint16 if trial % 2 else np.uint8
+    corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]])
+    pixels = rng.permutation(w * h)[: rng.integers(4, w * h // 2)]
+    pts = np.unique(np.r_[corners, np.c_[pixels % w, pixels // w]], axis=0)
+    old = np.unique(np.r_[corners, pts[rng.random(len(pts)) < 0.5]], axis=0)
+    reference = rng.integers(0, np.iinfo(dtype).max + 1, (h * w, c)).astype(dtype)
+    valid = (rng.random(h * w) < 0.8).astype(np.uint8) if trial % 4 == 1 else None
+    return w, h, c, dtype, pts, old, reference, valid
+
+
+def test_the_kept_row_sums_are_the_errors_sums_round_after_round():
+    """rows (H x C) holds each row's sum of the kept squared errors per channel, through
+    whole measures and measures of the changed triangles only (a pixel on an edge two
+    measured triangles share is counted once), holes 0, gray (worst only) and colour."""
+    rng = np.random.default_rng(11)
+    for trial in range(60):
+        w, h, c, dtype, pts, old, reference, valid = _random_case(rng, trial, (1, 3, 4))
+        top = np.iinfo(dtype).max + 1
+        added = pts[~(pts[:, None] == old[None]).all(axis=2).any(axis=1)]
+        worst, rows = np.zeros(h * w), np.zeros((h, c), np.int64)
+        sq = np.zeros((h * w, c)) if c > 1 else None
+        tri = Triangulation(old)
+        values = rng.integers(0, top, (len(old), c)).astype(np.int64)
+        _bound.measure(old.astype(np.int64), values, tri.triangles(), None, reference, valid, worst, sq, w, h, rows)
+        kept = worst[:, None] if sq is None else sq
+        np.testing.assert_array_equal(rows, kept.reshape(h, w, c).sum(axis=1))
+        tri.insert(added)
+        vertices = np.r_[old, added].astype(np.int64)
+        values = np.r_[values, rng.integers(0, top, (len(added), c))].astype(np.int64)
+        moved = rng.random(len(old)) < 0.2
+        values[: len(old)][moved] = rng.integers(0, top, (int(moved.sum()), c))
+        changed = np.r_[moved, np.ones(len(added), bool)].astype(np.uint8)
+        _bound.measure(vertices, values, tri.triangles(), changed, reference, valid, worst, sq, w, h, rows)
+        stored = values.astype(dtype)
+        want = _decoded_errors(Mesh(vertices, stored if c > 1 else stored[:, 0], tri.triangles(), w, h, [], None),
+                               reference.astype(np.float64), valid)
+        np.testing.assert_array_equal(rows, want.reshape(h, w, c).sum(axis=1))
+
+
+
+
+def test_the_decoded_store_keeps_the_sums_the_errors_keep():
+    """With `decoded` (the pixels' decoded values, the samples until measured) in place
+    of `sq`, the row sums and the largest errors stay those of the kept errors round
+    after round, and `decoded` is the decoder's image where measured."""
+    rng = np.random.default_rng(17)
+    for trial in range(60):
+        w, h, c, dtype, _, old, reference, valid = _random_case(rng, trial, (3, 4, 1))
+        top = np.iinfo(dtype).max + 1
+        kept = dict(worst=np.zeros(h * w), rows=np.zeros((h, c), np.int64), sq=np.zeros((h * w, c)))
+        store = dict(worst=np.zeros(h * w), rows=np.zeros((h, c), np.int64), decoded=reference.copy())
+        tri = Triangulation(old)
+        vertices = old.astype(np.int64)
+        values = rng.integers(0, top, (len(old), c)).astype(np.int64)
+        changed = None
+        for _ in range(3):
+            for state in (kept, store):
+                _bound.measure(vertices, values, tri.triangles(), changed, reference, valid, state["worst"],
+                               state.get("sq"), w, h, state["rows"], state.get("decoded"))
+            np.testing.assert_array_equal(store["worst"], kept["worst"])
+            np.testing.assert_array_equal(store["rows"], kept["rows"])
+            mesh = Mesh(vertices, (values if c > 1 else values[:, 0]).astype(dtype), tri.triangles(), w, h, [], None)
+            np.testing.assert_array_equal(store["decoded"], decoder_cpu.render(mesh).reshape(h * w, c))
+            added = np.unique(np.c_[rng.integers(0, w, 5), rng.integers(0, h, 5)], axis=0)
+            added = added[~(added[:, None] == vertices[None]).all(axis=2).any(axis=1)]
+            tri.insert(added)
+            moved = rng.random(len(vertices)) < 0.2
+            values = np.r_[values, rng.integers(0, top, (len(added), c))].astype(np.int64)
+            values[: len(vertices)][moved] = rng.integers(0, top, (int(moved.sum()), c))
+            changed = np.r_[moved, np.ones(len(added), bool)].astype(np.uint8)
+            vertices = np.r_[vertices, added].astype(np.int64)
+
+
+def test_measure_does_not_depend_on_the_triangles_order():
+    """The kernel measures the triangles by their top row, not as listed: any order of
+    the list, corners rotated or not, gives the same errors and row sums (a pixel two
+    triangles share gets the same value from either)."""
+    rng = np.random.default_rng(21)
+    for trial in range(40):
+        w, h = (int(x) for x in rng.integers(3, 60, 2))
+        c = (1, 3)[trial % 2]
+        mesh = _random_mesh(rng, w, h, c, np.uint8)
+        values = np.asarray(mesh.values, np.int64).reshape(len(mesh.vertices), c)
+        reference = rng.integers(0, 256, (h * w, c)).astype(np.uint8)
+        got = []
+        for order in (np.arange(len(mesh.triangles)), rng.permutation(len(mesh.triangles))):
+            triangles = np.roll(mesh.triangles[order], int(rng.integers(3)), axis=1)
+            worst, rows = np.zeros(h * w), np.zeros((h, c), np.int64)
+            sq = np.zeros((h * w, c)) if c > 1 else None
+            _bound.measure(mesh.vertices, values, np.ascontiguousarray(triangles), None, reference, None,
+                           worst, sq, w, h, rows)
+            got.append((worst, sq, rows))
+        for a, b in zip(*got):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_refinement_tests_rms_on_the_errors_sums(monkeypatch):
+    """The RMS test of every round reads the same per channel sums from the kept rows
+    as from adding every kept error, for colour and gray, one band and several."""
+    rng = np.random.default_rng(4)
+    totals = []
+    real = error_bound._Errors.total
+
+    def total(self, rows):
+        got = real(self, rows)
+        totals.append(1)
+        np.testing.assert_array_equal(got, self.per_channel()[rows].sum(axis=(0, 1)))
+        return got
+
+    image = np.clip(rng.normal(128, 40, (70, 90, 3)).cumsum(axis=1) / 9, 0, 255).astype(np.uint8)
+    monkeypatch.setattr(error_bound._Errors, "total", total)
+    for img, options in ((image, {}), (image[:, :, 0], {}), (image, {"band_height": 24})):
+        out = codec.decode(codec.encode(img, quality=60, **options))
+        assert out.shape == img.shape
+    assert len(totals) > 10
+
+
 def _numpy_spread(score: np.ndarray, count: int) -> np.ndarray:
     """The per-cell choice refinement made in numpy before: the highest positive score
     of each cell of a grid of about `count` cells, the first in the cell's raster order
@@ -145,6 +268,18 @@ def test_the_kernels_refuse_what_does_not_fit():
     with pytest.raises(ValueError, match="changed"):
         _bound.measure(v, values, np.array([[0, 1, 2]], np.int64), np.ones(2, np.uint8), reference, None,
                        worst, None, 4, 4)
+    with pytest.raises(ValueError, match="rows H x C"):
+        _bound.measure(v, values, np.array([[0, 1, 2]], np.int64), None, reference, None, worst, None, 4, 4,
+                       np.zeros((4, 1), np.int64))  # float samples: no exact sums
+    with pytest.raises(ValueError, match="rows H x C"):
+        _bound.measure(v, values, np.array([[0, 1, 2]], np.int64), None, reference.astype(np.uint8), None,
+                       worst, None, 4, 4, np.zeros((3, 1), np.int64))
+    with pytest.raises(ValueError, match="samples' range"):
+        _bound.measure(v, values + 256, np.array([[0, 1, 2]], np.int64), None, reference.astype(np.uint8), None,
+                       worst, None, 4, 4, np.zeros((4, 1), np.int64), np.zeros((16, 1), np.uint8))
+    with pytest.raises(ValueError, match="decoded H"):
+        _bound.measure(v, values, np.array([[0, 1, 2]], np.int64), None, reference.astype(np.uint8), None,
+                       worst, None, 4, 4, None, np.zeros((15, 1), np.uint8))
     with pytest.raises(ValueError, match="cell"):
         _bound.spread(np.zeros((4, 4)), np.zeros(4), np.zeros((4, 4), np.uint8), None, 0)
     with pytest.raises(ValueError, match="must fit"):
