@@ -45,7 +45,7 @@ def make_files(folder: Path) -> list[Path]:
 
     sys.path.insert(0, str(ROOT))
     import codec
-    from tests.corpus import load_corpus
+    from tests.corpus import load_corpus, range_data
 
     folder.mkdir(parents=True, exist_ok=True)
     corpus = None
@@ -56,7 +56,7 @@ def make_files(folder: Path) -> list[Path]:
             continue
         corpus = corpus or load_corpus()
         if name == "tum_depth16":
-            image = cv2.imread(str(ROOT.parent / "shared" / "range-data" / "tum_depth.png"), cv2.IMREAD_UNCHANGED)
+            image = cv2.imread(str(range_data() / "tum_depth.png"), cv2.IMREAD_UNCHANGED)
             if image is None:
                 continue
             data = codec.encode(image, points=round(DENSITY * image.size), nodata=0)

@@ -52,9 +52,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import codec  # noqa: E402
+from tests.corpus import range_data  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "out"
-RANGE_DATA = ROOT.parent / "shared" / "range-data"
+RANGE_DATA = range_data()
 ERRORS = (0.1, 0.5, 2.0)  # percent of the valid value range
 QUICK = 128  # side of the centre crop for --quick
 GDAL_NODATA = 42113  # the TIFF tag GDAL writes the nodata value in

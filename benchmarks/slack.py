@@ -23,9 +23,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import codec  # noqa: E402
+from tests.corpus import range_data  # noqa: E402
 from codec import quantise, slack  # noqa: E402
 
-RANGE_DATA = ROOT.parent / "shared" / "range-data"
+RANGE_DATA = range_data()
 
 
 def load(name: str) -> np.ndarray:

@@ -7,6 +7,16 @@ from pathlib import Path
 
 import numpy as np
 
+_ROOT = Path(__file__).resolve().parent.parent
+
+
+def range_data() -> Path:
+    """The project's shared range-data folder: shared/ beside the repository, or one
+    level further up (a git worktree kept in a folder beside it). The first place when
+    neither has it, so that a caller's missing file names where it was looked for."""
+    places = [base / "shared" / "range-data" for base in (_ROOT.parent, _ROOT.parent.parent)]
+    return next((p for p in places if p.is_dir()), places[0])
+
 
 def disparity_raw() -> np.ndarray:
     """skimage's motorcycle disparity map as stored: float, infinite where unknown."""

@@ -406,9 +406,11 @@ def band_point_sets(draw) -> tuple[np.ndarray, np.ndarray | None]:
 @given(band_point_sets())
 def test_the_sweep_gives_the_triangles_of_insertion_and_of_triangle(case):
     """Raster-ordered vertices whose first row holds the smallest and largest x (the
-    sweep-line's input): the same triangles as the same vertices shuffled (built by
-    insertion), and as Triangle after the canonical pass; every free edge locally
-    Delaunay under the perturbed rule."""
+    sweep-line's input): the same triangles as the same vertices shuffled (which the
+    build sorts back into raster order and sweeps too: the input order changes
+    nothing), and as Triangle after the canonical pass; every free edge locally
+    Delaunay under the perturbed rule. (Insertion one by one is compared in
+    test_a_band_of_thousands_of_vertices_is_swept_to_the_triangles_of_insertion.)"""
     pts, walls = case
     out = delaunay(pts, walls)
     np.testing.assert_array_equal(out, by_triangle(pts, walls))
@@ -416,9 +418,9 @@ def test_the_sweep_gives_the_triangles_of_insertion_and_of_triangle(case):
     where = np.empty_like(shuffle)
     where[shuffle] = np.arange(len(pts))  # raster index -> shuffled index
     if len(out):
-        # Triangulation keeps its input order, so shuffled vertices go in by insertion
-        # (delaunay would sort them back into the sweep's raster order); it takes
-        # coordinates from 0, and a shift changes no predicate
+        # Triangulation numbers the vertices in its input's order (its triangles
+        # name shuffled indices); it takes coordinates from 0, and a shift changes no
+        # predicate
         insertion = Triangulation(pts[shuffle] - pts.min(axis=0))
         if walls is not None:
             insertion.constrain(where[walls])

@@ -14,18 +14,16 @@ import pytest
 import codec
 from codec import geotiff
 from codec.cli.main import main
+from tests.corpus import range_data
 
 rasterio = pytest.importorskip("rasterio")
 from rasterio.transform import Affine  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
-
 
 def shared_file(name: str) -> Path:
-    """A file of the project's shared range data (beside the repository)."""
-    for base in (ROOT.parent / "shared", ROOT.parent.parent / "shared"):
-        if (base / "range-data" / name).exists():
-            return base / "range-data" / name
+    """A file of the project's shared range data (tests.corpus.range_data)."""
+    if (range_data() / name).exists():
+        return range_data() / name
     if os.environ.get("CI"):
         pytest.fail(f"CI must have shared/range-data/{name} beside the repository")
     pytest.skip(f"shared/range-data/{name} is not here")
