@@ -927,35 +927,27 @@ cdef bint _band_vertices(const int64_t* line_keys, int64_t nl, const int64_t* fr
                          const int64_t* ranks, int64_t total, const int64_t* appear, int64_t na,
                          const int64_t* lengths, int64_t count, int64_t width, int64_t* v, int64_t* fp,
                          int64_t* lp, int64_t* flat, int64_t* walls, int64_t nwalls, int64_t* on_line) noexcept nogil:
-    """band_vertices' passes into the caller's buffers (v: 2 (nl + nf), fp: nf + 1, lp:
-    nl + 1 scratch, flat: total, walls: 2 nwalls, on_line: na); False if a pixel is in
-    both lists or an index is out of range."""
-    cdef int64_t n = nl + nf, i = 0, j = 0, k, key, lk, fk, w = 0, at = 0, y = 0, row = 0
-    cdef int64_t last = 0x7FFFFFFFFFFFFFFF  # a list's key past its end
-    cdef bint line, both = False
+    """band_vertices' passes into the caller's buffers (v: 2 (nl + nf), fp: nf, lp: nl
+    scratch, flat: total, walls: 2 nwalls, on_line: na); False if a pixel is in both
+    lists or an index is out of range."""
+    cdef int64_t n = nl + nf, i = 0, j = 0, k, key, w = 0, at = 0, y = 0, row = 0
     for k in range(n):
-        # which list the next vertex comes from, by selects: the lists interleave at
-        # random, and a branch on it was mispredicted at every other vertex or so.
-        # Both lists' next place is written; the one not taken is written again when
-        # its key comes (each list's buffer has a place past its end for that)
-        lk = line_keys[i] if i < nl else last
-        fk = free_keys[j] if j < nf else last
-        # (the ends by count, not by the sentinel: any key, even the largest, is safe)
-        line = (i < nl) & ((lk < fk) | (j >= nf))
-        both |= (lk == fk) & (i < nl) & (j < nf)
-        key = lk if line else fk
-        lp[i] = k
-        fp[j] = k
-        i += line
-        j += 1 - line
+        if j >= nf or (i < nl and line_keys[i] < free_keys[j]):
+            key = line_keys[i]
+            lp[i] = k
+            i += 1
+        else:
+            key = free_keys[j]
+            if i < nl and line_keys[i] == key:
+                return False
+            fp[j] = k
+            j += 1
         # the keys increase: the row advances instead of a 64-bit division each
         while key - row >= width:
             row += width
             y += 1
         v[2 * k] = key - row
         v[2 * k + 1] = y
-    if both:
-        return False
     if (total and _corners_beyond(ranks, total, nl)) or (na and _corners_beyond(appear, na, nl)):
         return False
     for k in range(total):

@@ -269,9 +269,9 @@ def test_position_keys_follow_the_gaps(gaps: list[int], bits: int) -> None:
 @settings(max_examples=80, deadline=None)
 @given(st.integers(0, 300), st.integers(0, 32), st.integers(0, 9), st.integers(0, 2**32 - 1))
 def test_position_keys_cut_every_field_width_at_every_bit(n: int, bits: int, extra: int, seed: int) -> None:
-    """The low bits cut from whole big-endian words (and, near the field's end, byte
-    by byte) are numpy's unpacked bits, for every width up to 32 and every bit offset,
-    whatever bytes follow the field (position_keys takes a longer buffer)."""
+    """The low bits position_keys cuts from the field are numpy's unpacked bits, for
+    every width up to 32 and every bit offset, whatever bytes follow the field (it may
+    be given a longer buffer)."""
     from codec.native import _fields
 
     rng = np.random.default_rng(seed)
@@ -404,7 +404,7 @@ def test_band_vertices_merges_the_key_lists() -> None:
 @given(st.integers(0, 2**32 - 1), st.integers(1, 50), st.integers(0, 400), st.floats(0, 1),
        st.sampled_from(["none", "first", "last", "any"]))
 def test_band_vertices_merge_is_the_sorted_union(seed: int, width: int, n: int, share: float, dup: str) -> None:
-    """The merge by selects puts every key of both increasing lists in its sorted
+    """The merge puts every key of both increasing lists in its sorted
     place, whatever the mix (either list empty, one list's keys all before the
     other's), and refuses a key in both lists wherever it lies."""
     from codec.native import _fields
@@ -435,8 +435,8 @@ def test_band_vertices_merge_is_the_sorted_union(seed: int, width: int, n: int, 
 
 
 def test_band_vertices_takes_the_largest_keys() -> None:
-    """Keys up to int64's largest (the value past a list's end) are merged in their
-    places, never read or written past either list."""
+    """Keys up to int64's largest are merged in their places: the lists' ends go by
+    their counts, not by a sentinel key past them."""
     from codec.native import _fields
 
     top, wide = 2**63 - 1, 2**62

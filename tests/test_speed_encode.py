@@ -28,9 +28,11 @@ def test_speed_benchmark_prints_its_encode_tables() -> None:
     budget, bound, quality = (_table(t) for t in run.stdout.strip().split("\n\n"))
     assert [r[:2] for r in budget[2:]] == [["text", "448x172"], ["text", "64x64"]]
     assert all(float(r[-1]) > 0 for r in budget[2:])
-    head, _, row = bound
-    assert head[2:5] == ["atm bytes", "atm vertices", "delatin vertices"] and row[:2] == ["32x32", "20"]
+    # a row for the encode a user calls and one for the mesh alone, each E
+    head, _, *rows = bound
+    assert head[2:6] == ["atm encode", "atm bytes", "atm vertices", "delatin vertices"]
+    assert [r[:3] for r in rows] == [["32x32", "20", "default"], ["32x32", "20", "mesh only"]]
     assert head[-1] == "CPU atm / delatin"
-    assert int(row[2].replace(",", "")) > 0 and float(row[-1]) > 0
+    assert all(int(r[3].replace(",", "")) > 0 and float(r[-1]) > 0 for r in rows)
     head, _, row = quality
     assert head[2] == "atm quality=40 ms" and row[0] == "text" and float(row[-1]) > 0
