@@ -30,8 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import codec  # noqa: E402
 from codec import terrain  # noqa: E402
-
-ROOT = Path(__file__).resolve().parent.parent
+from tests.corpus import range_data  # noqa: E402
 
 
 def synthetic_dem(height: int, width: int) -> np.ndarray:
@@ -47,14 +46,12 @@ def dems(quick: bool) -> dict[str, tuple[np.ndarray, dict | None]]:
     """Name -> (elevations, geotiff metadata or None)."""
     out = {"synthetic": (synthetic_dem(80, 96) if quick else synthetic_dem(400, 480), None)}
     if not quick:
-        for base in (ROOT.parent / "shared", ROOT.parent.parent / "shared"):
-            path = base / "range-data" / "srtm_dem.tif"
-            if path.exists():
-                from codec import geotiff
+        path = range_data() / "srtm_dem.tif"
+        if path.exists():
+            from codec import geotiff
 
-                raster = geotiff.read(path.read_bytes(), path.name)
-                out["srtm_dem"] = (raster.image, raster.metadata)
-                break
+            raster = geotiff.read(path.read_bytes(), path.name)
+            out["srtm_dem"] = (raster.image, raster.metadata)
     return out
 
 

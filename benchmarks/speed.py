@@ -472,14 +472,19 @@ def encode_tables(corpus: dict[str, np.ndarray], names: list[str], dem_size: int
     paths = {"default": {}, "mesh only": {"residual": False}}
     for e in errors:
         cpu = {name: [] for name in (*paths, "delatin")}
-        fns = {name: _cpu_timed(cpu[name], lambda o=options: codec.encode(terrain, max_error=e, **o))
+        made = {}  # each contender's last result, for the bytes and vertex counts
+
+        def run(name, make):
+            return _cpu_timed(cpu[name], lambda: made.__setitem__(name, make()))
+
+        fns = {name: run(name, lambda o=options: codec.encode(terrain, max_error=e, **o))
                for name, options in paths.items()}
-        fns["delatin"] = _cpu_timed(cpu["delatin"], lambda: Delatin(terrain, max_error=e))
+        fns["delatin"] = run("delatin", lambda: Delatin(terrain, max_error=e))
         times = interleaved(fns, repeat)
         h, w = terrain.shape
-        delatin_vertices = len(Delatin(terrain, max_error=e).vertices)
-        for name, options in paths.items():
-            data = codec.encode(terrain, max_error=e, **options)
+        delatin_vertices = len(made["delatin"].vertices)
+        for name in paths:
+            data = made[name]
             rows.append([f"{w}x{h}", f"{e:g}", name, f"{len(data):,}", f"{codec.info(data)['vertices']:,}",
                          f"{delatin_vertices:,}", f"{statistics.median(times[name]):.0f}",
                          f"{statistics.median(times['delatin']):.0f}", f"{ratio(times, name, 'delatin'):.2f}",

@@ -113,7 +113,6 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
     cdef bint has_sq = sq is not None, has_valid = valid is not None, has_changed = changed is not None
     cdef bint has_rows = rows is not None, has_decoded = decoded is not None, hole
     cdef int64_t ri, di, si, most_i
-    cdef double old
     cdef int64_t count = 0, ch, x, y, lo, hi, p, j, l, q, r
     cdef int64_t c0, c1, c2, x0, y0, x1, y1, x2, y2, d, d2, xmin, xmax, ymin, ymax, e, rest
     cdef int64_t a[3]
@@ -288,13 +287,8 @@ def measure(const int64_t[:, ::1] vertices, const int64_t[:, ::1] values,
                         s = diff * diff
                         if has_valid and not valid[p]:
                             s = 0.0
-                        if has_rows:
-                            if has_decoded:
-                                old = <double>decoded[p, ch] - <double>reference[p, ch]
-                                old = 0.0 if has_valid and not valid[p] else old * old
-                            else:
-                                old = sq[p, ch] if has_sq else worst[p]
-                            added[ch] += <int64_t>s - <int64_t>old
+                        if has_rows:  # (integer samples: with decoded they took the loop above)
+                            added[ch] += <int64_t>s - <int64_t>(sq[p, ch] if has_sq else worst[p])
                         if has_decoded:
                             decoded[p, ch] = <sample_t>vq[ch]
                         if has_sq:

@@ -86,9 +86,8 @@ def order_chains(const uint8_t[::1] simple, const int64_t[::1] offsets):
     # two above twice the farthest offset, filled just ahead of the pixel read: every
     # neighbour read is set, so filled and not yet overwritten (an image-sized table,
     # 3 MB at 741 x 500, made its random reads miss the cache and faulted in its pages)
-    far = max(abs(int(v)) for v in offsets)
-    cdef int64_t span = far
-    cdef int64_t ring_mask = (1 << (2 * far + 1).bit_length()) - 1
+    cdef int64_t span = max(abs(int(v)) for v in offsets)
+    cdef int64_t ring_mask = (1 << (2 * span + 1).bit_length()) - 1
     ring_a = np.empty(ring_mask + 1, dtype=np.int64)
     nb_a = np.full((n, 2), -1, dtype=np.int64)
     comp_start_a = np.full(n, -1, dtype=np.int64)

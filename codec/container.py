@@ -178,15 +178,15 @@ class Writer:
         self.header = header
         self._next_y0 = 0
         self._rows_done = 0
-        stream.write(schema.FileHeader.build(dict(version=schema.VERSION)))
-        stream.write(_chunk(schema.HEADER, schema.Header.build(header._fields())))
+        stream.write(_build(schema.FileHeader, dict(version=schema.VERSION)))
+        stream.write(_chunk(schema.HEADER, _build(schema.Header, header._fields())))
         if header.quant is not None:
             q = header.quant
-            stream.write(_chunk(schema.QUANT, schema.Quantisation.build(dict(offset=q.offset, scale=q.scale))))
+            stream.write(_chunk(schema.QUANT, _build(schema.Quantisation, dict(offset=q.offset, scale=q.scale))))
         if header.steps is not None:
             stream.write(_chunk(schema.STEP, struct.pack("<dd", header.steps.offset, header.steps.scale)))
         if header.nodata is not None:
-            stream.write(_chunk(schema.NODATA, schema.NoData.build(dict(value=header.nodata))))
+            stream.write(_chunk(schema.NODATA, _build(schema.NoData, dict(value=header.nodata))))
         if header.channel_axis and header.channels == 1:
             stream.write(_chunk(schema.AXIS, b""))
         if header.metadata is not None:

@@ -148,7 +148,7 @@ class _Errors:
     every other pixel decodes as before). Owns its buffers."""
 
     def __init__(self, image: np.ndarray, valid: np.ndarray | None, height: int, width: int) -> None:
-        self.height, self.width, self.shape = height, width, image.shape
+        self.height, self.width = height, width
         # in the stored samples' own type where the kernel takes it (a quarter or an
         # eighth of float64's size: fewer cache lines to wait for)
         keep = image.dtype in (np.uint8, np.uint16)

@@ -114,13 +114,7 @@ class Triangulation:
         near: for each point a vertex index near it (-1: none), where its point
         location starts instead of at the last vertex inserted; a hint only, the
         triangles are the same whatever it holds."""
-        if near is not None:
-            near = np.ascontiguousarray(near, dtype=np.int64).reshape(-1)
-        status, indices = self._kernel.insert(np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2), near)
-        self._count += len(indices)
-        if status != _cdt.OK:
-            _refuse(status, self._count)
-        return indices
+        return self._insert(np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2), near)
 
     def insert_free(self, points: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
         """insert(points, near), leaving out each point at a position taken (by a vertex,
@@ -128,14 +122,20 @@ class Triangulation:
         own table of positions. Returns a mask of the points that went in (numbered
         next, in their order)."""
         points = np.ascontiguousarray(points, dtype=np.int64).reshape(-1, 2)
+        taken = np.zeros(len(points), np.uint8)
+        self._insert(points, near, taken)
+        return taken == 0
+
+    def _insert(self, points: np.ndarray, near: np.ndarray | None, taken: np.ndarray | None = None) -> np.ndarray:
+        """The kernel's insert of K x 2 int64 points (taken: see insert_free), counted,
+        refused as the codec's error when it fails; the new vertices' indices."""
         if near is not None:
             near = np.ascontiguousarray(near, dtype=np.int64).reshape(-1)
-        taken = np.zeros(len(points), np.uint8)
         status, indices = self._kernel.insert(points, near, taken)
         self._count += len(indices)
         if status != _cdt.OK:
             _refuse(status, self._count)
-        return taken == 0
+        return indices
 
     def constrain(self, segments: np.ndarray) -> None:
         """Make every segment (S x 2 vertex indices) an edge, cut at vertices on it."""

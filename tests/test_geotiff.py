@@ -22,8 +22,9 @@ from rasterio.transform import Affine  # noqa: E402
 
 def shared_file(name: str) -> Path:
     """A file of the project's shared range data (tests.corpus.range_data)."""
-    if (range_data() / name).exists():
-        return range_data() / name
+    path = range_data() / name
+    if path.exists():
+        return path
     if os.environ.get("CI"):
         pytest.fail(f"CI must have shared/range-data/{name} beside the repository")
     pytest.skip(f"shared/range-data/{name} is not here")

@@ -37,9 +37,14 @@ def merge(width: int, *groups: np.ndarray) -> np.ndarray:
     return pts[_first_of_each(pts, width)]
 
 
+def _pixels(pts: np.ndarray, width: int) -> np.ndarray:
+    """Each point's pixel index in raster order (int64, contiguous, for the kernels)."""
+    return np.ascontiguousarray(pts[:, 1] * width + pts[:, 0], dtype=np.int64)
+
+
 def _first_of_each(pts: np.ndarray, width: int) -> np.ndarray:
     """A mask of the points that are the first on their pixel."""
-    return _elements.first_of_each(np.ascontiguousarray(pts[:, 1] * width + pts[:, 0], dtype=np.int64))
+    return _elements.first_of_each(_pixels(pts, width))
 
 
 def merge_new(width: int, vertices: np.ndarray, points: np.ndarray, near: np.ndarray):
@@ -60,6 +65,20 @@ def _key_base(width: int, height: int) -> int:
     keys, nothing kept between rounds) where three pixel numbers would overflow int64."""
     base = width * height
     return base if base**3 < 2**62 else 0
+
+
+def _gathered(parts: list[np.ndarray], rows: np.ndarray, after: np.ndarray | None, width: int) -> np.ndarray:
+    """Rows `rows` of the parts taken as one store (statistics, `width` columns each),
+    followed by the rows of `after` if given: gathered into one new array by a compiled
+    row copy (np.take's row by row memmove took 2.6x as long), with no store of every
+    part joined and no second copy to append `after` (each a megabyte of fresh pages at
+    512 x 512)."""
+    tail = 0 if after is None else len(after)
+    out = np.empty((len(rows) + tail, width))
+    _elements.gather_rows(parts, np.ascontiguousarray(rows, dtype=np.int64), out[: len(rows)])
+    if tail:
+        out[len(rows):] = after
+    return out
 
 
 class _Cache:
@@ -85,7 +104,7 @@ class _Cache:
         """The squared error of every triangle (statistics() gives their statistics).
         last: no round follows, so the squared errors are not needed (None) and the
         cache is not updated."""
-        pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
+        pixel = _pixels(vertices, width)
         keys, rows, sse, fresh = _elements.cached(
             pixel, np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3), _key_base(width, height),
             self.keys, self.rows, self.sse, self._stored,
@@ -107,7 +126,7 @@ class _Cache:
         """Take a triangulation measured elsewhere (a _Kept one, when the caller's finish
         changes the mesh) as the last measured: its triangles (any corner order) and
         their statistics and squared errors, row by row."""
-        pixel = np.ascontiguousarray(vertices[:, 1] * width + vertices[:, 0], dtype=np.int64)
+        pixel = _pixels(vertices, width)
         none = np.zeros(0, np.int64)
         keys, rows, _, _ = _elements.cached(pixel, np.ascontiguousarray(triangles, dtype=np.int64),
                                             _key_base(width, height), none, none, np.zeros(0), 0)
@@ -123,20 +142,8 @@ class _Cache:
 
     def statistics(self, after: np.ndarray | None = None) -> np.ndarray:
         """The statistics of the triangles last measured, in their order, followed by the
-        rows of `after` if given. Gathered part by part into one array: no store of
-        every part joined, no second copy to append `after` (each a megabyte of
-        fresh pages at 512 x 512)."""
-        rows = self._last
-        tail = 0 if after is None else len(after)
-        out = np.empty((len(rows) + tail, self.layout.width))
-        head = out[: len(rows)]
-        if len(self._parts) == 1:
-            np.take(self._parts[0], rows, axis=0, out=head)  # a row gather: 3x quicker than store[rows]
-        else:
-            _elements.gather_rows(self._parts, np.ascontiguousarray(rows, dtype=np.int64), head)
-        if tail:
-            out[len(rows):] = after
-        return out
+        rows of `after` if given."""
+        return _gathered(self._parts, self._last, after, self.layout.width)
 
 
 class _Kept:
@@ -225,7 +232,7 @@ class _Kept:
         c = self.corners[tri]
         n = self.count
         if n**3 < 2**62:
-            order = np.argsort((c[:, 0] * n + c[:, 1]) * n + c[:, 2], kind="stable")
+            order = np.argsort((c[:, 0] * n + c[:, 1]) * n + c[:, 2])  # (distinct triangles: no ties)
         else:
             order = np.lexsort((c[:, 2], c[:, 1], c[:, 0]))
         return np.concatenate([tri[order], np.sort(elements[elements >= self.m])])
@@ -410,8 +417,4 @@ def refine_to_budget(
     if final_rows is None:
         return vertices, segments, tris, elements, cache.statistics(layout(lines)), ordered
     # the kept statistics of the final triangles, the border lines' after them
-    stats = np.empty((len(final_rows) + len(lines), layout.width))
-    # (a compiled row copy: np.take's row by row memmove took 2.6x as long)
-    _elements.gather_rows([kept.stats], final_rows, stats[: len(final_rows)])
-    stats[len(final_rows):] = layout(lines)
-    return vertices, segments, tris, elements, stats, ordered
+    return vertices, segments, tris, elements, _gathered([kept.stats], final_rows, layout(lines), layout.width), ordered
